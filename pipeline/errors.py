@@ -1,0 +1,39 @@
+"""The one exception tree of adaptune.
+
+Library code raises these; only the CLI (``stages.cli``) turns them into one line on
+stderr and exit code 1. Messages name the file or value and the rule it breaks.
+"""
+
+from __future__ import annotations
+
+
+class AdaptuneError(Exception):
+    """Root of every error adaptune raises on purpose."""
+
+
+class ConfigError(AdaptuneError):
+    """A params.yaml section or a CLI option breaks a rule."""
+
+
+class InputError(AdaptuneError):
+    """An input file (scans, poses, bag, MCAP, Parquet) is missing, malformed or inconsistent."""
+
+
+class SchemaError(InputError):
+    """A file follows another schema or schema version than the one expected."""
+
+
+class OdometryError(AdaptuneError):
+    """An odometry run failed (raised, diverged, returned NaN, lost frames, timed out)."""
+
+
+class TrialTimeout(OdometryError):
+    """An odometry run outlived its time limit."""
+
+
+class ArtifactError(AdaptuneError):
+    """A model artifact is missing files, tampered with, or made for something else."""
+
+
+class QueryError(AdaptuneError):
+    """A SQL query against the results database failed."""

@@ -1,0 +1,345 @@
+"""The sequence MCAP: one file per LiDAR sequence, the format every later stage reads.
+
+Layout (DESIGN section 4):
+- ``/lidar/points``: sensor_msgs/msg/PointCloud2 (float32 x, y, z, intensity), CDR;
+- ``/ground_truth/pose``: geometry_msgs/msg/PoseStamped, T_world_lidar, where known;
+- metadata ``adaptune.sequence``: name, sensor, source, frame_count, labels, schema_version;
+- metadata ``adaptune.frames``: the log times of the frames, so frame k is one seek away.
+Log time = sensor stamp [ns]; frames are 0..N-1 in log-time order. Chunked, zstd, indexed.
+Small channels (poses, parameters) are buffered and written after the scans, in chunks of
+their own, so reading the ground truth never decompresses a scan.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.errors import InputError, SchemaError
+from pipeline.io_utils import atomic_path
+from pipeline.ros2_cdr import (
+    decode_pointcloud2,
+    decode_pose_stamped,
+    encode_pointcloud2,
+    encode_pose_stamped,
+    pointcloud2_to_xyzi,
+)
+from schemas import SCHEMA_VERSION, read_text
+
+log = logging.getLogger(__name__)
+
+POINTS_TOPIC = "/lidar/points"
+GT_TOPIC = "/ground_truth/pose"
+META_SEQUENCE = "adaptune.sequence"
+META_FRAMES = "adaptune.frames"
+POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+
+
+@dataclass(frozen=True)
+class Scan:
+    """One LiDAR frame.
+
+    points_lidar: (N, 4) float32 x, y, z [m] in the sensor frame and intensity.
+    T_world_lidar: (4, 4) float64 ground-truth pose, or None where unknown.
+    """
+
+    frame: int
+    stamp_ns: int
+    points_lidar: NDArray[np.float32]
+    T_world_lidar: NDArray[np.float64] | None = None
+
+    @property
+    def xyz(self) -> NDArray[np.float32]:
+        """(N, 3) float32 points in the sensor frame [m]."""
+        return self.points_lidar[:, :3]
+
+
+@dataclass(frozen=True)
+class EnvLabel:
+    """Environment label of the frames ``start`` .. ``end`` (inclusive)."""
+
+    start: int
+    end: int
+    label: str
+
+
+@dataclass
+class SequenceInfo:
+    """What the ``adaptune.sequence`` metadata record says about a sequence."""
+
+    name: str
+    sensor: str = "unknown"
+    source: str = "unknown"
+    labels: list[EnvLabel] = field(default_factory=list)
+    frame_count: int = 0
+    schema_version: str = SCHEMA_VERSION
+    extra: dict[str, str] = field(default_factory=dict)
+
+    def to_record(self) -> dict[str, str]:
+        rec = {
+            "name": self.name, "sensor": self.sensor, "source": self.source,
+            "frame_count": str(self.frame_count), "schema_version": self.schema_version,
+            "labels": json.dumps([[x.start, x.end, x.label] for x in self.labels]),
+        }
+        rec.update({f"x.{k}": v for k, v in self.extra.items()})
+        return rec
+
+    @classmethod
+    def from_record(cls, rec: dict[str, str], what: str) -> SequenceInfo:
+        try:
+            labels = [EnvLabel(int(a), int(b), str(c)) for a, b, c in json.loads(rec["labels"])]
+            return cls(
+                name=rec["name"], sensor=rec["sensor"], source=rec["source"], labels=labels,
+                frame_count=int(rec["frame_count"]), schema_version=rec["schema_version"],
+                extra={k[2:]: v for k, v in rec.items() if k.startswith("x.")},
+            )
+        except (KeyError, ValueError, TypeError) as exc:
+            raise SchemaError(f"{what}: malformed '{META_SEQUENCE}' metadata ({exc})") from exc
+
+    def label_of(self, frame: int) -> str | None:
+        """Environment label of ``frame``, or None."""
+        for lab in self.labels:
+            if lab.start <= frame <= lab.end:
+                return lab.label
+        return None
+
+
+def drop_non_finite(points: NDArray[np.float32], what: str) -> tuple[NDArray[np.float32], int]:
+    """Remove points with a NaN or infinite coordinate; (kept points, dropped count).
+
+    Raises InputError naming ``what`` when nothing finite is left.
+    """
+    ok = np.isfinite(points[:, :3]).all(axis=1)
+    dropped = int(points.shape[0] - ok.sum())
+    if not ok.any():
+        raise InputError(f"{what}: empty scan (no finite points of {points.shape[0]})")
+    return (points if dropped == 0 else points[ok]), dropped
+
+
+class SequenceWriter:
+    """Write a sequence MCAP atomically: use as a context manager, ``add`` frames in order."""
+
+    def __init__(self, path: str | Path, info: SequenceInfo, chunk_size: int = 4 << 20) -> None:
+        self.path = Path(path)
+        self.info = info
+        self.chunk_size = chunk_size
+        self.stamps_ns: list[int] = []
+        self.dropped_points = 0
+        self._poses: dict[str, list[tuple[int, bytes]]] = {}
+        self._json: dict[str, tuple[dict[str, Any], list[tuple[int, bytes]]]] = {}
+
+    def __enter__(self) -> SequenceWriter:
+        from mcap.writer import CompressionType, Writer
+
+        self._atomic = atomic_path(self.path)
+        self._tmp = self._atomic.__enter__()
+        self._fh = open(self._tmp, "wb")  # noqa: SIM115 - closed in __exit__
+        self._w = Writer(self._fh, chunk_size=self.chunk_size, compression=CompressionType.ZSTD)
+        self._w.start(profile="ros2", library="adaptune")
+        self._schemas = {
+            POINTCLOUD2: self._w.register_schema(
+                POINTCLOUD2, "ros2msg", read_text("ros2/sensor_msgs__PointCloud2.msg").encode()),
+            POSE_STAMPED: self._w.register_schema(
+                POSE_STAMPED, "ros2msg", read_text("ros2/geometry_msgs__PoseStamped.msg").encode()),
+        }
+        self._points_ch = self._w.register_channel(POINTS_TOPIC, "cdr", self._schemas[POINTCLOUD2])
+        return self
+
+    def add(self, stamp_ns: int, points_lidar: NDArray[np.float32],
+            T_world_lidar: NDArray[np.float64] | None = None) -> int:
+        """Append one frame; returns its index. Non-finite points are dropped and counted.
+
+        points_lidar: (N, 3) or (N, 4) float [m]; T_world_lidar: (4, 4) or None.
+        """
+        frame = len(self.stamps_ns)
+        what = f"{self.info.name} frame {frame}"
+        stamp_ns = int(stamp_ns)
+        if self.stamps_ns and stamp_ns <= self.stamps_ns[-1]:
+            raise InputError(f"{what}: stamp {stamp_ns} ns is not after the previous "
+                             f"{self.stamps_ns[-1]} ns (frames must be in time order)")
+        pts = np.asarray(points_lidar, dtype=np.float32)
+        if pts.ndim != 2 or pts.shape[1] not in (3, 4):
+            raise InputError(f"{what}: points must be (N, 3) or (N, 4), got {pts.shape}")
+        if pts.shape[1] == 3:
+            pts = np.concatenate([pts, np.zeros((len(pts), 1), np.float32)], axis=1)
+        pts, dropped = drop_non_finite(pts, what)
+        self.dropped_points += dropped
+        self._w.add_message(self._points_ch, log_time=stamp_ns, publish_time=stamp_ns,
+                            data=encode_pointcloud2(stamp_ns, pts), sequence=frame)
+        if T_world_lidar is not None:
+            T = np.asarray(T_world_lidar, dtype=np.float64)
+            if T.shape != (4, 4) or not np.isfinite(T).all():
+                raise InputError(f"{what}: ground-truth pose is not a finite 4x4 matrix")
+            self.add_pose(GT_TOPIC, stamp_ns, T)
+        self.stamps_ns.append(stamp_ns)
+        return frame
+
+    def add_pose(self, topic: str, stamp_ns: int, T_world_x: NDArray[np.float64]) -> None:
+        """Queue a PoseStamped on ``topic`` (written after the scans, in its own chunks)."""
+        self._poses.setdefault(topic, []).append((int(stamp_ns), encode_pose_stamped(stamp_ns, T_world_x)))
+
+    def add_json(self, topic: str, stamp_ns: int, message: dict[str, Any],
+                 json_schema: dict[str, Any]) -> None:
+        """Queue a JSON message on ``topic`` with its JSON Schema (Foxglove plots its fields)."""
+        _, msgs = self._json.setdefault(topic, (json_schema, []))
+        msgs.append((int(stamp_ns), json.dumps(message).encode()))
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        try:
+            if exc_type is None:
+                self._finish()
+        finally:
+            self._fh.close()
+            self._atomic.__exit__(exc_type, exc, tb)
+
+    def _finish(self) -> None:
+        if not self.stamps_ns:
+            raise InputError(f"{self.info.name}: no frames to write")
+        self._w.flush()  # close the last scan chunk: small channels get chunks of their own
+        for topic, msgs in self._poses.items():
+            ch = self._w.register_channel(topic, "cdr", self._schemas[POSE_STAMPED])
+            for i, (t, data) in enumerate(msgs):
+                self._w.add_message(ch, log_time=t, publish_time=t, data=data, sequence=i)
+        for topic, (schema, msgs) in self._json.items():
+            sid = self._w.register_schema(topic.strip("/").replace("/", "."), "jsonschema",
+                                          json.dumps(schema).encode())
+            ch = self._w.register_channel(topic, "json", sid)
+            for i, (t, data) in enumerate(msgs):
+                self._w.add_message(ch, log_time=t, publish_time=t, data=data, sequence=i)
+        self.info.frame_count = len(self.stamps_ns)
+        self._w.add_metadata(META_SEQUENCE, self.info.to_record())
+        self._w.add_metadata(META_FRAMES, {"stamps_ns": " ".join(map(str, self.stamps_ns))})
+        self._w.finish()
+        if self.dropped_points:
+            log.warning("%s: dropped %d non-finite points", self.info.name, self.dropped_points)
+
+
+class SequenceReader:
+    """Random access to the frames of a sequence MCAP. Use as a context manager or ``close()``.
+
+    ``len(reader)`` frames; ``reader[k]`` -> Scan; iteration yields Scans with ground truth.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        from mcap.reader import make_reader
+
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise InputError(f"{self.path}: no such sequence file")
+        self._fh = open(self.path, "rb")  # noqa: SIM115 - closed by close()
+        try:
+            self._reader = make_reader(self._fh, validate_crcs=True)
+            summary = self._reader.get_summary()
+            meta = {m.name: m.metadata for m in self._reader.iter_metadata()}
+        except InputError:
+            self.close()
+            raise
+        except Exception as exc:  # mcap raises many types for a damaged file
+            self.close()
+            raise InputError(f"{self.path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})") from exc
+        if summary is None:
+            self.close()
+            raise InputError(f"{self.path}: corrupt or truncated MCAP (no summary section)")
+        if META_SEQUENCE not in meta or META_FRAMES not in meta:
+            self.close()
+            raise SchemaError(f"{self.path}: not an adaptune sequence MCAP (no '{META_SEQUENCE}' "
+                              "metadata); normalise it with `adaptune ingest mcap`")
+        self.info = SequenceInfo.from_record(meta[META_SEQUENCE], str(self.path))
+        if self.info.schema_version.split(".")[0] != SCHEMA_VERSION.split(".")[0]:
+            self.close()
+            raise SchemaError(f"{self.path}: schema version {self.info.schema_version}, "
+                              f"this adaptune reads {SCHEMA_VERSION}")
+        self.stamps_ns = np.array([int(s) for s in meta[META_FRAMES]["stamps_ns"].split()], np.int64)
+        self.topics = {ch.topic for ch in summary.channels.values()}
+        self._gt: NDArray[np.float64] | None | bool = False
+
+    def __len__(self) -> int:
+        return len(self.stamps_ns)
+
+    def __enter__(self) -> SequenceReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Release the file handle."""
+        self._fh.close()
+
+    def _messages(self, topics: list[str], start: int | None = None, end: int | None = None):
+        try:
+            yield from self._reader.iter_messages(topics=topics, starting_at=start, ending_before=end)
+        except InputError:
+            raise
+        except Exception as exc:
+            raise InputError(f"{self.path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})") from exc
+
+    def _decode_points(self, data: bytes, frame: int) -> NDArray[np.float32]:
+        what = f"{self.path} frame {frame}"
+        m = decode_pointcloud2(data, what)
+        return pointcloud2_to_xyzi(m.height, m.width, m.fields, m.is_bigendian, m.point_step,
+                                   m.row_step, m.data, what)
+
+    @property
+    def has_ground_truth(self) -> bool:
+        return GT_TOPIC in self.topics
+
+    def ground_truth(self) -> NDArray[np.float64] | None:
+        """(N, 4, 4) T_world_lidar of every frame, or None when the sequence has none."""
+        if self._gt is False:
+            self._gt = None
+            if self.has_ground_truth:
+                poses = {}
+                for _, _, msg in self._messages([GT_TOPIC]):
+                    poses[msg.log_time] = decode_pose_stamped(msg.data, f"{self.path} {GT_TOPIC}")[1]
+                missing = [int(s) for s in self.stamps_ns if int(s) not in poses]
+                if missing:
+                    raise InputError(f"{self.path}: {len(missing)} frames have no ground-truth pose")
+                self._gt = np.stack([poses[int(s)] for s in self.stamps_ns])
+        return self._gt  # type: ignore[return-value]
+
+    def __getitem__(self, frame: int) -> Scan:
+        n = len(self)
+        if not -n <= frame < n:
+            raise IndexError(f"{self.path}: frame {frame} out of range 0..{n - 1}")
+        frame %= n
+        t = int(self.stamps_ns[frame])
+        for _, _, msg in self._messages([POINTS_TOPIC], t, t + 1):
+            gt = self.ground_truth()
+            return Scan(frame, t, self._decode_points(msg.data, frame),
+                        None if gt is None else gt[frame])
+        raise InputError(f"{self.path}: frame {frame} (stamp {t} ns) has no point cloud")
+
+    def __iter__(self) -> Iterator[Scan]:
+        gt = self.ground_truth()
+        index = {int(s): i for i, s in enumerate(self.stamps_ns)}
+        count = 0
+        for _, _, msg in self._messages([POINTS_TOPIC]):
+            frame = index.get(msg.log_time)
+            if frame is None:
+                raise InputError(f"{self.path}: point cloud at {msg.log_time} ns is not a listed frame")
+            count += 1
+            yield Scan(frame, msg.log_time, self._decode_points(msg.data, frame),
+                       None if gt is None else gt[frame])
+        if count != len(self):
+            raise InputError(f"{self.path}: {count} point clouds for {len(self)} frames")
+
+    def iter_topic_json(self, topic: str) -> Iterator[tuple[int, dict[str, Any]]]:
+        """(stamp_ns, message) of a JSON channel such as ``/adaptune/params``."""
+        for _, _, msg in self._messages([topic]):
+            yield msg.log_time, json.loads(msg.data)
+
+    def iter_topic_poses(self, topic: str) -> Iterator[tuple[int, NDArray[np.float64]]]:
+        """(stamp_ns, (4, 4) pose) of a PoseStamped channel such as ``/odometry/pose``."""
+        for _, _, msg in self._messages([topic]):
+            yield decode_pose_stamped(msg.data, f"{self.path} {topic}")

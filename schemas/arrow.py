@@ -1,0 +1,54 @@
+"""Arrow schemas of every Parquet table adaptune writes (schema version in the metadata)."""
+
+from __future__ import annotations
+
+import pyarrow as pa
+
+from schemas import SCHEMA_VERSION
+
+POSE_COLUMNS = [f"T_{r}{c}" for r in range(3) for c in range(4)]
+"""The 12 numbers of T_world_lidar, row-major 3x4: T_00 .. T_23."""
+
+_META = {b"adaptune.schema_version": SCHEMA_VERSION.encode()}
+
+TRAJECTORY = pa.schema(
+    [pa.field("frame", pa.int32(), nullable=False),
+     pa.field("stamp_ns", pa.int64(), nullable=False)]
+    + [pa.field(c, pa.float64(), nullable=False) for c in POSE_COLUMNS],
+    metadata={**_META, b"adaptune.table": b"trajectory"},
+)
+"""One trial's estimated trajectory: T_world_lidar per frame."""
+
+DESCRIPTORS = pa.schema(
+    [pa.field("sequence", pa.string(), nullable=False),
+     pa.field("frame", pa.int32(), nullable=False),
+     pa.field("stamp_ns", pa.int64(), nullable=False)]
+    + [pa.field(f"d{i}", pa.float32(), nullable=False) for i in range(90)],
+    metadata={**_META, b"adaptune.table": b"descriptors"},
+)
+"""Environment descriptor (90-bin NDT voxel class histogram) of every frame."""
+
+SCHEDULE_BASE = pa.schema(
+    [pa.field("frame", pa.int32(), nullable=False),
+     pa.field("stamp_ns", pa.int64(), nullable=False)],
+    metadata={**_META, b"adaptune.table": b"schedule"},
+)
+"""A parameter schedule: these columns plus one float64 column per parameter."""
+
+
+def schedule_schema(param_names: list[str]) -> pa.Schema:
+    """Schema of a schedule table for the given parameter names (float64 each)."""
+    s = SCHEDULE_BASE
+    for name in param_names:
+        s = s.append(pa.field(name, pa.float64(), nullable=False))
+    return s.with_metadata(SCHEDULE_BASE.metadata)
+
+
+def check_schema_version(schema: pa.Schema, what: str) -> None:
+    """Raise SchemaError when a Parquet file was written with another major schema version."""
+    from pipeline.errors import SchemaError
+
+    meta = schema.metadata or {}
+    got = meta.get(b"adaptune.schema_version", b"").decode()
+    if got.split(".")[0] != SCHEMA_VERSION.split(".")[0]:
+        raise SchemaError(f"{what}: schema version {got or 'missing'}, this adaptune reads {SCHEMA_VERSION}")

@@ -1,0 +1,86 @@
+"""The ``adaptune`` command: a click group whose sub-commands load lazily.
+
+Only this module turns an AdaptuneError into one line on stderr and exit code 1.
+Sub-commands live in ``stages/<module>.py``; ``COMMANDS`` maps names to them so that
+``adaptune --help`` never imports numpy-heavy code.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import sys
+from typing import Any
+
+import click
+
+COMMANDS: dict[str, tuple[str, str]] = {
+    # name: (module, short help)
+    "ingest": ("stages.ingest:ingest", "Convert KITTI, ROS bags, MCAP or scan folders into a sequence MCAP."),
+    "info": ("stages.info:info", "Summarise a sequence MCAP."),
+    "simulate": ("stages.simulate:simulate", "Ray-cast a simulated world into a sequence MCAP."),
+    "metric": ("stages.metric:metric", "Trajectory error metrics (KITTI devkit)."),
+    "query": ("stages.query:query", "Run SQL against the results database."),
+    "export": ("stages.export:export", "Export a trajectory as KITTI or TUM text."),
+    "run": ("stages.run:run", "Run an odometry algorithm once (fixed params or a schedule)."),
+    "trials": ("stages.trials:trials", "SMBO (hyperopt TPE) trials of an odometry algorithm."),
+    "rte": ("stages.rte:rte", "Score trials into the DuckDB results database."),
+    "descriptors": ("stages.descriptors:descriptors", "Environment descriptors of every frame."),
+    "surrogate": ("stages.surrogate:surrogate", "Fit the kNN surrogate and write the model artifact."),
+    "select": ("stages.select:select", "Parameter schedule of a recorded sequence from a model."),
+    "live": ("stages.live:live", "Stream a sequence through odometry with online parameter selection."),
+    "adaptive": ("stages.adaptive:adaptive", "Adaptive runs on the validation sequences (dvc stage)."),
+    "evaluate": ("stages.evaluate:evaluate", "Baseline vs fixed vs adaptive: metrics, plots, report."),
+    "simulate-set": ("stages.simulate:simulate_set", "Simulate the toy data set of params.yaml (dvc stage)."),
+    "plot-world": ("stages.simulate:plot_world", "Top-down PNG of a world, its trajectory and one scan."),
+}
+
+
+class LazyGroup(click.Group):
+    """A group that imports a sub-command only when it is run or asked for help."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(n for n, (target, _) in COMMANDS.items() if _module_exists(target))
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name not in COMMANDS or not _module_exists(COMMANDS[name][0]):
+            return None
+        target, short = COMMANDS[name]
+        module, attr = target.split(":")
+        cmd = getattr(importlib.import_module(module), attr)
+        cmd.short_help = cmd.short_help or short
+        return cmd
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = [(n, COMMANDS[n][1]) for n in self.list_commands(ctx)]
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
+    def invoke(self, ctx: click.Context) -> Any:
+        from pipeline.errors import AdaptuneError
+
+        try:
+            return super().invoke(ctx)
+        except AdaptuneError as exc:
+            click.echo(f"adaptune: error: {exc}", err=True)
+            ctx.exit(1)
+
+
+def _module_exists(target: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(target.split(":")[0]) is not None
+
+
+@click.group(cls=LazyGroup)
+@click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
+@click.version_option(package_name="adaptune")
+def main(verbose: int) -> None:
+    """adaptune: adaptive hyperparameter tuning for black-box LiDAR odometry."""
+    level = logging.WARNING - 10 * min(verbose, 2) if verbose else logging.INFO
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()

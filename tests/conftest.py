@@ -1,0 +1,49 @@
+"""Shared fixtures. Real KITTI data comes from ADAPTUNE_TEST_DATA (default ../shared/data).
+
+Where that folder is missing, tests that need it skip with the reason; with CI=true that is
+a failure instead, so CI never goes green without the real data.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _data_root() -> Path:
+    env = os.environ.get("ADAPTUNE_TEST_DATA")
+    return Path(env) if env else (REPO / ".." / "shared" / "data").resolve()
+
+
+@pytest.fixture(scope="session")
+def test_data() -> Path:
+    """Root of the real test data (kitti_mini/, kitti_trajectories/)."""
+    root = _data_root()
+    if not (root / "kitti_mini").is_dir():
+        msg = f"real test data not found at {root} (set ADAPTUNE_TEST_DATA)"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return root
+
+
+@pytest.fixture(scope="session")
+def kitti_root(test_data: Path) -> Path:
+    """KITTI odometry root with sequences/ and poses/ (sequences 01, 04, 06, 10; frames 0-9)."""
+    return test_data / "kitti_mini" / "dataset"
+
+
+@pytest.fixture(scope="session")
+def kitti_trajectories(test_data: Path) -> Path:
+    """Folder of the official ground-truth pose files 00.txt .. 10.txt (camera frame)."""
+    return test_data / "kitti_trajectories"
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(1234)

@@ -1,0 +1,139 @@
+"""Sequence MCAP: round trip, random access, ROS 2 compatibility, bad input."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.errors import InputError
+from pipeline.geometry import pose_from_xyz_quat
+from pipeline.ros2_cdr import decode_pointcloud2, encode_pointcloud2, encode_pose_stamped
+from pipeline.sequence import GT_TOPIC, POINTS_TOPIC, EnvLabel, SequenceInfo, SequenceReader, SequenceWriter
+
+
+def _write(path: Path, rng: np.random.Generator, n: int = 5, gt: bool = True) -> list[np.ndarray]:
+    clouds = []
+    info = SequenceInfo(name="t", sensor="hdl32", source="test", labels=[EnvLabel(0, n - 1, "cave")])
+    with SequenceWriter(path, info) as w:
+        for i in range(n):
+            pts = rng.normal(size=(100 + i, 4)).astype(np.float32)
+            T = pose_from_xyz_quat(np.array([i, 0.5 * i, 0.0]), np.array([0, 0, np.sin(i / 10), np.cos(i / 10)]))
+            w.add(1_000_000_000 + i * 100_000_000, pts, T if gt else None)
+            clouds.append(pts)
+    return clouds
+
+
+def test_round_trip_random_access_and_iteration(tmp_path: Path, rng: np.random.Generator) -> None:
+    clouds = _write(tmp_path / "s.mcap", rng)
+    with SequenceReader(tmp_path / "s.mcap") as r:
+        assert len(r) == 5 and r.info.frame_count == 5 and r.info.label_of(3) == "cave"
+        np.testing.assert_array_equal(r[3].points_lidar, clouds[3])
+        assert r[3].stamp_ns == 1_300_000_000
+        scans = list(r)
+        assert [s.frame for s in scans] == list(range(5))
+        np.testing.assert_allclose(scans[2].T_world_lidar[:3, 3], [2, 1, 0], atol=1e-12)
+        np.testing.assert_array_equal(scans[4].points_lidar, clouds[4])
+
+
+def test_without_ground_truth(tmp_path: Path, rng: np.random.Generator) -> None:
+    _write(tmp_path / "s.mcap", rng, gt=False)
+    with SequenceReader(tmp_path / "s.mcap") as r:
+        assert not r.has_ground_truth and r.ground_truth() is None and r[0].T_world_lidar is None
+
+
+def test_messages_decode_with_mcap_ros2(tmp_path: Path, rng: np.random.Generator) -> None:
+    """Our hand-written CDR agrees with mcap_ros2's generic decoder (what ROS 2 tools use)."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    clouds = _write(tmp_path / "s.mcap", rng)
+    with open(tmp_path / "s.mcap", "rb") as fh:
+        reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+        msgs = list(reader.iter_decoded_messages(topics=[POINTS_TOPIC, GT_TOPIC]))
+    pcs = [m for _, ch, _, m in msgs if ch.topic == POINTS_TOPIC]
+    poses = [m for _, ch, _, m in msgs if ch.topic == GT_TOPIC]
+    assert len(pcs) == 5 and len(poses) == 5
+    assert [f.name for f in pcs[1].fields] == ["x", "y", "z", "intensity"]
+    got = np.frombuffer(bytes(pcs[1].data), np.float32).reshape(-1, 4)
+    np.testing.assert_array_equal(got, clouds[1])
+    assert poses[3].pose.position.x == pytest.approx(3.0)
+
+
+def test_encode_matches_mcap_ros2_encoder(rng: np.random.Generator) -> None:
+    from mcap_ros2._dynamic import serialize_dynamic
+
+    from schemas import read_text
+
+    pts = rng.normal(size=(7, 4)).astype(np.float32)
+    enc = serialize_dynamic("sensor_msgs/msg/PointCloud2", read_text("ros2/sensor_msgs__PointCloud2.msg"))
+    ref = enc["sensor_msgs/msg/PointCloud2"]({
+        "header": {"stamp": {"sec": 3, "nanosec": 5}, "frame_id": "lidar"},
+        "height": 1, "width": 7,
+        "fields": [{"name": n, "offset": 4 * i, "datatype": 7, "count": 1}
+                   for i, n in enumerate(["x", "y", "z", "intensity"])],
+        "is_bigendian": False, "point_step": 16, "row_step": 112,
+        "data": pts.tobytes(), "is_dense": True,
+    })
+    assert encode_pointcloud2(3_000_000_005, pts) == bytes(ref)
+    enc2 = serialize_dynamic("geometry_msgs/msg/PoseStamped", read_text("ros2/geometry_msgs__PoseStamped.msg"))
+    ref2 = enc2["geometry_msgs/msg/PoseStamped"]({
+        "header": {"stamp": {"sec": 1, "nanosec": 0}, "frame_id": "world"},
+        "pose": {"position": {"x": 1.0, "y": 2.0, "z": 3.0},
+                 "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
+    })
+    T = np.eye(4)
+    T[:3, 3] = [1, 2, 3]
+    assert encode_pose_stamped(1_000_000_000, T) == bytes(ref2)
+    assert decode_pointcloud2(encode_pointcloud2(7, pts)).width == 7
+
+
+def test_nan_points_dropped_and_empty_scan_refused(tmp_path: Path) -> None:
+    pts = np.ones((10, 4), np.float32)
+    pts[2, 0] = np.nan
+    pts[5, 1] = np.inf
+    with SequenceWriter(tmp_path / "a.mcap", SequenceInfo(name="a")) as w:
+        w.add(1, pts)
+        assert w.dropped_points == 2
+    with SequenceReader(tmp_path / "a.mcap") as r:
+        assert r[0].points_lidar.shape == (8, 4)
+    bad = np.full((4, 4), np.nan, np.float32)
+    with pytest.raises(InputError, match="empty scan"), SequenceWriter(tmp_path / "b.mcap", SequenceInfo(name="b")) as w:
+        w.add(1, bad)
+    assert not (tmp_path / "b.mcap").exists()
+    assert not list(tmp_path.glob(".b.mcap*"))
+
+
+def test_stamps_must_increase(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="not after"), SequenceWriter(tmp_path / "c.mcap", SequenceInfo(name="c")) as w:
+        w.add(5, np.ones((3, 3), np.float32))
+        w.add(5, np.ones((3, 3), np.float32))
+    assert not (tmp_path / "c.mcap").exists()
+
+
+@pytest.mark.parametrize("cut", [0.5, 0.9])
+def test_truncated_mcap_is_one_clear_error(tmp_path: Path, rng: np.random.Generator, cut: float) -> None:
+    _write(tmp_path / "s.mcap", rng)
+    data = (tmp_path / "s.mcap").read_bytes()
+    (tmp_path / "t.mcap").write_bytes(data[: int(len(data) * cut)])
+    with pytest.raises(InputError, match="corrupt or truncated MCAP"):
+        with SequenceReader(tmp_path / "t.mcap") as r:
+            list(r)
+
+
+def test_corrupt_chunk_is_one_clear_error(tmp_path: Path, rng: np.random.Generator) -> None:
+    _write(tmp_path / "s.mcap", rng)
+    data = bytearray((tmp_path / "s.mcap").read_bytes())
+    for i in range(200, 600):
+        data[i] ^= 0xFF
+    (tmp_path / "t.mcap").write_bytes(bytes(data))
+    with pytest.raises(InputError, match="corrupt or truncated MCAP"):
+        with SequenceReader(tmp_path / "t.mcap") as r:
+            list(r)
+
+
+def test_not_an_mcap(tmp_path: Path) -> None:
+    (tmp_path / "x.mcap").write_text("hello")
+    with pytest.raises(InputError, match="x.mcap"):
+        SequenceReader(tmp_path / "x.mcap")
