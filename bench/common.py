@@ -1,0 +1,46 @@
+"""Shared pieces of the benchmark scripts: the Row type, timing, the table printer."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass
+class Row:
+    """One figure: our value beside the reference (same run, or the paper) and the target."""
+
+    figure: str
+    value: float
+    unit: str
+    reference: str = ""
+    target: str = ""
+
+
+def best_of(fn: Callable[[], object], repeat: int = 5, number: int = 1) -> float:
+    """Best wall time [s] of ``number`` calls, over ``repeat`` rounds, divided by ``number``."""
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        best = min(best, (time.perf_counter() - t0) / number)
+    return best
+
+
+def data_root() -> Path:
+    """The real test data (ADAPTUNE_TEST_DATA, default ../shared/data)."""
+    env = os.environ.get("ADAPTUNE_TEST_DATA")
+    return Path(env) if env else Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+def format_table(rows: list[Row]) -> str:
+    """A fixed-width text table of ``rows``."""
+    head = ("figure", "value", "unit", "reference (same run / paper)", "target")
+    body = [(r.figure, f"{r.value:.4g}", r.unit, r.reference, r.target) for r in rows]
+    widths = [max(len(str(x)) for x in col) for col in zip(head, *body, strict=False)]
+    line = lambda cells: "  ".join(str(c).ljust(w) for c, w in zip(cells, widths, strict=True))  # noqa: E731
+    return "\n".join([line(head), line(["-" * w for w in widths]), *map(line, body)])

@@ -1,0 +1,46 @@
+"""`make bench`: every figure of DESIGN section 8, printed as one table.
+
+Each ``bench/bench_*.py`` module exposes ``run() -> list[Row]``; a row gives the figure, our
+measurement, the reference measured in the same run (or the paper's number), and the target.
+Run one module with ``python bench/run.py ingest``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import logging
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+sys.path.insert(0, str(HERE))
+
+from common import Row, format_table  # noqa: E402
+
+
+def main(argv: list[str]) -> int:
+    logging.basicConfig(level=logging.WARNING)
+    wanted = set(argv)
+    rows: list[Row] = []
+    for path in sorted(HERE.glob("bench_*.py")):
+        name = path.stem.removeprefix("bench_")
+        if wanted and name not in wanted:
+            continue
+        spec = importlib.util.spec_from_file_location(path.stem, path)
+        assert spec and spec.loader
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        t0 = time.perf_counter()
+        got = module.run()
+        print(f"[{name}: {len(got)} figures in {time.perf_counter() - t0:.1f} s]", file=sys.stderr)
+        print(format_table(got), flush=True)
+        rows.extend(got)
+    print("\n== all figures ==")
+    print(format_table(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))

@@ -1,0 +1,233 @@
+"""The black-box contract (DESIGN section 5): parameter spaces, schedules, adapters.
+
+An *adapter* wraps one odometry algorithm. It declares a ``ParameterSpace`` (the baseline is
+each parameter's default) and runs over scans with fixed parameters or a per-frame
+``Schedule``. In-process adapters implement ``start`` (a streaming ``Odometry`` that takes
+one scan at a time and accepts new parameters between scans); ``run_streaming`` turns that
+into ``run``. Out-of-process adapters (``command``) implement ``run`` directly.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.errors import ConfigError, InputError
+from pipeline.sequence import Scan
+from pipeline.trajectory import Trajectory
+
+Params = dict[str, float]
+"""Parameter name -> value (ints are stored as floats with integral values)."""
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One tunable parameter: range [low, high], int or float, log scale, baseline default."""
+
+    name: str
+    low: float
+    high: float
+    default: float
+    kind: Literal["float", "int"] = "float"
+    log: bool = False
+    unit: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.low <= self.default <= self.high:
+            raise ConfigError(f"{self.name}: default {self.default} outside [{self.low}, {self.high}]")
+        if self.log and self.low <= 0:
+            raise ConfigError(f"{self.name}: log scale needs low > 0, got low={self.low}")
+
+    def check(self, value: float) -> float:
+        """``value`` as a float if it is finite, in range (and integral for ints); else ConfigError."""
+        v = float(value)
+        if not math.isfinite(v) or not self.low <= v <= self.high:
+            raise ConfigError(f"{self.name} must be in [{self.low}, {self.high}], got {value}")
+        if self.kind == "int" and v != round(v):
+            raise ConfigError(f"{self.name} must be an integer, got {value}")
+        return v
+
+
+@dataclass(frozen=True)
+class ParameterSpace:
+    """The ordered parameters of an adapter."""
+
+    specs: tuple[ParamSpec, ...]
+
+    @property
+    def names(self) -> list[str]:
+        return [s.name for s in self.specs]
+
+    def defaults(self) -> Params:
+        """The baseline: every parameter at its default."""
+        return {s.name: float(s.default) for s in self.specs}
+
+    def __getitem__(self, name: str) -> ParamSpec:
+        for s in self.specs:
+            if s.name == name:
+                return s
+        raise ConfigError(f"unknown parameter {name!r} (known: {', '.join(self.names)})")
+
+    def validate(self, params: Mapping[str, float], partial: bool = False) -> Params:
+        """Checked copy of ``params``; missing names take defaults unless ``partial``."""
+        unknown = set(params) - set(self.names)
+        if unknown:
+            raise ConfigError(f"unknown parameter {sorted(unknown)[0]!r} (known: {', '.join(self.names)})")
+        out = {} if partial else self.defaults()
+        out.update({k: self[k].check(v) for k, v in params.items()})
+        return out
+
+    def to_unit(self, params: Mapping[str, float]) -> NDArray[np.float64]:
+        """Map params to [0, 1]^D (log parameters on a log scale). (D,) float64."""
+        out = []
+        for s in self.specs:
+            v = float(params[s.name])
+            lo, hi = (math.log(s.low), math.log(s.high)) if s.log else (s.low, s.high)
+            x = math.log(v) if s.log else v
+            out.append((x - lo) / (hi - lo) if hi > lo else 0.0)
+        return np.array(out)
+
+    def from_unit(self, u: NDArray[np.float64]) -> Params:
+        """Inverse of ``to_unit`` (clipped to [0, 1], ints rounded)."""
+        out = {}
+        for s, ui in zip(self.specs, np.clip(np.asarray(u, np.float64), 0.0, 1.0), strict=True):
+            if s.log:
+                v = math.exp(math.log(s.low) + ui * (math.log(s.high) - math.log(s.low)))
+            else:
+                v = s.low + ui * (s.high - s.low)
+            out[s.name] = float(round(v)) if s.kind == "int" else float(min(max(v, s.low), s.high))
+        return out
+
+    def to_json(self) -> list[dict[str, object]]:
+        """Plain description (for manifests and reports)."""
+        return [dict(name=s.name, low=s.low, high=s.high, default=s.default, kind=s.kind,
+                     log=s.log, unit=s.unit) for s in self.specs]
+
+
+@dataclass
+class Schedule:
+    """Parameters per frame. ``values``: name -> (N,) float64, aligned with ``frames`` (N,)."""
+
+    frames: NDArray[np.int32]
+    values: dict[str, NDArray[np.float64]]
+    stamps_ns: NDArray[np.int64] | None = None
+
+    @classmethod
+    def constant(cls, params: Mapping[str, float], n_frames: int) -> Schedule:
+        """The same parameters for frames 0..n_frames-1."""
+        return cls(np.arange(n_frames, dtype=np.int32),
+                   {k: np.full(n_frames, float(v)) for k, v in params.items()})
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def at(self, i: int) -> Params:
+        """Parameters of the i-th row."""
+        return {k: float(v[i]) for k, v in self.values.items()}
+
+    def changes(self) -> list[int]:
+        """Row indices where any parameter differs from the previous row (0 always)."""
+        if not len(self):
+            return []
+        arr = np.stack(list(self.values.values()), axis=1)
+        diff = np.any(arr[1:] != arr[:-1], axis=1)
+        return [0, *(np.flatnonzero(diff) + 1).tolist()]
+
+    def validate(self, space: ParameterSpace, n_frames: int, what: str = "schedule") -> None:
+        """InputError unless the schedule covers frames 0..n_frames-1 with valid values."""
+        if len(self) != n_frames or not np.array_equal(self.frames, np.arange(n_frames)):
+            raise InputError(f"{what}: covers {len(self)} frames, the sequence has {n_frames}")
+        if set(self.values) != set(space.names):
+            raise InputError(f"{what}: parameters {sorted(self.values)}, expected {space.names}")
+        for name, arr in self.values.items():
+            spec = space[name]
+            bad = ~np.isfinite(arr) | (arr < spec.low) | (arr > spec.high)
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise InputError(f"{what}: {name} must be in [{spec.low}, {spec.high}], "
+                                 f"got {arr[k]} at frame {k}")
+
+    def write(self, path: str | Path) -> None:
+        """Write as Parquet (schemas.arrow.schedule_schema), atomically."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        from pipeline.io_utils import atomic_path
+        from schemas.arrow import schedule_schema
+
+        names = list(self.values)
+        stamps = self.stamps_ns if self.stamps_ns is not None else np.zeros(len(self), np.int64)
+        cols = [pa.array(self.frames, pa.int32()), pa.array(stamps, pa.int64())]
+        cols += [pa.array(self.values[n], pa.float64()) for n in names]
+        table = pa.Table.from_arrays(cols, schema=schedule_schema(names))
+        with atomic_path(path) as tmp:
+            pq.write_table(table, tmp)
+
+    @classmethod
+    def read(cls, path: str | Path) -> Schedule:
+        """Read a schedule written by ``write``."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        from schemas.arrow import check_schema_version
+
+        path = Path(path)
+        try:
+            table = pq.read_table(path)
+        except (FileNotFoundError, pa.ArrowInvalid, OSError) as exc:
+            raise InputError(f"{path}: not a readable schedule ({exc})") from exc
+        check_schema_version(table.schema, str(path))
+        names = [c for c in table.column_names if c not in ("frame", "stamp_ns")]
+        return cls(table.column("frame").to_numpy().astype(np.int32),
+                   {n: table.column(n).to_numpy().astype(np.float64) for n in names},
+                   table.column("stamp_ns").to_numpy().astype(np.int64))
+
+
+@runtime_checkable
+class Odometry(Protocol):
+    """A running odometry: one scan at a time, parameters replaceable between scans."""
+
+    def step(self, points_lidar: NDArray[np.float32], stamp_ns: int) -> NDArray[np.float64]:
+        """Register one scan ((N, 3) float32, sensor frame [m]); return T_world_lidar (4, 4)."""
+        ...
+
+    def set_params(self, params: Params) -> None:
+        """Apply new parameters from the next scan on (in place, or rebuilt with state handed over)."""
+        ...
+
+
+@runtime_checkable
+class Adapter(Protocol):
+    """One odometry algorithm behind the black-box contract."""
+
+    name: str
+    space: ParameterSpace
+
+    def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
+        """Run over ``scans`` (frames 0..N-1) with parameters per frame; a Trajectory of N poses."""
+        ...
+
+
+def run_streaming(make: type[Odometry] | object, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
+    """``run`` for in-process adapters: ``make(params)`` -> Odometry, then step every scan,
+    calling ``set_params`` only where the schedule changes."""
+    changes = set(schedule.changes())
+    odom: Odometry | None = None
+    frames, stamps, poses = [], [], []
+    for i, scan in enumerate(scans):
+        if odom is None:
+            odom = make(schedule.at(i))  # type: ignore[operator]
+        elif i in changes:
+            odom.set_params(schedule.at(i))
+        poses.append(odom.step(scan.xyz, scan.stamp_ns))
+        frames.append(scan.frame)
+        stamps.append(scan.stamp_ns)
+    if odom is None:
+        raise InputError("no scans to run odometry on")
+    return Trajectory(np.array(frames), np.array(stamps), np.stack(poses))
