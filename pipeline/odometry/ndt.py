@@ -1,0 +1,275 @@
+"""``ndt``: keyframe NDT scan matching (point-to-distribution, Magnusson 2009), numpy only.
+
+Algorithm, per scan:
+1. Source: the scan downsampled to the centroids of a voxel grid of ``source_voxel_m``
+   (option, default 1.0 m; a fixed size so that ``resolution`` changes only the target).
+2. Target: the keyframe (a full scan, stored in world coordinates) in a voxel grid of side
+   ``resolution``; per voxel with >= ``min_points`` points the mean and the covariance,
+   regularised by clamping its eigenvalues to >= 1 % of the largest (Magnusson's rule),
+   and its inverse. Voxel keys are packed integer coordinates, kept sorted; a source point
+   finds its voxel with ``np.searchsorted`` (and, with ``neighbors=7``, the 6 face neighbours).
+3. Pose: Gauss-Newton on the NDT score sum_k -d1 exp(-d2/2 e_k^T S_k^-1 e_k) (the outlier
+   ratio 0.55 gives d1, d2 as in Magnusson's thesis), i.e. iteratively reweighted least
+   squares with weights -d1 d2/2 exp(...), Levenberg damping (a step is kept only when the
+   score rises; else the damping grows tenfold), right-perturbation on SE(3), starting from a
+   constant-velocity prediction; at most ``max_iterations`` steps, stop below 1e-4.
+4. Keyframe: replaced by the current scan (transformed with its estimated pose) when the path
+   length travelled since the keyframe reaches ``keyframe_interval`` [m]; 0 = every frame.
+
+Parameter changes (``set_params``) are applied in place: a new ``resolution`` rebuilds the
+keyframe's voxel map from the stored keyframe points (and the score constants); a new
+``keyframe_interval`` takes effect at the next keyframe decision. Pose, velocity and keyframe
+are kept, so the trajectory stays continuous across a change.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import Field
+
+from pipeline.config import Section
+from pipeline.odometry.base import (
+    Adapter,
+    ParameterSpace,
+    Params,
+    ParamSpec,
+    Schedule,
+    run_streaming,
+)
+from pipeline.odometry.common import (
+    F64,
+    constant_velocity_guess,
+    orthonormalize,
+    parse_options,
+    se3_exp,
+    voxel_downsample,
+    voxel_keys,
+)
+from pipeline.sequence import Scan
+from pipeline.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
+
+SPACE = ParameterSpace((
+    ParamSpec("resolution", 1.0, 10.0, 4.0, unit="m"),
+    ParamSpec("keyframe_interval", 0.0, 10.0, 4.0, unit="m"),
+))
+
+# neighbours searched around a source point's own voxel
+_OFFSETS = {
+    1: np.zeros((1, 3), np.int64),
+    7: np.array([[0, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]),
+}
+
+
+class NdtOptions(Section):
+    """Settings of ``ndt`` that are not tuned."""
+
+    source_voxel_m: float = Field(1.0, gt=0, le=10)
+    min_points: int = Field(5, ge=3)
+    neighbors: int = Field(1, description="1 (own voxel) or 7 (and face neighbours)")
+    max_iterations: int = Field(15, ge=1, le=100)
+    outlier_ratio: float = Field(0.55, gt=0, lt=1)
+
+    def model_post_init(self, __context: object) -> None:
+        if self.neighbors not in _OFFSETS:
+            raise ValueError(f"neighbors must be 1 or 7, got {self.neighbors}")
+
+
+@dataclass
+class VoxelMap:
+    """NDT voxels of one keyframe: sorted keys (K,), means (K, 3), inverse covariances (K, 3, 3)."""
+
+    resolution: float
+    keys: NDArray[np.int64]
+    means: F64
+    inv_covs: F64
+
+    @classmethod
+    def build(cls, points_world: F64, resolution: float, min_points: int) -> VoxelMap:
+        """Voxel statistics of ``points_world`` (M, 3) [m] at ``resolution`` [m]."""
+        keys, inv, counts = np.unique(voxel_keys(points_world, resolution),
+                                      return_inverse=True, return_counts=True)
+        # coordinates relative to a point of each voxel keep the second moments well conditioned
+        first = np.zeros(len(keys), np.int64)
+        first[inv[::-1]] = np.arange(len(inv))[::-1]
+        local = points_world - points_world[first][inv]
+        sums = np.stack([np.bincount(inv, local[:, k], len(keys)) for k in range(3)], axis=1)
+        mean_local = sums / counts[:, None]
+        second = np.empty((len(keys), 3, 3))
+        for a in range(3):
+            for b in range(a, 3):
+                s = np.bincount(inv, local[:, a] * local[:, b], len(keys)) / counts
+                second[:, a, b] = second[:, b, a] = s
+        keep = counts >= min_points
+        cov = (second - mean_local[:, :, None] * mean_local[:, None, :])[keep]
+        cov *= (counts[keep] / (counts[keep] - 1.0))[:, None, None]
+        evals, evecs = np.linalg.eigh(cov)
+        floor = np.maximum(0.01 * evals[:, 2:3], 1e-6)
+        evals = np.maximum(evals, floor)
+        inv_covs = np.einsum("kij,kj,klj->kil", evecs, 1.0 / evals, evecs)
+        means = mean_local[keep] + points_world[first[keep]]
+        return cls(resolution, keys[keep], means, inv_covs)
+
+    def __len__(self) -> int:
+        return len(self.keys)
+
+    def lookup(self, points_world: F64,
+               offsets: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """Pairs (point index, voxel index) of the voxels near ``points_world`` (N, 3)."""
+        ijk = np.floor(points_world * (1.0 / self.resolution)).astype(np.int64)
+        pts, vox = [], []
+        for off in offsets:
+            k = voxel_keys((ijk + off + 0.5) * self.resolution, self.resolution)
+            idx = np.searchsorted(self.keys, k)
+            idx[idx >= len(self.keys)] = 0
+            hit = np.flatnonzero(self.keys[idx] == k)
+            pts.append(hit)
+            vox.append(idx[hit])
+        if len(offsets) == 1:
+            return pts[0], vox[0]
+        return np.concatenate(pts), np.concatenate(vox)
+
+
+def score_constants(resolution: float, outlier_ratio: float) -> tuple[float, float]:
+    """Magnusson's (d1, d2) of the Gaussian-plus-uniform fit; d1 < 0 < d2."""
+    c1 = 10.0 * (1.0 - outlier_ratio)
+    c2 = outlier_ratio / resolution**3
+    d3 = -math.log(c2)
+    d1 = -math.log(c1 + c2) - d3
+    d2 = -2.0 * math.log((-math.log(c1 * math.exp(-0.5) + c2) - d3) / d1)
+    return d1, d2
+
+
+class NdtOdometry:
+    """Streaming keyframe NDT: ``step`` one scan at a time, ``set_params`` between scans."""
+
+    def __init__(self, params: Params, options: NdtOptions | None = None) -> None:
+        self.options = options or NdtOptions()
+        self.params = SPACE.validate(params)
+        self.poses: list[F64] = []
+        self.keyframe_world: F64 | None = None
+        self.voxels: VoxelMap | None = None
+        self.travelled_m = 0.0
+        self._offsets = _OFFSETS[self.options.neighbors]
+        self._set_constants()
+
+    def _set_constants(self) -> None:
+        self.d1, self.d2 = score_constants(self.params["resolution"], self.options.outlier_ratio)
+
+    def set_params(self, params: Params) -> None:
+        """In place: a new resolution rebuilds the keyframe's voxel map; the rest is kept."""
+        new = SPACE.validate(params)
+        rebuild = new["resolution"] != self.params["resolution"]
+        self.params = new
+        if rebuild:
+            self._set_constants()
+            if self.keyframe_world is not None:
+                self._build_map()
+
+    def _build_map(self) -> None:
+        assert self.keyframe_world is not None
+        self.voxels = VoxelMap.build(self.keyframe_world, self.params["resolution"],
+                                     self.options.min_points)
+
+    def step(self, points_lidar: NDArray[np.float32], stamp_ns: int) -> F64:
+        """Register one scan ((N, 3) float32 [m]); T_world_lidar (4, 4), the first is identity."""
+        pts = np.asarray(points_lidar, dtype=np.float64)[:, :3]
+        if not self.poses:
+            T = np.eye(4)
+        else:
+            guess = constant_velocity_guess(self.poses)
+            source = voxel_downsample(pts, self.options.source_voxel_m)
+            T = self._align(source, guess)
+            self.travelled_m += float(np.linalg.norm(T[:3, 3] - self.poses[-1][:3, 3]))
+        self.poses.append(T)
+        if self.keyframe_world is None or self.travelled_m >= self.params["keyframe_interval"]:
+            self.keyframe_world = pts @ T[:3, :3].T + T[:3, 3]
+            self.travelled_m = 0.0
+            self._build_map()
+        return T.copy()
+
+    def _evaluate(self, source: F64, T: F64) -> tuple[float, F64, F64, int]:
+        """NDT score of ``source`` at pose ``T``, Gauss-Newton Hessian (6, 6), gradient (6,)."""
+        assert self.voxels is not None
+        R = T[:3, :3]
+        q = source @ R.T + T[:3, 3]
+        ip, iv = self.voxels.lookup(q, self._offsets)
+        n = len(ip)
+        if n == 0:
+            return 0.0, np.zeros((6, 6)), np.zeros(6), 0
+        e = q[ip] - self.voxels.means[iv]
+        Ci = self.voxels.inv_covs[iv]
+        Ce = np.einsum("nij,nj->ni", Ci, e)
+        m = np.einsum("ni,ni->n", e, Ce)
+        ex = np.exp(-0.5 * self.d2 * m)
+        score = float(-self.d1 * ex.sum())
+        w = (-self.d1 * self.d2) * ex
+        # right perturbation T exp(xi): dq/dw = -R [p]x, dq/dv = R
+        p = source[ip]
+        J = np.empty((n, 3, 6))
+        # column j of -R [p]x is R (e_j x p)
+        Rx, Ry, Rz = R[:, 0], R[:, 1], R[:, 2]
+        px, py, pz = p[:, 0:1], p[:, 1:2], p[:, 2:3]
+        J[:, :, 0] = py * Rz - pz * Ry  # R (e_x x p) = R (0, -pz, py)
+        J[:, :, 1] = pz * Rx - px * Rz  # R (e_y x p) = R (pz, 0, -px)
+        J[:, :, 2] = px * Ry - py * Rx  # R (e_z x p) = R (-py, px, 0)
+        J[:, :, 3:] = R
+        CJ = np.matmul(Ci, J)  # (n, 3, 6)
+        H = (J * w[:, None, None]).reshape(-1, 6).T @ CJ.reshape(-1, 6)
+        g = (Ce * w[:, None]).reshape(-1) @ J.reshape(-1, 6)
+        return score, H, g, n
+
+    def _align(self, source: F64, guess: F64) -> F64:
+        """Levenberg-damped Gauss-Newton from ``guess``; the best pose found."""
+        T = guess
+        score, H, g, n = self._evaluate(source, T)
+        if n < 6:
+            log.debug("ndt: only %d correspondences, keeping the prediction", n)
+            return T
+        lam = 1e-4
+        for _ in range(self.options.max_iterations):
+            D = np.diag(np.maximum(np.diag(H), 1e-9))
+            try:
+                xi = -np.linalg.solve(H + lam * D, g)
+            except np.linalg.LinAlgError:
+                break
+            cand = orthonormalize(T @ se3_exp(xi))
+            c_score, c_H, c_g, c_n = self._evaluate(source, cand)
+            if c_score > score and c_n >= 6:
+                T, score, H, g = cand, c_score, c_H, c_g
+                lam = max(lam * 0.1, 1e-7)
+                if np.linalg.norm(xi) < 1e-4:
+                    break
+            else:
+                lam *= 10.0
+                if lam > 1e3:
+                    break
+        return T
+
+
+class NdtAdapter:
+    """The ``ndt`` adapter: keyframe NDT, parameters ``resolution`` and ``keyframe_interval``."""
+
+    name = "ndt"
+    space = SPACE
+
+    def __init__(self, **options: object) -> None:
+        self.options = parse_options(NdtOptions, self.name, dict(options))
+
+    def start(self, params: Params) -> NdtOdometry:
+        """A streaming odometry with ``params`` (validated; missing ones take defaults)."""
+        return NdtOdometry(params, self.options)
+
+    def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
+        """Run over ``scans`` with the per-frame ``schedule``."""
+        return run_streaming(self.start, scans, schedule)
+
+
+_: type[Adapter] = NdtAdapter
