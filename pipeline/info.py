@@ -1,0 +1,75 @@
+"""Summary of a sequence MCAP (``adaptune info``): frames, duration, path length, points."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.errors import InputError
+from pipeline.geometry import path_distances
+from pipeline.ros2_cdr import decode_pointcloud2
+from pipeline.sequence import POINTS_TOPIC, SequenceReader
+
+
+@dataclass(frozen=True)
+class SequenceSummary:
+    """What ``adaptune info`` prints. ``path_length_m`` is None without ground truth;
+    ``points_per_scan`` has min / median / max; labels are [start, end, label] frame ranges."""
+
+    path: str
+    name: str
+    frames: int
+    duration_s: float
+    path_length_m: float | None
+    has_ground_truth: bool
+    points_per_scan: dict[str, float]
+    sensor: str
+    source: str
+    labels: list[list[Any]] = field(default_factory=list)
+    schema_version: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def summarize_sequence(path: str | Path) -> SequenceSummary:
+    """Summarise the sequence MCAP at ``path`` (reads the scan headers, not the points)."""
+    path = Path(path)
+    with SequenceReader(path) as reader:
+        gt = reader.ground_truth()
+        counts = _points_per_scan(path, len(reader))
+        stamps = reader.stamps_ns
+        info = reader.info
+        return SequenceSummary(
+            path=str(path), name=info.name, frames=len(reader),
+            duration_s=float(stamps[-1] - stamps[0]) / 1e9 if len(stamps) else 0.0,
+            path_length_m=None if gt is None else float(path_distances(gt)[-1]),
+            has_ground_truth=gt is not None,
+            points_per_scan={"min": int(counts.min()), "median": float(np.median(counts)),
+                             "max": int(counts.max())},
+            sensor=info.sensor, source=info.source,
+            labels=[[lab.start, lab.end, lab.label] for lab in info.labels],
+            schema_version=info.schema_version,
+        )
+
+
+def _points_per_scan(path: Path, frames: int) -> np.ndarray:
+    """(frames,) point counts from the PointCloud2 headers (width x height)."""
+    from mcap.reader import make_reader
+
+    counts = []
+    with open(path, "rb") as fh:
+        try:
+            for _, _, msg in make_reader(fh).iter_messages(topics=[POINTS_TOPIC]):
+                m = decode_pointcloud2(msg.data, f"{path} frame {len(counts)}")
+                counts.append(m.width * m.height)
+        except InputError:
+            raise
+        except Exception as exc:
+            raise InputError(f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})") from None
+    if len(counts) != frames or not counts:
+        raise InputError(f"{path}: {len(counts)} point clouds for {frames} frames")
+    return np.array(counts, np.int64)

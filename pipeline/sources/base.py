@@ -1,0 +1,112 @@
+"""What every ingest source is: a Protocol, the Frame it yields, and the one writer loop.
+
+A source is opened on its input (a KITTI sequence, a bag, a folder, an MCAP) with its options,
+checks what it can up front (layout, counts, pose files), then yields ``Frame``s in time order.
+``write_sequence`` streams them into a sequence MCAP (pipeline.sequence.SequenceWriter):
+non-finite points are dropped and counted, a scan with no finite point is an error naming the
+input file, and any error leaves no output file behind (the writer is atomic).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.errors import InputError
+from pipeline.sequence import SequenceInfo, SequenceWriter, drop_non_finite
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One scan as a source reads it.
+
+    stamp_ns: sensor time [ns]; points_lidar: (N, 3) or (N, 4) float32 x, y, z [m] (+ intensity)
+    in the sensor frame, possibly with non-finite rows; T_world_lidar: (4, 4) ground truth or
+    None; what: where it came from, for error messages (a file, or ``bag topic #k``).
+    """
+
+    stamp_ns: int
+    points_lidar: NDArray[np.float32]
+    T_world_lidar: NDArray[np.float64] | None
+    what: str
+
+
+@runtime_checkable
+class Source(Protocol):
+    """An ingest source. ``name`` is its registry key (``adaptune ingest <name>``)."""
+
+    name: ClassVar[str]
+
+    def sequence_info(self) -> SequenceInfo:
+        """Name, sensor and source description of the sequence it produces."""
+        ...
+
+    def expected_frames(self) -> int | None:
+        """Number of frames it will yield, when known before reading them."""
+        ...
+
+    def frames(self) -> Iterator[Frame]:
+        """The scans in time order."""
+        ...
+
+
+@dataclass(frozen=True)
+class IngestReport:
+    """What an ingest wrote: ``frames`` scans with ``points`` points in total, after
+    dropping ``dropped_points`` non-finite ones, into ``out`` in ``seconds``."""
+
+    out: Path
+    frames: int
+    points: int
+    dropped_points: int
+    has_ground_truth: bool
+    seconds: float
+
+
+def write_sequence(source: Source, out: str | Path) -> IngestReport:
+    """Stream every frame of ``source`` into the sequence MCAP ``out`` (atomically)."""
+    from tqdm import tqdm
+
+    t0 = time.perf_counter()
+    out = Path(out)
+    info = source.sequence_info()
+    points = dropped = 0
+    with_gt: bool | None = None
+    with SequenceWriter(out, info) as writer:
+        bar = tqdm(source.frames(), total=source.expected_frames(), unit="scan",
+                   desc=f"ingest {info.name}", disable=None, leave=False)
+        for frame in bar:
+            pts, n_bad = drop_non_finite(_as_points(frame), frame.what)
+            if n_bad:
+                log.info("%s: dropped %d non-finite points", frame.what, n_bad)
+            has_gt = frame.T_world_lidar is not None
+            if with_gt is None:
+                with_gt = has_gt
+            elif has_gt != with_gt:
+                raise InputError(f"{frame.what}: has {'a' if has_gt else 'no'} ground-truth pose "
+                                 f"unlike the frames before it")
+            writer.add(frame.stamp_ns, pts, frame.T_world_lidar)
+            points += len(pts)
+            dropped += n_bad
+        frames = len(writer.stamps_ns)
+    if dropped:
+        log.warning("%s: dropped %d non-finite points in total", out, dropped)
+    return IngestReport(out, frames, points, dropped, bool(with_gt), time.perf_counter() - t0)
+
+
+def _as_points(frame: Frame) -> NDArray[np.float32]:
+    pts = np.asarray(frame.points_lidar, dtype=np.float32)
+    if pts.ndim != 2 or pts.shape[1] not in (3, 4):
+        raise InputError(f"{frame.what}: points must be (N, 3) or (N, 4), got shape {pts.shape}")
+    if len(pts) == 0:
+        raise InputError(f"{frame.what}: empty scan (0 points)")
+    return pts

@@ -1,0 +1,92 @@
+"""KITTI odometry layout: ROOT/sequences/SEQ/{velodyne/*.bin, times.txt, calib.txt},
+ROOT/poses/SEQ.txt (optional ground truth, camera-0 frame -> T_world_lidar = inv(Tr) P Tr).
+
+Frames ``start`` .. ``end`` (both inclusive, KITTI frame numbers) can be picked; stamps are
+times.txt seconds in ns as they are (KITTI times start at 0.0).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.errors import ConfigError, InputError
+from pipeline.sequence import SequenceInfo
+from pipeline.sources.base import Frame, IngestReport, write_sequence
+from pipeline.sources.poses import camera_to_lidar, check_count, read_kitti_calib, read_pose_file
+from pipeline.sources.scanfiles import read_bin
+
+
+def read_times(path: Path, n_scans: int) -> NDArray[np.int64]:
+    """(n_scans,) stamps [ns] from a KITTI times.txt (seconds, one a line)."""
+    if not path.is_file():
+        raise InputError(f"{path}: no such times file")
+    try:
+        t_s = np.loadtxt(path, dtype=np.float64, ndmin=1)
+    except ValueError as exc:
+        raise InputError(f"{path}: malformed times file ({exc})") from None
+    if len(t_s) != n_scans:
+        raise InputError(f"{path}: {len(t_s)} stamps for {n_scans} scans")
+    if not np.isfinite(t_s).all() or np.any(np.diff(t_s) <= 0):
+        raise InputError(f"{path}: stamps must be finite and strictly increasing")
+    return np.round(t_s * 1e9).astype(np.int64)
+
+
+class KittiSource:
+    """Scans of one KITTI odometry sequence, with ground truth where ROOT/poses/SEQ.txt exists."""
+
+    name: ClassVar[str] = "kitti"
+
+    def __init__(self, root: str | Path, seq: str, start: int | None = None,
+                 end: int | None = None, name: str | None = None) -> None:
+        self.root = Path(root)
+        self.seq = str(seq)
+        self.dir = self.root / "sequences" / self.seq
+        self.seq_name = name or f"kitti_{self.seq}"
+        velodyne = self.dir / "velodyne"
+        if not velodyne.is_dir():
+            raise InputError(f"{velodyne}: no such folder (expected ROOT/sequences/{self.seq}/velodyne)")
+        all_bins = sorted(velodyne.glob("*.bin"))
+        if not all_bins:
+            raise InputError(f"{velodyne}: no .bin scans")
+        n = len(all_bins)
+        self.start = 0 if start is None else int(start)
+        self.end = n - 1 if end is None else int(end)
+        if not 0 <= self.start <= self.end < n:
+            raise ConfigError(f"frame range --start {self.start} --end {self.end} is not within "
+                              f"0..{n - 1} of {velodyne}")
+        self.bins = all_bins[self.start : self.end + 1]
+        self.stamps_ns = read_times(self.dir / "times.txt", n)[self.start : self.end + 1]
+        self.Tr = read_kitti_calib(self.dir / "calib.txt")
+        self.T_world_lidar = self._ground_truth(n)
+
+    def _ground_truth(self, n: int) -> NDArray[np.float64] | None:
+        path = self.root / "poses" / f"{self.seq}.txt"
+        if not path.is_file():
+            return None
+        poses = read_pose_file(path, "kitti")
+        check_count(poses, n, str(self.dir / "velodyne"))
+        return camera_to_lidar(poses.T_world_x[self.start : self.end + 1], self.Tr)
+
+    def sequence_info(self) -> SequenceInfo:
+        return SequenceInfo(name=self.seq_name, sensor="velodyne_hdl64e", source=f"kitti:{self.seq}",
+                            extra={"kitti_root": str(self.root), "first_frame": str(self.start),
+                                   "last_frame": str(self.end)})
+
+    def expected_frames(self) -> int:
+        return len(self.bins)
+
+    def frames(self) -> Iterator[Frame]:
+        for k, path in enumerate(self.bins):
+            yield Frame(int(self.stamps_ns[k]), read_bin(path),
+                        None if self.T_world_lidar is None else self.T_world_lidar[k], str(path))
+
+
+def ingest_kitti(root: str | Path, seq: str, out: str | Path, start: int | None = None,
+                 end: int | None = None, name: str | None = None) -> IngestReport:
+    """KITTI sequence ``seq`` under ``root`` -> sequence MCAP ``out`` (frames start..end inclusive)."""
+    return write_sequence(KittiSource(root, seq, start, end, name), out)

@@ -1,0 +1,156 @@
+"""Any MCAP with sensor_msgs/PointCloud2 (a ROS 2 recording, a Foxglove export, another
+sequence MCAP) normalised into a sequence MCAP.
+
+Point clouds in ``cdr`` (ROS 2) or ``ros1`` encoding; the topic is found by itself when there
+is exactly one. Stamps: header stamps (log time where zero). Ground truth, optional: a pose,
+odometry or TF topic in the same file (interpolated to the scan stamps), or a pose file.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, ClassVar
+
+from pipeline.errors import ConfigError, InputError
+from pipeline.ros2_cdr import decode_pointcloud2, pointcloud2_to_xyzi
+from pipeline.sequence import SequenceInfo
+from pipeline.sources.base import Frame, IngestReport, write_sequence
+from pipeline.sources.poses import PoseFormat, check_count, read_pose_file
+from pipeline.sources.rosbag import GroundTruth, pick_topic
+from pipeline.sources.rosmsg import (
+    POINTCLOUD2_TYPES,
+    POSE_TYPES,
+    cloud_to_xyzi,
+    collect_poses,
+    normalise_type,
+    poses_of,
+    stamp_ns,
+)
+
+ENCODINGS = ("cdr", "ros1")
+
+
+@contextmanager
+def open_mcap(path: Path) -> Iterator[tuple[Any, Any]]:
+    """(reader, summary) of an MCAP file; any failure becomes one InputError line."""
+    from mcap.reader import make_reader
+
+    if not path.is_file():
+        raise InputError(f"{path}: no such MCAP file")
+    with open(path, "rb") as fh:
+        try:
+            reader = make_reader(fh, validate_crcs=True)
+            summary = reader.get_summary()
+        except Exception as exc:
+            raise InputError(f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})") from None
+        if summary is None:
+            raise InputError(f"{path}: corrupt or truncated MCAP (no summary section; "
+                             "`mcap recover` can rebuild it)")
+        try:
+            yield reader, summary
+        except InputError:
+            raise
+        except Exception as exc:
+            raise InputError(f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})") from None
+
+
+class _Decoder:
+    """Deserialises messages of one channel (rosbags typestore; own codec for cdr clouds)."""
+
+    def __init__(self, schema: Any, encoding: str, what: str) -> None:
+        from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+        if encoding not in ENCODINGS:
+            raise InputError(f"{what}: message encoding {encoding!r} is not supported ({', '.join(ENCODINGS)})")
+        self.encoding, self.what = encoding, what
+        self.msgtype = normalise_type(schema.name)
+        self.store = get_typestore(Stores.ROS2_HUMBLE if encoding == "cdr" else Stores.ROS1_NOETIC)
+        if self.msgtype not in self.store.fielddefs:
+            try:
+                self.store.register(get_types_from_msg(schema.data.decode(), self.msgtype))
+            except Exception as exc:
+                raise InputError(f"{what}: cannot parse the schema of {schema.name} ({exc})") from None
+
+    def message(self, data: bytes) -> Any:
+        if self.encoding == "cdr":
+            return self.store.deserialize_cdr(data, self.msgtype)
+        return self.store.deserialize_ros1(data, self.msgtype)
+
+    def cloud(self, data: bytes, log_ns: int, what: str) -> tuple[int, Any]:
+        """(stamp_ns, (N, 4) float32 points) of a PointCloud2 message."""
+        if self.encoding == "cdr":
+            m = decode_pointcloud2(data, what)
+            pts = pointcloud2_to_xyzi(m.height, m.width, m.fields, m.is_bigendian, m.point_step,
+                                      m.row_step, m.data, what)
+            return (m.stamp_ns or int(log_ns)), pts
+        msg = self.message(data)
+        return stamp_ns(msg, log_ns), cloud_to_xyzi(msg, what)
+
+
+class McapSource:
+    """PointCloud2 scans of any MCAP file."""
+
+    name: ClassVar[str] = "mcap"
+
+    def __init__(self, path: str | Path, topic: str | None = None, gt_topic: str | None = None,
+                 gt_child_frame: str | None = None, poses: str | Path | None = None,
+                 poses_format: PoseFormat = "auto", name: str | None = None,
+                 sensor: str = "unknown") -> None:
+        if gt_topic is not None and poses is not None:
+            raise ConfigError("give either --gt-topic or --poses, not both")
+        self.path = Path(path)
+        self.seq_name = name or self.path.stem
+        self.sensor = sensor
+        self.gt: GroundTruth | None = None
+        with open_mcap(self.path) as (reader, summary):
+            channels = {ch.topic: ch for ch in summary.channels.values()}
+            available = {t: summary.schemas[ch.schema_id].name if ch.schema_id in summary.schemas else ""
+                         for t, ch in channels.items()}
+            self.topic = pick_topic(available, topic, POINTCLOUD2_TYPES, str(self.path), "sensor_msgs/PointCloud2")
+            self.channel = channels[self.topic]
+            self.schema = summary.schemas[self.channel.schema_id]
+            counts = summary.statistics.channel_message_counts if summary.statistics else {}
+            self.count = int(counts.get(self.channel.id, 0)) or None
+            if gt_topic is not None:
+                pick_topic(available, gt_topic, POSE_TYPES, str(self.path), "a pose, odometry or TF")
+                self.gt = self._topic_poses(reader, summary, channels[gt_topic], gt_child_frame)
+        if poses is not None:
+            pf = read_pose_file(poses, poses_format)
+            if pf.stamps_ns is None:
+                check_count(pf, self.count or 0, f"{self.path} {self.topic}")
+            self.gt = GroundTruth.from_file(pf, None)
+
+    def _topic_poses(self, reader: Any, summary: Any, channel: Any, child_frame: str | None) -> GroundTruth:
+        what = f"{self.path} {channel.topic}"
+        schema = summary.schemas[channel.schema_id]
+        dec = _Decoder(schema, channel.message_encoding, what)
+        entries = []
+        for _, _, msg in reader.iter_messages(topics=[channel.topic]):
+            entries += poses_of(dec.message(msg.data), dec.msgtype, msg.log_time, child_frame, what)
+        stamps, T = collect_poses(entries, dec.msgtype, child_frame, what)
+        return GroundTruth(what, stamps, T)
+
+    def sequence_info(self) -> SequenceInfo:
+        return SequenceInfo(name=self.seq_name, sensor=self.sensor,
+                            source=f"mcap:{self.path.name}:{self.topic}")
+
+    def expected_frames(self) -> int | None:
+        return self.count
+
+    def frames(self) -> Iterator[Frame]:
+        dec = _Decoder(self.schema, self.channel.message_encoding, f"{self.path} {self.topic}")
+        with open_mcap(self.path) as (reader, _):
+            for k, (_, _, msg) in enumerate(reader.iter_messages(topics=[self.topic])):
+                what = f"{self.path} {self.topic} message {k}"
+                stamp, pts = dec.cloud(msg.data, msg.log_time, what)
+                yield Frame(stamp, pts, None if self.gt is None else self.gt.at(k, stamp), what)
+
+
+def ingest_mcap(path: str | Path, out: str | Path, topic: str | None = None,
+                gt_topic: str | None = None, gt_child_frame: str | None = None,
+                poses: str | Path | None = None, poses_format: PoseFormat = "auto",
+                name: str | None = None) -> IngestReport:
+    """PointCloud2 scans of any MCAP + optional ground truth -> sequence MCAP ``out``."""
+    return write_sequence(McapSource(path, topic, gt_topic, gt_child_frame, poses, poses_format, name), out)

@@ -1,0 +1,96 @@
+"""ROS messages (as ``rosbags`` deserialises them, ROS 1 or ROS 2) -> points, stamps, poses.
+
+Point clouds: sensor_msgs/PointCloud2 of any layout with float32/float64 x, y, z (intensity
+optional), through pipeline.ros2_cdr.pointcloud2_to_xyzi. Ground truth: geometry_msgs
+PoseStamped / PoseWithCovarianceStamped / TransformStamped, nav_msgs/Odometry, and
+tf2_msgs/TFMessage (the transform whose child frame is ``child_frame``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.errors import InputError
+from pipeline.geometry import pose_from_xyz_quat
+from pipeline.ros2_cdr import pointcloud2_to_xyzi
+
+POINTCLOUD2_TYPES = ("sensor_msgs/msg/PointCloud2",)
+POSE_TYPES = (
+    "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "geometry_msgs/msg/TransformStamped", "nav_msgs/msg/Odometry", "tf2_msgs/msg/TFMessage",
+)
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+
+
+def normalise_type(msgtype: str) -> str:
+    """'sensor_msgs/PointCloud2' (ROS 1) -> 'sensor_msgs/msg/PointCloud2'."""
+    parts = msgtype.split("/")
+    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else msgtype
+
+
+def stamp_ns(msg: Any, fallback_ns: int) -> int:
+    """The header stamp [ns] of a message; ``fallback_ns`` (the log time) when it is zero."""
+    st = msg.header.stamp
+    ns = int(st.sec) * 1_000_000_000 + int(st.nanosec)
+    return ns if ns != 0 else int(fallback_ns)
+
+
+def cloud_to_xyzi(msg: Any, what: str) -> NDArray[np.float32]:
+    """(N, 4) float32 x, y, z, intensity of a deserialised PointCloud2."""
+    return pointcloud2_to_xyzi(int(msg.height), int(msg.width), list(msg.fields), bool(msg.is_bigendian),
+                               int(msg.point_step), int(msg.row_step), msg.data, what)
+
+
+def _pose(p: Any) -> NDArray[np.float64]:
+    return pose_from_xyz_quat(np.array([p.position.x, p.position.y, p.position.z]),
+                              np.array([p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w]))
+
+
+def _transform(t: Any) -> NDArray[np.float64]:
+    return pose_from_xyz_quat(np.array([t.translation.x, t.translation.y, t.translation.z]),
+                              np.array([t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w]))
+
+
+def poses_of(msg: Any, msgtype: str, log_ns: int, child_frame: str | None,
+             what: str) -> list[tuple[int, NDArray[np.float64], str]]:
+    """(stamp_ns, (4, 4) pose, child frame) entries of one ground-truth message.
+
+    TF messages yield only transforms whose child frame is ``child_frame`` (all when None,
+    so the caller can list what is there).
+    """
+    msgtype = normalise_type(msgtype)
+    if msgtype == "geometry_msgs/msg/PoseStamped":
+        return [(stamp_ns(msg, log_ns), _pose(msg.pose), "")]
+    if msgtype == "geometry_msgs/msg/PoseWithCovarianceStamped":
+        return [(stamp_ns(msg, log_ns), _pose(msg.pose.pose), "")]
+    if msgtype == "nav_msgs/msg/Odometry":
+        return [(stamp_ns(msg, log_ns), _pose(msg.pose.pose), str(msg.child_frame_id))]
+    if msgtype == "geometry_msgs/msg/TransformStamped":
+        return [(stamp_ns(msg, log_ns), _transform(msg.transform), str(msg.child_frame_id))]
+    if msgtype == TF_TYPE:
+        return [(stamp_ns(t, log_ns), _transform(t.transform), str(t.child_frame_id))
+                for t in msg.transforms if child_frame is None or t.child_frame_id == child_frame]
+    raise InputError(f"{what}: {msgtype} is not a ground-truth type ({', '.join(POSE_TYPES)})")
+
+
+def collect_poses(entries: list[tuple[int, NDArray[np.float64], str]], msgtype: str,
+                  child_frame: str | None, what: str) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Stamps (M,) and poses (M, 4, 4) sorted by time, from ``poses_of`` entries of a topic."""
+    if normalise_type(msgtype) == TF_TYPE:
+        frames = sorted({c for _, _, c in entries})
+        if child_frame is None:
+            raise InputError(f"{what}: a TF ground-truth topic needs a child frame "
+                             f"(--gt-child-frame; frames here: {', '.join(frames) or 'none'})")
+        entries = [e for e in entries if e[2] == child_frame]
+        if not entries:
+            raise InputError(f"{what}: no transform with child frame {child_frame!r} "
+                             f"(frames here: {', '.join(frames) or 'none'})")
+    if not entries:
+        raise InputError(f"{what}: no ground-truth messages")
+    entries = sorted(entries, key=lambda e: e[0])
+    stamps = np.array([e[0] for e in entries], np.int64)
+    keep = np.concatenate([[True], np.diff(stamps) > 0])  # duplicates: keep the first
+    return stamps[keep], np.stack([e[1] for e in entries])[keep]
