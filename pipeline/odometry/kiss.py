@@ -1,0 +1,139 @@
+"""``kiss_icp``: the KISS-ICP package (Vizzo et al., RA-L 2023) behind the black-box contract.
+
+Parameters and baseline = KISS-ICP's own defaults (kiss_icp.config): ``max_range`` 100 m,
+``min_range`` 0 m, ``voxel_size`` = max_range / 100 = 1.0 m (KISS-ICP derives it from
+max_range when unset; we fix it at that value so the baseline is one point of the space),
+``initial_threshold`` 2.0 m, ``min_motion_th`` 0.1 m, ``max_points_per_voxel`` 20.
+Not tuned (options): ``deskew`` (False: the sequence MCAP has no per-point times),
+``max_num_threads`` (1), ``max_num_iterations`` (500), ``convergence_criterion`` (1e-4).
+
+Parameter changes (``set_params``) rebuild the KissICP object with the new configuration and
+hand over: the last pose and the last relative motion (the constant-velocity prediction),
+the local map's points (re-inserted into the new voxel map, so a new voxel size or points per
+voxel re-voxelises them; a new max_range prunes them at the next update), and the adaptive
+threshold's state, by replaying every past model deviation into the new estimator (so it is
+the state the new min_motion_th / max_range would have reached). Nothing else is kept.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import Field
+
+from pipeline.config import Section
+from pipeline.odometry.base import (
+    Adapter,
+    ParameterSpace,
+    Params,
+    ParamSpec,
+    Schedule,
+    run_streaming,
+)
+from pipeline.odometry.common import F64, parse_options
+from pipeline.sequence import Scan
+from pipeline.trajectory import Trajectory
+
+SPACE = ParameterSpace((
+    ParamSpec("voxel_size", 0.2, 3.0, 1.0, log=True, unit="m"),
+    ParamSpec("max_range", 20.0, 200.0, 100.0, unit="m"),
+    ParamSpec("min_range", 0.0, 10.0, 0.0, unit="m"),
+    ParamSpec("initial_threshold", 0.1, 5.0, 2.0, log=True, unit="m"),
+    ParamSpec("min_motion_th", 0.01, 1.0, 0.1, log=True, unit="m"),
+    ParamSpec("max_points_per_voxel", 1.0, 50.0, 20.0, kind="int"),
+))
+
+
+class KissOptions(Section):
+    """Settings of ``kiss_icp`` that are not tuned."""
+
+    deskew: bool = False
+    max_num_threads: int = Field(1, ge=0, le=64)
+    max_num_iterations: int = Field(500, ge=1)
+    convergence_criterion: float = Field(1e-4, gt=0)
+
+
+def kiss_config(params: Params, options: KissOptions) -> Any:
+    """A kiss_icp KISSConfig of ``params`` and ``options``."""
+    from kiss_icp.config import KISSConfig
+    from kiss_icp.config.config import (
+        AdaptiveThresholdConfig,
+        DataConfig,
+        MappingConfig,
+        RegistrationConfig,
+    )
+
+    return KISSConfig(
+        data=DataConfig(max_range=params["max_range"], min_range=params["min_range"],
+                        deskew=options.deskew),
+        mapping=MappingConfig(voxel_size=params["voxel_size"],
+                              max_points_per_voxel=int(params["max_points_per_voxel"])),
+        registration=RegistrationConfig(max_num_iterations=options.max_num_iterations,
+                                        convergence_criterion=options.convergence_criterion,
+                                        max_num_threads=options.max_num_threads),
+        adaptive_threshold=AdaptiveThresholdConfig(
+            initial_threshold=params["initial_threshold"], min_motion_th=params["min_motion_th"]),
+    )
+
+
+class KissOdometry:
+    """Streaming KISS-ICP: ``step`` one scan at a time, ``set_params`` between scans."""
+
+    def __init__(self, params: Params, options: KissOptions | None = None) -> None:
+        from kiss_icp.kiss_icp import KissICP
+
+        self.options = options or KissOptions()
+        self.params = SPACE.validate(params)
+        self.kiss = KissICP(kiss_config(self.params, self.options))
+        self.deviations: list[F64] = []  # model deviation of every frame, for the handover
+
+    def set_params(self, params: Params) -> None:
+        """Rebuild KissICP with the new parameters; pose, motion, map and threshold handed over."""
+        from kiss_icp.kiss_icp import KissICP
+
+        new = SPACE.validate(params)
+        if new == self.params:
+            return
+        old = self.kiss
+        kiss = KissICP(kiss_config(new, self.options))
+        kiss.last_pose = old.last_pose.copy()
+        kiss.last_delta = old.last_delta.copy()
+        map_points = old.local_map.point_cloud()
+        if len(map_points):
+            kiss.local_map.add_points(np.ascontiguousarray(map_points, dtype=np.float64))
+        for dev in self.deviations:
+            kiss.adaptive_threshold.update_model_deviation(dev)
+        self.kiss, self.params = kiss, new
+
+    def step(self, points_lidar: NDArray[np.float32], stamp_ns: int) -> F64:
+        """Register one scan ((N, 3) float32 [m]); T_world_lidar (4, 4), the first is identity."""
+        pts = np.ascontiguousarray(np.asarray(points_lidar, dtype=np.float64)[:, :3])
+        guess = self.kiss.last_pose @ self.kiss.last_delta
+        self.kiss.register_frame(pts, np.zeros(0))
+        T = np.array(self.kiss.last_pose, dtype=np.float64)
+        self.deviations.append(np.linalg.solve(guess, T))
+        return T
+
+
+class KissIcpAdapter:
+    """The ``kiss_icp`` adapter."""
+
+    name = "kiss_icp"
+    space = SPACE
+
+    def __init__(self, **options: object) -> None:
+        self.options = parse_options(KissOptions, self.name, dict(options))
+
+    def start(self, params: Params) -> KissOdometry:
+        """A streaming odometry with ``params`` (validated; missing ones take defaults)."""
+        return KissOdometry(params, self.options)
+
+    def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
+        """Run over ``scans`` with the per-frame ``schedule``."""
+        return run_streaming(self.start, scans, schedule)
+
+
+_: type[Adapter] = KissIcpAdapter
