@@ -44,13 +44,19 @@ def summarize_sequence(path: str | Path) -> SequenceSummary:
         stamps = reader.stamps_ns
         info = reader.info
         return SequenceSummary(
-            path=str(path), name=info.name, frames=len(reader),
+            path=str(path),
+            name=info.name,
+            frames=len(reader),
             duration_s=float(stamps[-1] - stamps[0]) / 1e9 if len(stamps) else 0.0,
             path_length_m=None if gt is None else float(path_distances(gt)[-1]),
             has_ground_truth=gt is not None,
-            points_per_scan={"min": int(counts.min()), "median": float(np.median(counts)),
-                             "max": int(counts.max())},
-            sensor=info.sensor, source=info.source,
+            points_per_scan={
+                "min": int(counts.min()),
+                "median": float(np.median(counts)),
+                "max": int(counts.max()),
+            },
+            sensor=info.sensor,
+            source=info.source,
             labels=[[lab.start, lab.end, lab.label] for lab in info.labels],
             schema_version=info.schema_version,
         )
@@ -69,7 +75,9 @@ def _points_per_scan(path: Path, frames: int) -> np.ndarray:
         except InputError:
             raise
         except Exception as exc:
-            raise InputError(f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})") from None
+            raise InputError(
+                f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})"
+            ) from None
     if len(counts) != frames or not counts:
         raise InputError(f"{path}: {len(counts)} point clouds for {frames} frames")
     return np.array(counts, np.int64)

@@ -21,10 +21,16 @@ def info(path: Path, as_json: bool) -> None:
         return
     pps = s.points_per_scan
     rows = [
-        ("name", s.name), ("frames", s.frames), ("duration", f"{s.duration_s:.3f} s"),
-        ("ground truth", f"yes, path length {s.path_length_m:.2f} m" if s.has_ground_truth else "no"),
+        ("name", s.name),
+        ("frames", s.frames),
+        ("duration", f"{s.duration_s:.3f} s"),
+        (
+            "ground truth",
+            f"yes, path length {s.path_length_m:.2f} m" if s.has_ground_truth else "no",
+        ),
         ("points per scan", f"min {pps['min']}, median {pps['median']:g}, max {pps['max']}"),
-        ("sensor", s.sensor), ("source", s.source),
+        ("sensor", s.sensor),
+        ("source", s.source),
         ("labels", ", ".join(f"{a}-{b}: {lab}" for a, b, lab in s.labels) or "none"),
         ("schema version", s.schema_version),
     ]

@@ -36,7 +36,19 @@ def get_source(name: str) -> type[Source]:
 
 
 __all__ = [
-    "SOURCES", "FolderSource", "Frame", "IngestReport", "KittiSource", "McapSource", "RosbagSource",
-    "Source", "get_source", "ingest_folder", "ingest_kitti", "ingest_mcap", "ingest_rosbag",
-    "source_names", "write_sequence",
+    "SOURCES",
+    "FolderSource",
+    "Frame",
+    "IngestReport",
+    "KittiSource",
+    "McapSource",
+    "RosbagSource",
+    "Source",
+    "get_source",
+    "ingest_folder",
+    "ingest_kitti",
+    "ingest_mcap",
+    "ingest_rosbag",
+    "source_names",
+    "write_sequence",
 ]

@@ -82,8 +82,14 @@ def write_sequence(source: Source, out: str | Path) -> IngestReport:
     points = dropped = 0
     with_gt: bool | None = None
     with SequenceWriter(out, info) as writer:
-        bar = tqdm(source.frames(), total=source.expected_frames(), unit="scan",
-                   desc=f"ingest {info.name}", disable=None, leave=False)
+        bar = tqdm(
+            source.frames(),
+            total=source.expected_frames(),
+            unit="scan",
+            desc=f"ingest {info.name}",
+            disable=None,
+            leave=False,
+        )
         for frame in bar:
             pts, n_bad = drop_non_finite(_as_points(frame), frame.what)
             if n_bad:
@@ -92,8 +98,10 @@ def write_sequence(source: Source, out: str | Path) -> IngestReport:
             if with_gt is None:
                 with_gt = has_gt
             elif has_gt != with_gt:
-                raise InputError(f"{frame.what}: has {'a' if has_gt else 'no'} ground-truth pose "
-                                 f"unlike the frames before it")
+                raise InputError(
+                    f"{frame.what}: has {'a' if has_gt else 'no'} ground-truth pose "
+                    f"unlike the frames before it"
+                )
             writer.add(frame.stamp_ns, pts, frame.T_world_lidar)
             points += len(pts)
             dropped += n_bad

@@ -34,10 +34,17 @@ class FolderSource:
 
     name: ClassVar[str] = "folder"
 
-    def __init__(self, folder: str | Path, poses: str | Path | None = None,
-                 poses_format: PoseFormat = "auto", times: str | Path | None = None,
-                 calib: str | Path | None = None, rate_hz: float = 10.0,
-                 name: str | None = None, sensor: str = "unknown") -> None:
+    def __init__(
+        self,
+        folder: str | Path,
+        poses: str | Path | None = None,
+        poses_format: PoseFormat = "auto",
+        times: str | Path | None = None,
+        calib: str | Path | None = None,
+        rate_hz: float = 10.0,
+        name: str | None = None,
+        sensor: str = "unknown",
+    ) -> None:
         self.folder = Path(folder)
         if not self.folder.is_dir():
             raise InputError(f"{self.folder}: no such folder")
@@ -51,11 +58,18 @@ class FolderSource:
             raise ConfigError(f"rate must be > 0 Hz, got {rate_hz}")
         self.seq_name = name or self.folder.name
         self.sensor = sensor
-        self.stamps_ns, self.T_world_lidar = self._stamps_and_poses(poses, poses_format, times, calib, rate_hz)
+        self.stamps_ns, self.T_world_lidar = self._stamps_and_poses(
+            poses, poses_format, times, calib, rate_hz
+        )
 
-    def _stamps_and_poses(self, poses: str | Path | None, fmt: PoseFormat, times: str | Path | None,
-                          calib: str | Path | None, rate_hz: float
-                          ) -> tuple[NDArray[np.int64], NDArray[np.float64] | None]:
+    def _stamps_and_poses(
+        self,
+        poses: str | Path | None,
+        fmt: PoseFormat,
+        times: str | Path | None,
+        calib: str | Path | None,
+        rate_hz: float,
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64] | None]:
         n = len(self.files)
         pf = read_pose_file(poses, fmt) if poses is not None else None
         if pf is not None:
@@ -81,13 +95,25 @@ class FolderSource:
 
     def frames(self) -> Iterator[Frame]:
         for k, path in enumerate(self.files):
-            yield Frame(int(self.stamps_ns[k]), read_scan(path),
-                        None if self.T_world_lidar is None else self.T_world_lidar[k], str(path))
+            yield Frame(
+                int(self.stamps_ns[k]),
+                read_scan(path),
+                None if self.T_world_lidar is None else self.T_world_lidar[k],
+                str(path),
+            )
 
 
-def ingest_folder(folder: str | Path, out: str | Path, poses: str | Path | None = None,
-                  poses_format: PoseFormat = "auto", times: str | Path | None = None,
-                  calib: str | Path | None = None, rate_hz: float = 10.0,
-                  name: str | None = None) -> IngestReport:
+def ingest_folder(
+    folder: str | Path,
+    out: str | Path,
+    poses: str | Path | None = None,
+    poses_format: PoseFormat = "auto",
+    times: str | Path | None = None,
+    calib: str | Path | None = None,
+    rate_hz: float = 10.0,
+    name: str | None = None,
+) -> IngestReport:
     """Scan files of ``folder`` (name order) + optional pose file -> sequence MCAP ``out``."""
-    return write_sequence(FolderSource(folder, poses, poses_format, times, calib, rate_hz, name), out)
+    return write_sequence(
+        FolderSource(folder, poses, poses_format, times, calib, rate_hz, name), out
+    )

@@ -41,15 +41,23 @@ class KittiSource:
 
     name: ClassVar[str] = "kitti"
 
-    def __init__(self, root: str | Path, seq: str, start: int | None = None,
-                 end: int | None = None, name: str | None = None) -> None:
+    def __init__(
+        self,
+        root: str | Path,
+        seq: str,
+        start: int | None = None,
+        end: int | None = None,
+        name: str | None = None,
+    ) -> None:
         self.root = Path(root)
         self.seq = str(seq)
         self.dir = self.root / "sequences" / self.seq
         self.seq_name = name or f"kitti_{self.seq}"
         velodyne = self.dir / "velodyne"
         if not velodyne.is_dir():
-            raise InputError(f"{velodyne}: no such folder (expected ROOT/sequences/{self.seq}/velodyne)")
+            raise InputError(
+                f"{velodyne}: no such folder (expected ROOT/sequences/{self.seq}/velodyne)"
+            )
         all_bins = sorted(velodyne.glob("*.bin"))
         if not all_bins:
             raise InputError(f"{velodyne}: no .bin scans")
@@ -57,8 +65,10 @@ class KittiSource:
         self.start = 0 if start is None else int(start)
         self.end = n - 1 if end is None else int(end)
         if not 0 <= self.start <= self.end < n:
-            raise ConfigError(f"frame range --start {self.start} --end {self.end} is not within "
-                              f"0..{n - 1} of {velodyne}")
+            raise ConfigError(
+                f"frame range --start {self.start} --end {self.end} is not within "
+                f"0..{n - 1} of {velodyne}"
+            )
         self.bins = all_bins[self.start : self.end + 1]
         self.stamps_ns = read_times(self.dir / "times.txt", n)[self.start : self.end + 1]
         self.Tr = read_kitti_calib(self.dir / "calib.txt")
@@ -73,20 +83,37 @@ class KittiSource:
         return camera_to_lidar(poses.T_world_x[self.start : self.end + 1], self.Tr)
 
     def sequence_info(self) -> SequenceInfo:
-        return SequenceInfo(name=self.seq_name, sensor="velodyne_hdl64e", source=f"kitti:{self.seq}",
-                            extra={"kitti_root": str(self.root), "first_frame": str(self.start),
-                                   "last_frame": str(self.end)})
+        return SequenceInfo(
+            name=self.seq_name,
+            sensor="velodyne_hdl64e",
+            source=f"kitti:{self.seq}",
+            extra={
+                "kitti_root": str(self.root),
+                "first_frame": str(self.start),
+                "last_frame": str(self.end),
+            },
+        )
 
     def expected_frames(self) -> int:
         return len(self.bins)
 
     def frames(self) -> Iterator[Frame]:
         for k, path in enumerate(self.bins):
-            yield Frame(int(self.stamps_ns[k]), read_bin(path),
-                        None if self.T_world_lidar is None else self.T_world_lidar[k], str(path))
+            yield Frame(
+                int(self.stamps_ns[k]),
+                read_bin(path),
+                None if self.T_world_lidar is None else self.T_world_lidar[k],
+                str(path),
+            )
 
 
-def ingest_kitti(root: str | Path, seq: str, out: str | Path, start: int | None = None,
-                 end: int | None = None, name: str | None = None) -> IngestReport:
-    """KITTI sequence ``seq`` under ``root`` -> sequence MCAP ``out`` (frames start..end inclusive)."""
+def ingest_kitti(
+    root: str | Path,
+    seq: str,
+    out: str | Path,
+    start: int | None = None,
+    end: int | None = None,
+    name: str | None = None,
+) -> IngestReport:
+    """KITTI sequence ``seq`` under ``root`` -> MCAP ``out``, frames start..end inclusive."""
     return write_sequence(KittiSource(root, seq, start, end, name), out)

@@ -44,16 +44,22 @@ def open_mcap(path: Path) -> Iterator[tuple[Any, Any]]:
             reader = make_reader(fh, validate_crcs=True)
             summary = reader.get_summary()
         except Exception as exc:
-            raise InputError(f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})") from None
+            raise InputError(
+                f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})"
+            ) from None
         if summary is None:
-            raise InputError(f"{path}: corrupt or truncated MCAP (no summary section; "
-                             "`mcap recover` can rebuild it)")
+            raise InputError(
+                f"{path}: corrupt or truncated MCAP (no summary section; "
+                "`mcap recover` can rebuild it)"
+            )
         try:
             yield reader, summary
         except InputError:
             raise
         except Exception as exc:
-            raise InputError(f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})") from None
+            raise InputError(
+                f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})"
+            ) from None
 
 
 class _Decoder:
@@ -63,7 +69,9 @@ class _Decoder:
         from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
         if encoding not in ENCODINGS:
-            raise InputError(f"{what}: message encoding {encoding!r} is not supported ({', '.join(ENCODINGS)})")
+            raise InputError(
+                f"{what}: message encoding {encoding!r} is not supported ({', '.join(ENCODINGS)})"
+            )
         self.encoding, self.what = encoding, what
         self.msgtype = normalise_type(schema.name)
         self.store = get_typestore(Stores.ROS2_HUMBLE if encoding == "cdr" else Stores.ROS1_NOETIC)
@@ -71,7 +79,9 @@ class _Decoder:
             try:
                 self.store.register(get_types_from_msg(schema.data.decode(), self.msgtype))
             except Exception as exc:
-                raise InputError(f"{what}: cannot parse the schema of {schema.name} ({exc})") from None
+                raise InputError(
+                    f"{what}: cannot parse the schema of {schema.name} ({exc})"
+                ) from None
 
     def message(self, data: bytes) -> Any:
         if self.encoding == "cdr":
@@ -82,8 +92,9 @@ class _Decoder:
         """(stamp_ns, (N, 4) float32 points) of a PointCloud2 message."""
         if self.encoding == "cdr":
             m = decode_pointcloud2(data, what)
-            pts = pointcloud2_to_xyzi(m.height, m.width, m.fields, m.is_bigendian, m.point_step,
-                                      m.row_step, m.data, what)
+            pts = pointcloud2_to_xyzi(
+                m.height, m.width, m.fields, m.is_bigendian, m.point_step, m.row_step, m.data, what
+            )
             return (m.stamp_ns or int(log_ns)), pts
         msg = self.message(data)
         return stamp_ns(msg, log_ns), cloud_to_xyzi(msg, what)
@@ -94,10 +105,17 @@ class McapSource:
 
     name: ClassVar[str] = "mcap"
 
-    def __init__(self, path: str | Path, topic: str | None = None, gt_topic: str | None = None,
-                 gt_child_frame: str | None = None, poses: str | Path | None = None,
-                 poses_format: PoseFormat = "auto", name: str | None = None,
-                 sensor: str = "unknown") -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        topic: str | None = None,
+        gt_topic: str | None = None,
+        gt_child_frame: str | None = None,
+        poses: str | Path | None = None,
+        poses_format: PoseFormat = "auto",
+        name: str | None = None,
+        sensor: str = "unknown",
+    ) -> None:
         if gt_topic is not None and poses is not None:
             raise ConfigError("give either --gt-topic or --poses, not both")
         self.path = Path(path)
@@ -106,15 +124,21 @@ class McapSource:
         self.gt: GroundTruth | None = None
         with open_mcap(self.path) as (reader, summary):
             channels = {ch.topic: ch for ch in summary.channels.values()}
-            available = {t: summary.schemas[ch.schema_id].name if ch.schema_id in summary.schemas else ""
-                         for t, ch in channels.items()}
-            self.topic = pick_topic(available, topic, POINTCLOUD2_TYPES, str(self.path), "sensor_msgs/PointCloud2")
+            available = {
+                t: summary.schemas[ch.schema_id].name if ch.schema_id in summary.schemas else ""
+                for t, ch in channels.items()
+            }
+            self.topic = pick_topic(
+                available, topic, POINTCLOUD2_TYPES, str(self.path), "sensor_msgs/PointCloud2"
+            )
             self.channel = channels[self.topic]
             self.schema = summary.schemas[self.channel.schema_id]
             counts = summary.statistics.channel_message_counts if summary.statistics else {}
             self.count = int(counts.get(self.channel.id, 0)) or None
             if gt_topic is not None:
-                pick_topic(available, gt_topic, POSE_TYPES, str(self.path), "a pose, odometry or TF")
+                pick_topic(
+                    available, gt_topic, POSE_TYPES, str(self.path), "a pose, odometry or TF"
+                )
                 self.gt = self._topic_poses(reader, summary, channels[gt_topic], gt_child_frame)
         if poses is not None:
             pf = read_pose_file(poses, poses_format)
@@ -122,7 +146,9 @@ class McapSource:
                 check_count(pf, self.count or 0, f"{self.path} {self.topic}")
             self.gt = GroundTruth.from_file(pf, None)
 
-    def _topic_poses(self, reader: Any, summary: Any, channel: Any, child_frame: str | None) -> GroundTruth:
+    def _topic_poses(
+        self, reader: Any, summary: Any, channel: Any, child_frame: str | None
+    ) -> GroundTruth:
         what = f"{self.path} {channel.topic}"
         schema = summary.schemas[channel.schema_id]
         dec = _Decoder(schema, channel.message_encoding, what)
@@ -133,8 +159,9 @@ class McapSource:
         return GroundTruth(what, stamps, T)
 
     def sequence_info(self) -> SequenceInfo:
-        return SequenceInfo(name=self.seq_name, sensor=self.sensor,
-                            source=f"mcap:{self.path.name}:{self.topic}")
+        return SequenceInfo(
+            name=self.seq_name, sensor=self.sensor, source=f"mcap:{self.path.name}:{self.topic}"
+        )
 
     def expected_frames(self) -> int | None:
         return self.count
@@ -148,9 +175,17 @@ class McapSource:
                 yield Frame(stamp, pts, None if self.gt is None else self.gt.at(k, stamp), what)
 
 
-def ingest_mcap(path: str | Path, out: str | Path, topic: str | None = None,
-                gt_topic: str | None = None, gt_child_frame: str | None = None,
-                poses: str | Path | None = None, poses_format: PoseFormat = "auto",
-                name: str | None = None) -> IngestReport:
+def ingest_mcap(
+    path: str | Path,
+    out: str | Path,
+    topic: str | None = None,
+    gt_topic: str | None = None,
+    gt_child_frame: str | None = None,
+    poses: str | Path | None = None,
+    poses_format: PoseFormat = "auto",
+    name: str | None = None,
+) -> IngestReport:
     """PointCloud2 scans of any MCAP + optional ground truth -> sequence MCAP ``out``."""
-    return write_sequence(McapSource(path, topic, gt_topic, gt_child_frame, poses, poses_format, name), out)
+    return write_sequence(
+        McapSource(path, topic, gt_topic, gt_child_frame, poses, poses_format, name), out
+    )

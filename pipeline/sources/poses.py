@@ -48,7 +48,9 @@ def _numbers(path: Path) -> list[tuple[int, list[float]]]:
         try:
             rows.append((k, [float(v) for v in text.split()]))
         except ValueError:
-            raise InputError(f"{path} line {k}: not a list of numbers: {line.strip()[:60]!r}") from None
+            raise InputError(
+                f"{path} line {k}: not a list of numbers: {line.strip()[:60]!r}"
+            ) from None
     if not rows:
         raise InputError(f"{path}: no poses in the file")
     return rows
@@ -63,8 +65,9 @@ def read_pose_file(path: str | Path, fmt: PoseFormat = "auto") -> PoseFile:
     width = 12 if fmt == "kitti" else 8
     for k, vals in rows:
         if len(vals) != width:
-            raise InputError(f"{path} line {k}: expected {width} numbers ({fmt} pose file), "
-                             f"got {len(vals)}")
+            raise InputError(
+                f"{path} line {k}: expected {width} numbers ({fmt} pose file), got {len(vals)}"
+            )
     arr = np.array([v for _, v in rows], dtype=np.float64)
     if not np.isfinite(arr).all():
         k = rows[int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])][0]
@@ -99,7 +102,9 @@ def read_kitti_calib(path: str | Path) -> NDArray[np.float64]:
     raise InputError(f"{path}: no 'Tr' (velodyne -> camera) line in the calibration file")
 
 
-def camera_to_lidar(T_world_cam: NDArray[np.float64], Tr: NDArray[np.float64]) -> NDArray[np.float64]:
+def camera_to_lidar(
+    T_world_cam: NDArray[np.float64], Tr: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """KITTI ground truth in the lidar frame: inv(Tr) @ P @ Tr for (..., 4, 4) camera poses P."""
     return inv_se3(Tr) @ T_world_cam @ Tr
 
@@ -107,12 +112,17 @@ def camera_to_lidar(T_world_cam: NDArray[np.float64], Tr: NDArray[np.float64]) -
 def check_count(poses: PoseFile, n_scans: int, scans_what: str) -> None:
     """A pose file without stamps must hold exactly one pose per scan."""
     if len(poses.T_world_x) != n_scans:
-        raise InputError(f"{poses.path}: {len(poses.T_world_x)} poses for {n_scans} scans "
-                         f"in {scans_what}")
+        raise InputError(
+            f"{poses.path}: {len(poses.T_world_x)} poses for {n_scans} scans in {scans_what}"
+        )
 
 
-def interpolate_poses(query_ns: NDArray[np.int64], stamps_ns: NDArray[np.int64],
-                      T_world_x: NDArray[np.float64], what: str) -> NDArray[np.float64]:
+def interpolate_poses(
+    query_ns: NDArray[np.int64],
+    stamps_ns: NDArray[np.int64],
+    T_world_x: NDArray[np.float64],
+    what: str,
+) -> NDArray[np.float64]:
     """(Q, 4, 4) poses at ``query_ns`` from stamped poses (M, 4, 4) (sorted by ``stamps_ns``).
 
     Linear in translation, slerp in rotation; exact where a stamp matches. Raises InputError
@@ -125,9 +135,11 @@ def interpolate_poses(query_ns: NDArray[np.int64], stamps_ns: NDArray[np.int64],
     q = np.asarray(query_ns, np.int64)
     outside = (q < t[0] - MATCH_TOLERANCE_NS) | (q > t[-1] + MATCH_TOLERANCE_NS)
     if outside.any():
-        raise InputError(f"{what}: {int(outside.sum())} of {len(q)} scans lie outside the "
-                         f"ground-truth time span [{t[0] / 1e9:.3f}, {t[-1] / 1e9:.3f}] s "
-                         f"(first at {q[outside][0] / 1e9:.3f} s)")
+        raise InputError(
+            f"{what}: {int(outside.sum())} of {len(q)} scans lie outside the "
+            f"ground-truth time span [{t[0] / 1e9:.3f}, {t[-1] / 1e9:.3f}] s "
+            f"(first at {q[outside][0] / 1e9:.3f} s)"
+        )
     qc = np.clip(q, t[0], t[-1])
     hi = np.clip(np.searchsorted(t, qc, side="left"), 0, len(t) - 1)
     lo = np.clip(hi - 1, 0, len(t) - 1)
@@ -136,17 +148,23 @@ def interpolate_poses(query_ns: NDArray[np.int64], stamps_ns: NDArray[np.int64],
     gap = t[hi] - t[lo]
     if np.any(gap > MAX_GAP_NS):
         k = int(np.flatnonzero(gap > MAX_GAP_NS)[0])
-        raise InputError(f"{what}: no ground-truth pose within {MAX_GAP_NS / 1e9:g} s around "
-                         f"the scan at {q[k] / 1e9:.3f} s")
+        raise InputError(
+            f"{what}: no ground-truth pose within {MAX_GAP_NS / 1e9:g} s around "
+            f"the scan at {q[k] / 1e9:.3f} s"
+        )
     alpha = np.where(gap > 0, (qc - t[lo]) / np.maximum(gap, 1), 0.0)
     out = np.tile(np.eye(4), (len(q), 1, 1))
     out[:, :3, 3] = (1 - alpha)[:, None] * T[lo, :3, 3] + alpha[:, None] * T[hi, :3, 3]
-    out[:, :3, :3] = quat_to_rot(_slerp(rot_to_quat(T[lo, :3, :3]), rot_to_quat(T[hi, :3, :3]), alpha))
+    out[:, :3, :3] = quat_to_rot(
+        _slerp(rot_to_quat(T[lo, :3, :3]), rot_to_quat(T[hi, :3, :3]), alpha)
+    )
     out[exact] = T[hi[exact]]
     return out
 
 
-def _slerp(q0: NDArray[np.float64], q1: NDArray[np.float64], alpha: NDArray[np.float64]) -> NDArray[np.float64]:
+def _slerp(
+    q0: NDArray[np.float64], q1: NDArray[np.float64], alpha: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """Spherical interpolation of unit quaternions (Q, 4) by ``alpha`` (Q,) in [0, 1]."""
     dot = np.sum(q0 * q1, axis=1)
     q1 = np.where(dot[:, None] < 0, -q1, q1)
@@ -160,8 +178,12 @@ def _slerp(q0: NDArray[np.float64], q1: NDArray[np.float64], alpha: NDArray[np.f
     return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
-def ground_truth_for(stamps_ns: list[int] | NDArray[np.int64], poses: PoseFile,
-                     scans_what: str, Tr: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+def ground_truth_for(
+    stamps_ns: list[int] | NDArray[np.int64],
+    poses: PoseFile,
+    scans_what: str,
+    Tr: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
     """(N, 4, 4) T_world_lidar of the scans at ``stamps_ns`` from a pose file.
 
     KITTI files: line k is scan k (the counts must match). TUM files: matched by time.
@@ -171,6 +193,7 @@ def ground_truth_for(stamps_ns: list[int] | NDArray[np.int64], poses: PoseFile,
         check_count(poses, len(stamps_ns), scans_what)
         T = poses.T_world_x
     else:
-        T = interpolate_poses(np.asarray(stamps_ns, np.int64), poses.stamps_ns, poses.T_world_x,
-                              str(poses.path))
+        T = interpolate_poses(
+            np.asarray(stamps_ns, np.int64), poses.stamps_ns, poses.T_world_x, str(poses.path)
+        )
     return camera_to_lidar(T, Tr) if Tr is not None else T

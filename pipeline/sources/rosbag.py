@@ -22,8 +22,8 @@ from pipeline.errors import ConfigError, InputError
 from pipeline.sequence import SequenceInfo
 from pipeline.sources.base import Frame, IngestReport, write_sequence
 from pipeline.sources.poses import (
-    PoseFormat,
     PoseFile,
+    PoseFormat,
     camera_to_lidar,
     check_count,
     interpolate_poses,
@@ -46,11 +46,16 @@ def bag_path(path: str | Path) -> Path:
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such bag")
-    if path.is_file() and path.suffix in (".mcap", ".db3") and (path.parent / "metadata.yaml").is_file():
+    if (
+        path.is_file()
+        and path.suffix in (".mcap", ".db3")
+        and (path.parent / "metadata.yaml").is_file()
+    ):
         return path.parent
     if path.is_file() and path.suffix == ".mcap":
-        raise InputError(f"{path}: an MCAP file without a ROS 2 bag folder; "
-                         "use `adaptune ingest mcap` for it")
+        raise InputError(
+            f"{path}: an MCAP file without a ROS 2 bag folder; use `adaptune ingest mcap` for it"
+        )
     if path.is_dir() and not (path / "metadata.yaml").is_file():
         raise InputError(f"{path}: not a ROS 2 bag folder (no metadata.yaml)")
     if path.is_file() and path.suffix != ".bag":
@@ -81,28 +86,37 @@ def open_bag(path: Path) -> Iterator[Any]:
         reader.close()
 
 
-def pick_topic(available: dict[str, str], wanted: str | None, types: tuple[str, ...],
-               what: str, kind: str) -> str:
+def pick_topic(
+    available: dict[str, str], wanted: str | None, types: tuple[str, ...], what: str, kind: str
+) -> str:
     """The one topic of ``types`` (or ``wanted``, checked) among topic -> type ``available``."""
     matching = sorted(t for t, ty in available.items() if normalise_type(ty) in types)
     if wanted is not None:
         if wanted not in available:
-            raise InputError(f"{what}: no topic {wanted!r} (topics: {', '.join(sorted(available)) or 'none'})")
+            raise InputError(
+                f"{what}: no topic {wanted!r} (topics: {', '.join(sorted(available)) or 'none'})"
+            )
         if normalise_type(available[wanted]) not in types:
             raise InputError(f"{what}: topic {wanted!r} is {available[wanted]}, not {kind}")
         return wanted
     if not matching:
-        raise InputError(f"{what}: no {kind} topic (topics: "
-                         f"{', '.join(f'{t} [{ty}]' for t, ty in sorted(available.items())) or 'none'})")
+        raise InputError(
+            f"{what}: no {kind} topic (topics: "
+            f"{', '.join(f'{t} [{ty}]' for t, ty in sorted(available.items())) or 'none'})"
+        )
     if len(matching) > 1:
-        raise InputError(f"{what}: {len(matching)} {kind} topics ({', '.join(matching)}); pick one with --topic")
+        raise InputError(
+            f"{what}: {len(matching)} {kind} topics ({', '.join(matching)}); pick one with --topic"
+        )
     return matching[0]
 
 
 class GroundTruth:
     """Per-scan ground truth from stamped poses (interpolated) or a KITTI file (by index)."""
 
-    def __init__(self, what: str, stamps_ns: NDArray[np.int64] | None, T: NDArray[np.float64]) -> None:
+    def __init__(
+        self, what: str, stamps_ns: NDArray[np.int64] | None, T: NDArray[np.float64]
+    ) -> None:
         self.what, self.stamps_ns, self.T = what, stamps_ns, T
 
     def at(self, frame: int, stamp: int) -> NDArray[np.float64]:
@@ -112,7 +126,11 @@ class GroundTruth:
 
     @classmethod
     def from_file(cls, pf: PoseFile, calib: str | Path | None) -> GroundTruth:
-        T = pf.T_world_x if calib is None else camera_to_lidar(pf.T_world_x, read_kitti_calib(calib))
+        T = (
+            pf.T_world_x
+            if calib is None
+            else camera_to_lidar(pf.T_world_x, read_kitti_calib(calib))
+        )
         return cls(str(pf.path), pf.stamps_ns, T)
 
 
@@ -121,10 +139,18 @@ class RosbagSource:
 
     name: ClassVar[str] = "rosbag"
 
-    def __init__(self, bag: str | Path, topic: str | None = None, gt_topic: str | None = None,
-                 gt_child_frame: str | None = None, poses: str | Path | None = None,
-                 poses_format: PoseFormat = "auto", calib: str | Path | None = None,
-                 name: str | None = None, sensor: str = "unknown") -> None:
+    def __init__(
+        self,
+        bag: str | Path,
+        topic: str | None = None,
+        gt_topic: str | None = None,
+        gt_child_frame: str | None = None,
+        poses: str | Path | None = None,
+        poses_format: PoseFormat = "auto",
+        calib: str | Path | None = None,
+        name: str | None = None,
+        sensor: str = "unknown",
+    ) -> None:
         if gt_topic is not None and poses is not None:
             raise ConfigError("give either --gt-topic or --poses, not both")
         self.bag = bag_path(bag)
@@ -132,7 +158,9 @@ class RosbagSource:
         self.sensor = sensor
         with open_bag(self.bag) as reader:
             available = {t: info.msgtype for t, info in reader.topics.items()}
-            self.topic = pick_topic(available, topic, POINTCLOUD2_TYPES, str(self.bag), "sensor_msgs/PointCloud2")
+            self.topic = pick_topic(
+                available, topic, POINTCLOUD2_TYPES, str(self.bag), "sensor_msgs/PointCloud2"
+            )
             self.count = sum(c.msgcount for c in reader.connections if c.topic == self.topic)
             self.gt: GroundTruth | None = None
             if gt_topic is not None:
@@ -149,13 +177,16 @@ class RosbagSource:
         conns = [c for c in reader.connections if c.topic == topic]
         entries = []
         for conn, log_ns, raw in reader.messages(connections=conns):
-            entries += poses_of(reader.deserialize(raw, conn.msgtype), conn.msgtype, log_ns, child_frame, what)
+            entries += poses_of(
+                reader.deserialize(raw, conn.msgtype), conn.msgtype, log_ns, child_frame, what
+            )
         stamps, T = collect_poses(entries, conns[0].msgtype, child_frame, what)
         return GroundTruth(what, stamps, T)
 
     def sequence_info(self) -> SequenceInfo:
-        return SequenceInfo(name=self.seq_name, sensor=self.sensor,
-                            source=f"rosbag:{self.bag.name}:{self.topic}")
+        return SequenceInfo(
+            name=self.seq_name, sensor=self.sensor, source=f"rosbag:{self.bag.name}:{self.topic}"
+        )
 
     def expected_frames(self) -> int:
         return self.count
@@ -167,14 +198,26 @@ class RosbagSource:
                 what = f"{self.bag} {self.topic} message {k}"
                 msg = reader.deserialize(raw, conn.msgtype)
                 stamp = stamp_ns(msg, log_ns)
-                yield Frame(stamp, cloud_to_xyzi(msg, what),
-                            None if self.gt is None else self.gt.at(k, stamp), what)
+                yield Frame(
+                    stamp,
+                    cloud_to_xyzi(msg, what),
+                    None if self.gt is None else self.gt.at(k, stamp),
+                    what,
+                )
 
 
-def ingest_rosbag(bag: str | Path, out: str | Path, topic: str | None = None,
-                  gt_topic: str | None = None, gt_child_frame: str | None = None,
-                  poses: str | Path | None = None, poses_format: PoseFormat = "auto",
-                  calib: str | Path | None = None, name: str | None = None) -> IngestReport:
+def ingest_rosbag(
+    bag: str | Path,
+    out: str | Path,
+    topic: str | None = None,
+    gt_topic: str | None = None,
+    gt_child_frame: str | None = None,
+    poses: str | Path | None = None,
+    poses_format: PoseFormat = "auto",
+    calib: str | Path | None = None,
+    name: str | None = None,
+) -> IngestReport:
     """PointCloud2 scans of a ROS 1/2 bag + optional ground truth -> sequence MCAP ``out``."""
-    return write_sequence(RosbagSource(bag, topic, gt_topic, gt_child_frame, poses, poses_format,
-                                       calib, name), out)
+    return write_sequence(
+        RosbagSource(bag, topic, gt_topic, gt_child_frame, poses, poses_format, calib, name), out
+    )

@@ -19,8 +19,11 @@ from pipeline.ros2_cdr import pointcloud2_to_xyzi
 
 POINTCLOUD2_TYPES = ("sensor_msgs/msg/PointCloud2",)
 POSE_TYPES = (
-    "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
-    "geometry_msgs/msg/TransformStamped", "nav_msgs/msg/Odometry", "tf2_msgs/msg/TFMessage",
+    "geometry_msgs/msg/PoseStamped",
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "geometry_msgs/msg/TransformStamped",
+    "nav_msgs/msg/Odometry",
+    "tf2_msgs/msg/TFMessage",
 )
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 
@@ -40,22 +43,35 @@ def stamp_ns(msg: Any, fallback_ns: int) -> int:
 
 def cloud_to_xyzi(msg: Any, what: str) -> NDArray[np.float32]:
     """(N, 4) float32 x, y, z, intensity of a deserialised PointCloud2."""
-    return pointcloud2_to_xyzi(int(msg.height), int(msg.width), list(msg.fields), bool(msg.is_bigendian),
-                               int(msg.point_step), int(msg.row_step), msg.data, what)
+    return pointcloud2_to_xyzi(
+        int(msg.height),
+        int(msg.width),
+        list(msg.fields),
+        bool(msg.is_bigendian),
+        int(msg.point_step),
+        int(msg.row_step),
+        msg.data,
+        what,
+    )
 
 
 def _pose(p: Any) -> NDArray[np.float64]:
-    return pose_from_xyz_quat(np.array([p.position.x, p.position.y, p.position.z]),
-                              np.array([p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w]))
+    return pose_from_xyz_quat(
+        np.array([p.position.x, p.position.y, p.position.z]),
+        np.array([p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w]),
+    )
 
 
 def _transform(t: Any) -> NDArray[np.float64]:
-    return pose_from_xyz_quat(np.array([t.translation.x, t.translation.y, t.translation.z]),
-                              np.array([t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w]))
+    return pose_from_xyz_quat(
+        np.array([t.translation.x, t.translation.y, t.translation.z]),
+        np.array([t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w]),
+    )
 
 
-def poses_of(msg: Any, msgtype: str, log_ns: int, child_frame: str | None,
-             what: str) -> list[tuple[int, NDArray[np.float64], str]]:
+def poses_of(
+    msg: Any, msgtype: str, log_ns: int, child_frame: str | None, what: str
+) -> list[tuple[int, NDArray[np.float64], str]]:
     """(stamp_ns, (4, 4) pose, child frame) entries of one ground-truth message.
 
     TF messages yield only transforms whose child frame is ``child_frame`` (all when None,
@@ -71,23 +87,34 @@ def poses_of(msg: Any, msgtype: str, log_ns: int, child_frame: str | None,
     if msgtype == "geometry_msgs/msg/TransformStamped":
         return [(stamp_ns(msg, log_ns), _transform(msg.transform), str(msg.child_frame_id))]
     if msgtype == TF_TYPE:
-        return [(stamp_ns(t, log_ns), _transform(t.transform), str(t.child_frame_id))
-                for t in msg.transforms if child_frame is None or t.child_frame_id == child_frame]
+        return [
+            (stamp_ns(t, log_ns), _transform(t.transform), str(t.child_frame_id))
+            for t in msg.transforms
+            if child_frame is None or t.child_frame_id == child_frame
+        ]
     raise InputError(f"{what}: {msgtype} is not a ground-truth type ({', '.join(POSE_TYPES)})")
 
 
-def collect_poses(entries: list[tuple[int, NDArray[np.float64], str]], msgtype: str,
-                  child_frame: str | None, what: str) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+def collect_poses(
+    entries: list[tuple[int, NDArray[np.float64], str]],
+    msgtype: str,
+    child_frame: str | None,
+    what: str,
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Stamps (M,) and poses (M, 4, 4) sorted by time, from ``poses_of`` entries of a topic."""
     if normalise_type(msgtype) == TF_TYPE:
         frames = sorted({c for _, _, c in entries})
         if child_frame is None:
-            raise InputError(f"{what}: a TF ground-truth topic needs a child frame "
-                             f"(--gt-child-frame; frames here: {', '.join(frames) or 'none'})")
+            raise InputError(
+                f"{what}: a TF ground-truth topic needs a child frame "
+                f"(--gt-child-frame; frames here: {', '.join(frames) or 'none'})"
+            )
         entries = [e for e in entries if e[2] == child_frame]
         if not entries:
-            raise InputError(f"{what}: no transform with child frame {child_frame!r} "
-                             f"(frames here: {', '.join(frames) or 'none'})")
+            raise InputError(
+                f"{what}: no transform with child frame {child_frame!r} "
+                f"(frames here: {', '.join(frames) or 'none'})"
+            )
     if not entries:
         raise InputError(f"{what}: no ground-truth messages")
     entries = sorted(entries, key=lambda e: e[0])

@@ -33,13 +33,25 @@ def read_bin(path: Path) -> NDArray[np.float32]:
     """(N, 4) float32 of a KITTI velodyne .bin (x, y, z, reflectance, little endian)."""
     size = path.stat().st_size
     if size % 16:
-        raise InputError(f"{path}: size {size} bytes is not a multiple of 16 "
-                         "(float32 x, y, z, reflectance per point): truncated scan?")
+        raise InputError(
+            f"{path}: size {size} bytes is not a multiple of 16 "
+            "(float32 x, y, z, reflectance per point): truncated scan?"
+        )
     return np.fromfile(path, dtype="<f4").reshape(-1, 4)
 
 
-_PCD_TYPES = {("F", 4): "f4", ("F", 8): "f8", ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4",
-              ("I", 8): "i8", ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8"}
+_PCD_TYPES = {
+    ("F", 4): "f4",
+    ("F", 8): "f8",
+    ("I", 1): "i1",
+    ("I", 2): "i2",
+    ("I", 4): "i4",
+    ("I", 8): "i8",
+    ("U", 1): "u1",
+    ("U", 2): "u2",
+    ("U", 4): "u4",
+    ("U", 8): "u8",
+}
 
 
 def read_pcd(path: Path) -> NDArray[np.float32]:
@@ -65,8 +77,10 @@ def read_pcd(path: Path) -> NDArray[np.float32]:
     n = int(header.get("POINTS", [0])[0] or 0) or _pcd_width(header)
     if data == "binary":
         if len(body) < n * dtype.itemsize:
-            raise InputError(f"{path}: PCD data is {len(body)} bytes, expected {n * dtype.itemsize} "
-                             f"({n} points of {dtype.itemsize} bytes): truncated")
+            raise InputError(
+                f"{path}: PCD data is {len(body)} bytes, expected {n * dtype.itemsize} "
+                f"({n} points of {dtype.itemsize} bytes): truncated"
+            )
         rec = np.frombuffer(body, dtype=dtype, count=n)
     elif data == "ascii":
         try:
@@ -74,8 +88,10 @@ def read_pcd(path: Path) -> NDArray[np.float32]:
         except ValueError as exc:
             raise InputError(f"{path}: malformed ascii PCD data ({exc})") from None
         if table.shape[0] != n or table.shape[1] != len(dtype.names or ()):
-            raise InputError(f"{path}: PCD has {table.shape[0]}x{table.shape[1]} values, header "
-                             f"says {n} points x {len(dtype.names or ())} fields")
+            raise InputError(
+                f"{path}: PCD has {table.shape[0]}x{table.shape[1]} values, header "
+                f"says {n} points x {len(dtype.names or ())} fields"
+            )
         rec = np.zeros(n, dtype=dtype)
         for k, name in enumerate(dtype.names or ()):
             rec[name] = table[:, k]
@@ -105,7 +121,9 @@ def _pcd_dtype(path: Path, header: dict[str, list[str]]) -> tuple[np.dtype, list
         code = _PCD_TYPES.get((typ, size))
         if code is None:
             raise InputError(f"{path}: PCD field {name!r} has unknown TYPE {typ} SIZE {size}")
-        fields.append((f"{name}#{k}", "<" + code, (count,)) if count > 1 else (f"{name}#{k}", "<" + code))
+        fields.append(
+            (f"{name}#{k}", "<" + code, (count,)) if count > 1 else (f"{name}#{k}", "<" + code)
+        )
     dtype = np.dtype(fields)
     return dtype, [n.split("#")[0] for n in dtype.names or ()]
 
