@@ -1,0 +1,260 @@
+"""``command``: any executable as a black-box odometry (a ROS or C++ system, a script...).
+
+Per run adaptune makes a work directory and writes into it:
+- ``params.json``: {name: value} of frame 0 (for a constant schedule, the parameters);
+- ``schedule.csv``: header ``frame,stamp_ns,<param>...``, one row per frame;
+- ``schedule.json``: {"frame": [...], "stamp_ns": [...], "params": {name: [...]}};
+- the sequence: the MCAP the scans came from (its path), or ``sequence.mcap`` written there
+  when the scans are not read from a file.
+It then runs the argv template ``command`` (a list, or one shell-like string) with these
+placeholders substituted: ``{sequence}``, ``{params}``, ``{schedule}`` (CSV), ``{schedule_json}``,
+``{out}`` (the trajectory file the command must write), ``{workdir}``, ``{python}`` (this
+interpreter). The command gets ``time_limit_s`` (``run_sequence``'s, else the ``timeout_s``
+option); past it its whole process group is killed and TrialTimeout raised. A non-zero exit
+status is an OdometryError carrying the last line of its stderr.
+
+The trajectory (T_world_lidar) is read back in ``format``:
+- ``kitti``: 12 numbers a line (row-major 3x4), one line per frame in order: N lines for N frames;
+- ``tum``: ``stamp_s tx ty tz qx qy qz qw`` a line, matched to frames by stamp (nearest, within
+  ``stamp_tolerance_s``); every frame must be present.
+Lines starting with ``#`` and blank lines are skipped. The parameter space comes from the
+``space`` option: a list of ParamSpec dicts (name, low, high, default, kind, log, unit) or the
+path of a YAML/JSON file holding that list (or ``{"params": [...]}``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import Field, field_validator
+
+from pipeline.config import Section
+from pipeline.errors import ConfigError, OdometryError, TrialTimeout
+from pipeline.geometry import pose_from_xyz_quat
+from pipeline.odometry.base import Adapter, ParameterSpace, ParamSpec, Schedule
+from pipeline.odometry.common import F64, parse_options
+from pipeline.sequence import Scan, SequenceInfo, SequenceWriter
+from pipeline.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
+
+PLACEHOLDERS = ("sequence", "params", "schedule", "schedule_json", "out", "workdir", "python")
+
+
+class CommandOptions(Section):
+    """Settings of ``command``."""
+
+    command: list[str] = Field(min_length=1)
+    space: list[dict[str, Any]] | str
+    format: Literal["kitti", "tum"] = "kitti"
+    timeout_s: float | None = Field(None, gt=0)
+    cwd: str | None = None
+    workdir: str | None = None
+    keep_workdir: bool = False
+    stamp_tolerance_s: float = Field(1e-3, gt=0)
+
+    @field_validator("command", mode="before")
+    @classmethod
+    def _split(cls, value: object) -> object:
+        if isinstance(value, str):
+            text = value.strip()
+            return json.loads(text) if text.startswith("[") else shlex.split(text)
+        return value
+
+    @field_validator("command")
+    @classmethod
+    def _fields(cls, value: list[str]) -> list[str]:
+        import string
+
+        for arg in value:
+            for _, field, _, _ in string.Formatter().parse(arg):
+                if field is not None and field not in PLACEHOLDERS:
+                    raise ValueError(f"unknown placeholder {{{field}}} in {arg!r} "
+                                     f"(known: {', '.join(PLACEHOLDERS)})")
+        return value
+
+
+def load_space(spec: list[dict[str, Any]] | str) -> ParameterSpace:
+    """ParameterSpace from a list of ParamSpec dicts or a YAML/JSON file of one."""
+    import yaml
+
+    what = "command option space"
+    if isinstance(spec, str):
+        path = Path(spec)
+        try:
+            data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ConfigError(f"{path}: no such parameter space file") from None
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"{path}: not valid YAML/JSON ({exc})") from None
+        what = str(path)
+        spec = data.get("params") if isinstance(data, dict) else data
+    if not isinstance(spec, list) or not spec:
+        raise ConfigError(f"{what}: must be a non-empty list of parameters")
+    specs = []
+    for i, item in enumerate(spec):
+        try:
+            specs.append(ParamSpec(**item))
+        except TypeError as exc:
+            raise ConfigError(f"{what}: parameter {i} is malformed ({exc})") from None
+    names = [s.name for s in specs]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"{what}: duplicate parameter names in {names}")
+    return ParameterSpace(tuple(specs))
+
+
+class CommandAdapter:
+    """The ``command`` adapter: an external executable, parameters in files, trajectory out."""
+
+    name = "command"
+    accepts_time_limit = True
+
+    def __init__(self, **options: object) -> None:
+        self.options = parse_options(CommandOptions, self.name, dict(options))
+        self.space = load_space(self.options.space)
+
+    def run(self, scans: Iterable[Scan], schedule: Schedule,
+            time_limit_s: float | None = None) -> Trajectory:
+        """Run the command over ``scans`` with ``schedule``; raises OdometryError / TrialTimeout."""
+        limit = time_limit_s if time_limit_s is not None else self.options.timeout_s
+        base = self.options.workdir
+        if base:
+            Path(base).mkdir(parents=True, exist_ok=True)
+        tmp = tempfile.TemporaryDirectory(prefix="adaptune-cmd-", dir=base)
+        try:
+            work = Path(tmp.name)
+            sequence, stamps_ns = self._sequence(scans, work)
+            if len(schedule) != len(stamps_ns):
+                raise OdometryError(f"command: schedule has {len(schedule)} rows for "
+                                    f"{len(stamps_ns)} frames")
+            files = write_inputs(work, schedule, stamps_ns)
+            argv = [a.format(sequence=sequence, out=work / "trajectory.txt", workdir=work,
+                             python=sys.executable, **files) for a in self.options.command]
+            run_process(argv, self.options.cwd, limit)
+            T = read_poses(work / "trajectory.txt", self.options.format, stamps_ns,
+                           self.options.stamp_tolerance_s)
+            return Trajectory(np.arange(len(stamps_ns)), stamps_ns, T)
+        finally:
+            if self.options.keep_workdir:
+                log.info("command: work directory kept at %s", tmp.name)
+            else:
+                tmp.cleanup()
+
+    def _sequence(self, scans: Iterable[Scan], work: Path) -> tuple[Path, np.ndarray]:
+        """The sequence MCAP holding ``scans`` (theirs, or one written into ``work``) and stamps."""
+        path = getattr(scans, "path", None)
+        stamps = getattr(scans, "stamps_ns", None)
+        if path is not None and stamps is not None and Path(path).is_file():
+            return Path(path).resolve(), np.asarray(stamps, np.int64)
+        out = work / "sequence.mcap"
+        with SequenceWriter(out, SequenceInfo(name="command-input")) as w:
+            for scan in scans:
+                w.add(scan.stamp_ns, scan.points_lidar, scan.T_world_lidar)
+        return out, np.asarray(w.stamps_ns, np.int64)
+
+
+def write_inputs(work: Path, schedule: Schedule, stamps_ns: np.ndarray) -> dict[str, Path]:
+    """params.json, schedule.csv and schedule.json in ``work``; their paths by placeholder."""
+    names = list(schedule.values)
+    params = work / "params.json"
+    params.write_text(json.dumps(schedule.at(0), indent=1))
+    rows = ["frame,stamp_ns," + ",".join(names)]
+    for i in range(len(schedule)):
+        vals = ",".join(repr(float(schedule.values[n][i])) for n in names)
+        rows.append(f"{int(schedule.frames[i])},{int(stamps_ns[i])},{vals}")
+    csv = work / "schedule.csv"
+    csv.write_text("\n".join(rows) + "\n")
+    js = work / "schedule.json"
+    js.write_text(json.dumps({"frame": schedule.frames.tolist(),
+                              "stamp_ns": [int(s) for s in stamps_ns],
+                              "params": {n: schedule.values[n].tolist() for n in names}}))
+    return {"params": params, "schedule": csv, "schedule_json": js}
+
+
+def run_process(argv: list[str], cwd: str | None, time_limit_s: float | None) -> None:
+    """Run ``argv`` in its own process group; TrialTimeout past the limit, OdometryError on failure."""
+    try:
+        proc = subprocess.Popen(argv, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                stdin=subprocess.DEVNULL, start_new_session=True)
+    except (FileNotFoundError, PermissionError) as exc:
+        raise ConfigError(f"command: cannot run {argv[0]!r} ({exc.strerror})") from None
+    try:
+        _, err = proc.communicate(timeout=time_limit_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        raise TrialTimeout(f"command: {argv[0]} outlived its time limit of {time_limit_s:g} s; "
+                           "killed") from None
+    if proc.returncode != 0:
+        lines = err.decode(errors="replace").strip().splitlines()
+        last = lines[-1] if lines else "no stderr"
+        raise OdometryError(f"command: {Path(argv[0]).name} exited with status "
+                            f"{proc.returncode}: {last}")
+
+
+def read_poses(path: Path, fmt: str, stamps_ns: np.ndarray, tolerance_s: float) -> F64:
+    """(N, 4, 4) T_world_lidar for the N frames at ``stamps_ns`` from a KITTI or TUM file."""
+    if not path.is_file():
+        raise OdometryError(f"command: wrote no trajectory ({path.name} missing)")
+    rows = []
+    for k, line in enumerate(path.read_text().splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        try:
+            rows.append([float(x) for x in line.replace(",", " ").split()])
+        except ValueError:
+            raise OdometryError(f"command: {path.name} line {k} is not numbers: {line[:60]!r}") from None
+    width = 12 if fmt == "kitti" else 8
+    bad = [i for i, r in enumerate(rows) if len(r) != width]
+    if bad:
+        raise OdometryError(f"command: {path.name} row {bad[0] + 1} has {len(rows[bad[0]])} "
+                            f"numbers, a {fmt} trajectory has {width}")
+    arr = np.array(rows, np.float64).reshape(-1, width)
+    n = len(stamps_ns)
+    if fmt == "kitti":
+        if len(arr) != n:
+            raise OdometryError(f"command: {path.name} has {len(arr)} poses for {n} frames")
+        T = np.tile(np.eye(4), (n, 1, 1))
+        T[:, :3, :] = arr.reshape(n, 3, 4)
+        return T
+    return _match_tum(arr, stamps_ns, tolerance_s, path.name)
+
+
+def _match_tum(arr: F64, stamps_ns: np.ndarray, tolerance_s: float, what: str) -> F64:
+    """Poses of a TUM table (M, 8) matched to the frames' stamps (nearest within tolerance)."""
+    t_frames = np.asarray(stamps_ns, np.int64) * 1e-9
+    order = np.argsort(arr[:, 0], kind="stable")
+    t_est = arr[order, 0]
+    if len(t_est) == 0:
+        raise OdometryError(f"command: {what} is empty")
+    j = np.clip(np.searchsorted(t_est, t_frames), 1, max(len(t_est) - 1, 1))
+    prev = np.clip(j - 1, 0, len(t_est) - 1)
+    j = np.clip(j, 0, len(t_est) - 1)
+    nearest = np.where(np.abs(t_est[prev] - t_frames) <= np.abs(t_est[j] - t_frames), prev, j)
+    miss = np.abs(t_est[nearest] - t_frames) > tolerance_s
+    if miss.any():
+        k = int(np.argmax(miss))
+        raise OdometryError(f"command: {what} has no pose for frame {k} (stamp "
+                            f"{t_frames[k]:.6f} s; {int(miss.sum())} frames missing)")
+    rows = arr[order][nearest]
+    q = rows[:, 4:8]
+    norms = np.linalg.norm(q, axis=1)
+    if not np.all(np.isfinite(norms)) or np.any(np.abs(norms - 1.0) > 1e-3):
+        k = int(np.argmax(~np.isfinite(norms) | (np.abs(norms - 1.0) > 1e-3)))
+        raise OdometryError(f"command: {what} has a non-unit quaternion at frame {k}")
+    return pose_from_xyz_quat(rows[:, 1:4], q)
+
+
+_: type[Adapter] = CommandAdapter
