@@ -183,7 +183,7 @@ def write_inputs(work: Path, schedule: Schedule, stamps_ns: np.ndarray) -> dict[
 
 
 def run_process(argv: list[str], cwd: str | None, time_limit_s: float | None) -> None:
-    """Run ``argv`` in its own process group; TrialTimeout past the limit, OdometryError on failure."""
+    """Run ``argv`` in its own process group; TrialTimeout past the limit, else OdometryError."""
     try:
         proc = subprocess.Popen(argv, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 stdin=subprocess.DEVNULL, start_new_session=True)
@@ -215,7 +215,8 @@ def read_poses(path: Path, fmt: str, stamps_ns: np.ndarray, tolerance_s: float) 
         try:
             rows.append([float(x) for x in line.replace(",", " ").split()])
         except ValueError:
-            raise OdometryError(f"command: {path.name} line {k} is not numbers: {line[:60]!r}") from None
+            raise OdometryError(f"command: {path.name} line {k} is not numbers: "
+                                f"{line[:60]!r}") from None
     width = 12 if fmt == "kitti" else 8
     bad = [i for i, r in enumerate(rows) if len(r) != width]
     if bad:
