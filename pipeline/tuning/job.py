@@ -1,0 +1,229 @@
+"""One trial: run an adapter with fixed parameters over one or more sequences, score, write.
+
+``run_trial(job)`` is the top-level, picklable function the executor runs. It never raises for a
+failing odometry: an exception, a non-finite pose, lost frames, an implausible jump (a
+frame-to-frame translation above ``jump_limit_m``) or a run past its time limit make a *failed*
+result whose objective is ``penalty_pct`` (a fixed number, so that a resumed or repeated run
+sees the same history) and whose ``error`` is one line of text.
+
+Time limit: with ``time_limit_s`` set (per sequence; a joint trial gets the sum), the trial runs
+in a child process forked from a ``forkserver`` (cheap: the server has numpy, the job module and
+the adapter's module preloaded) and is SIGKILLed when it outlives the limit, so even a hang
+inside C code ends. With ``time_limit_s=None`` the trial runs in the calling process.
+The child writes the trajectory Parquet files (atomically) and sends back a small result.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import multiprocessing
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.errors import InputError, OdometryError, TrialTimeout
+from pipeline.odometry.base import Adapter
+from pipeline.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
+
+MAX_ERROR_CHARS = 400
+
+
+@dataclass(frozen=True)
+class TrialJob:
+    """Everything a worker needs for one trial (plain data, picklable).
+
+    adapter: a registry name (``ndt``) or ``module:factory`` (a callable ``(**options) -> Adapter``).
+    algorithm: the name used in output paths (the adapter's ``name``).
+    sequences: ((sequence name, MCAP path), ...); more than one for a joint trial.
+    """
+
+    adapter: str
+    algorithm: str
+    sequences: tuple[tuple[str, str], ...]
+    trial: int
+    seed: int
+    params: dict[str, float]
+    out_dir: str
+    length_m: float
+    penalty_pct: float
+    jump_limit_m: float
+    time_limit_s: float | None = None
+    adapter_options: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class TrialResult:
+    """Outcome of one trial. objective: mean translational RTE [%] (mean over sequences) or the penalty."""
+
+    trial: int
+    status: str  # 'ok' | 'failed'
+    error: str
+    objective: float
+    wall_time_s: float
+    seed: int
+    params: dict[str, float]
+    rte_pct: dict[str, float] = field(default_factory=dict)
+    odometry_s: float = 0.0
+
+
+def resolve_adapter(ref: str, options: Mapping[str, Any] | None = None) -> Adapter:
+    """The adapter named ``ref`` in the registry, or built by the factory ``module:attr``."""
+    options = dict(options or {})
+    if ":" in ref:
+        import importlib
+
+        module, attr = ref.split(":", 1)
+        return getattr(importlib.import_module(module), attr)(**options)  # type: ignore[no-any-return]
+    from pipeline.odometry.registry import get_adapter
+
+    return get_adapter(ref, **options)
+
+
+def trajectory_path(out_dir: str | Path, algorithm: str, sequence: str, trial: int) -> Path:
+    """``<OUT>/trajectories/algorithm=<A>/sequence=<S>/trial=<N>/trajectory.parquet`` (CONTRACTS.md)."""
+    return (Path(out_dir) / "trajectories" / f"algorithm={algorithm}" / f"sequence={sequence}"
+            / f"trial={trial}" / "trajectory.parquet")
+
+
+def run_trial(job: TrialJob) -> TrialResult:
+    """Run ``job``; a failed TrialResult (never an exception) when the odometry fails."""
+    t0 = time.perf_counter()
+    try:
+        if job.time_limit_s is None:
+            out = evaluate_trial(job)
+        else:
+            out = _run_in_child(job, job.time_limit_s * len(job.sequences))
+    except Exception as exc:
+        _remove_trajectories(job)
+        return TrialResult(job.trial, "failed", _one_line(exc), job.penalty_pct,
+                           time.perf_counter() - t0, job.seed, dict(job.params))
+    return TrialResult(job.trial, "ok", "", out["objective"], time.perf_counter() - t0, job.seed,
+                       dict(job.params), out["rte_pct"], out["odometry_s"])
+
+
+def evaluate_trial(job: TrialJob) -> dict[str, Any]:
+    """Run, check, score and write every sequence of ``job``; raises on any failure.
+
+    Returns {"objective": mean RTE [%] over sequences, "rte_pct": {sequence: RTE}, "odometry_s"}.
+    ``pipeline.odometry.run_sequence`` checks frames, stamps and finiteness; ``check_jump`` the rest.
+    """
+    from pipeline.evaluation.rte import mean_rte_pct
+    from pipeline.odometry import run_sequence
+    from pipeline.trajectory import write_trajectory
+
+    adapter = resolve_adapter(job.adapter, job.adapter_options)
+    rte: dict[str, float] = {}
+    odometry_s = 0.0
+    for name, path in job.sequences:
+        gt = load_ground_truth(path)
+        t0 = time.perf_counter()
+        traj = run_sequence(adapter, path, job.params, job.time_limit_s)
+        odometry_s += time.perf_counter() - t0
+        check_jump(traj, job.jump_limit_m)
+        rte[name] = mean_rte_pct(gt, traj.T_world_lidar, job.length_m)
+        if not np.isfinite(rte[name]):
+            raise OdometryError(f"{name}: no segment of {job.length_m} m to score")
+        write_trajectory(trajectory_path(job.out_dir, job.algorithm, name, job.trial), traj, {
+            "algorithm": job.algorithm, "sequence": name, "trial": str(job.trial),
+            "params_json": json.dumps(job.params, sort_keys=True)})
+    return {"objective": float(np.mean(list(rte.values()))), "rte_pct": rte, "odometry_s": odometry_s}
+
+
+def load_ground_truth(path: str | Path) -> NDArray[np.float64]:
+    """(N, 4, 4) ground-truth T_world_lidar of a sequence MCAP; InputError when it has none."""
+    from pipeline.sequence import SequenceReader
+
+    with SequenceReader(path) as reader:
+        gt = reader.ground_truth()
+    if gt is None:
+        raise InputError(f"{path}: no ground truth to score trials against")
+    return gt
+
+
+def check_jump(traj: Trajectory, jump_limit_m: float) -> None:
+    """OdometryError when a frame-to-frame translation exceeds ``jump_limit_m`` [m]."""
+    if len(traj) > 1:
+        step_m = np.linalg.norm(np.diff(traj.T_world_lidar[:, :3, 3], axis=0), axis=1)
+        k = int(np.argmax(step_m))
+        if not step_m[k] <= jump_limit_m:
+            raise OdometryError(f"implausible jump of {step_m[k]:.3g} m at frame {k + 1} "
+                                f"(jump_limit_m={jump_limit_m})")
+
+
+# -- the child process ---------------------------------------------------------------------
+
+_PRELOADED: set[str] = set()
+
+
+def _context(job: TrialJob) -> multiprocessing.context.BaseContext:
+    """The forkserver context; the first call sets what the server preloads."""
+    ctx = multiprocessing.get_context("forkserver")
+    if not _PRELOADED:
+        modules = ["pipeline.tuning.job", "pipeline.evaluation.rte", "pipeline.odometry"]
+        try:
+            modules.append(type(resolve_adapter(job.adapter, job.adapter_options)).__module__)
+        except Exception:
+            pass
+        ctx.set_forkserver_preload(modules)  # type: ignore[attr-defined]
+        _PRELOADED.update(modules)
+    return ctx
+
+
+def _child_main(job: TrialJob, conn: Any) -> None:
+    """Entry point of the trial process: evaluate and send ("ok", out) or ("error", text)."""
+    try:
+        message: tuple[str, Any] = ("ok", evaluate_trial(job))
+    except BaseException as exc:
+        message = ("error", _one_line(exc))
+    conn.send(message)
+    conn.close()
+
+
+def _run_in_child(job: TrialJob, limit_s: float) -> dict[str, Any]:
+    """``evaluate_trial(job)`` in a child process, killed after ``limit_s`` seconds."""
+    if multiprocessing.current_process().daemon:
+        raise OdometryError("cannot enforce the time limit in a daemonic worker process; start Dask "
+                            "workers with DASK_DISTRIBUTED__WORKER__DAEMON=False")
+    ctx = _context(job)
+    recv, send = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child_main, args=(job, send), name=f"trial-{job.trial}")
+    proc.start()
+    send.close()
+    try:
+        if not recv.poll(limit_s):
+            proc.kill()
+            raise TrialTimeout(f"time limit of {limit_s:g} s exceeded (trial process killed)")
+        try:
+            kind, payload = recv.recv()
+        except EOFError:
+            proc.join(5.0)
+            raise OdometryError(f"trial process died (exit code {proc.exitcode})") from None
+    finally:
+        recv.close()
+        proc.join(5.0)
+        if proc.is_alive():
+            proc.kill()
+            proc.join()
+    if kind != "ok":
+        raise OdometryError(payload)
+    return payload  # type: ignore[no-any-return]
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc) if isinstance(exc, OdometryError) else f"{type(exc).__name__}: {exc}"
+    text = " ".join(text.split())
+    return text[:MAX_ERROR_CHARS]
+
+
+def _remove_trajectories(job: TrialJob) -> None:
+    """Drop trajectory files of a failed trial (e.g. left by an earlier, killed run)."""
+    for name, _ in job.sequences:
+        trajectory_path(job.out_dir, job.algorithm, name, job.trial).unlink(missing_ok=True)

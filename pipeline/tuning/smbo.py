@@ -1,0 +1,301 @@
+"""The SMBO trial runner: hyperopt TPE proposals, W trials in flight, resumable.
+
+``run_trials`` is the library entry point of the ``trials`` / ``fixed`` stages: one study per
+sequence (``joint=False``) or one study whose objective is the mean over all sequences
+(``joint=True``, sequence ``__joint__``). Each study:
+1. reads its trials table (finished trials of an earlier, killed run) into the TPE history;
+2. keeps up to ``workers`` trials in flight: trial 0 is the baseline (the space's defaults),
+   every other trial is ``TpeSearch.ask`` over finished + pending trials;
+3. after every finished trial rewrites the trials table atomically, so a kill loses at most the
+   trials in flight, and a restart runs exactly the missing trial ids 0..iterations-1.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import multiprocessing
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pydantic import Field, field_validator
+
+from pipeline.config import Section
+from pipeline.errors import ConfigError, InputError, OdometryError
+from pipeline.odometry.base import Adapter, Params
+from pipeline.tuning.job import TrialJob, TrialResult, resolve_adapter, run_trial
+from pipeline.tuning.table import JOINT, read_trials, trials_path, write_trials
+from pipeline.tuning.tpe import TpeSearch, trial_seed
+
+log = logging.getLogger(__name__)
+
+
+class TrialsSection(Section):
+    """params.yaml ``trials``: settings of the SMBO trials (also used by the joint ``fixed`` stage).
+
+    penalty_pct: objective [%] of a failed trial (fixed, not relative to the baseline, so that
+    history and resume are deterministic; well above any sane mean RTE).
+    time_limit_s: per sequence run (a joint trial gets the sum); null = no limit, in-process.
+    jump_limit_m: a frame-to-frame translation above this fails the trial (diverged odometry).
+    startup_trials: random proposals before TPE (hyperopt's n_startup_jobs).
+    dask: null = process pool; "local" = a Dask LocalCluster of ``workers`` processes;
+    "tcp://host:port" = an existing Dask scheduler.
+    """
+
+    algorithm: str = "ndt"
+    iterations: int = Field(256, ge=1)
+    workers: int = Field(1, ge=1)
+    dask: str | None = None
+    time_limit_s: float | None = Field(600.0, gt=0)
+    penalty_pct: float = Field(100.0, gt=0)
+    length_m: float = Field(25.0, gt=0)
+    jump_limit_m: float = Field(5.0, gt=0)
+    startup_trials: int = Field(20, ge=1)
+    split: str = "train"
+    adapter_options: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("dask")
+    @classmethod
+    def _dask_address(cls, v: str | None) -> str | None:
+        if v is not None and v != "local" and "://" not in v:
+            raise ValueError("dask must be 'local' or a scheduler address like tcp://host:8786")
+        return v
+
+
+@dataclass
+class StudySummary:
+    """What one study ended with."""
+
+    algorithm: str
+    sequence: str
+    trials: int
+    failed: int
+    ran: int
+    best_trial: int
+    best_objective: float
+    best_params: Params = field(default_factory=dict)
+    trials_path: Path | None = None
+
+
+@dataclass(frozen=True)
+class Study:
+    """One SMBO: a name (sequence or ``__joint__``) and the sequences its objective averages."""
+
+    name: str
+    sequences: tuple[tuple[str, str], ...]
+
+
+def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settings: TrialsSection,
+               seed: int, joint: bool = False, progress: bool = True,
+               on_trial: Callable[[Study, TrialResult], None] | None = None,
+               executor: Executor | None = None) -> list[StudySummary]:
+    """Run the SMBO studies of ``sequence_paths`` into ``out_dir`` (CONTRACTS.md layout).
+
+    ``executor``: run trials there instead of opening one from ``settings`` (left open).
+    ``on_trial(study, result)`` is called after each finished trial is saved.
+    """
+    adapter = resolve_adapter(settings.algorithm, settings.adapter_options)
+    studies = make_studies(sequence_paths, joint)
+    for study in studies:
+        for _, path in study.sequences:
+            check_scorable(path, settings.length_m)
+    summaries = []
+    with contextlib.ExitStack() as stack:
+        if executor is None:
+            executor = stack.enter_context(open_executor(settings.workers, settings.dask))
+        for study in studies:
+            summaries.append(run_study(study, adapter, executor, Path(out_dir), settings, seed,
+                                       progress, on_trial))
+    return summaries
+
+
+def make_studies(sequence_paths: Sequence[str | Path], joint: bool) -> list[Study]:
+    """One study per sequence (named by file stem), or one joint study over all of them."""
+    if not sequence_paths:
+        raise ConfigError("no sequences given")
+    named = [(Path(p).stem, str(p)) for p in sequence_paths]
+    stems = [n for n, _ in named]
+    dup = sorted({n for n in stems if stems.count(n) > 1})
+    if dup:
+        raise ConfigError(f"sequence names must be unique (file stems), {dup[0]!r} is given twice")
+    if JOINT in stems:
+        raise ConfigError(f"{JOINT!r} is reserved for the joint study")
+    if joint:
+        return [Study(JOINT, tuple(named))]
+    return [Study(n, ((n, p),)) for n, p in named]
+
+
+def check_scorable(path: str | Path, length_m: float) -> None:
+    """InputError unless the sequence has ground truth longer than ``length_m`` (RTE needs it)."""
+    from pipeline.geometry import path_distances
+    from pipeline.tuning.job import load_ground_truth
+
+    gt = load_ground_truth(path)
+    total_m = float(path_distances(gt)[-1]) if len(gt) else 0.0
+    if not total_m > length_m:
+        raise InputError(f"{path}: ground truth runs {total_m:.1f} m, not longer than "
+                         f"length_m={length_m}: no RTE segment to score")
+
+
+def run_study(study: Study, adapter: Adapter, executor: Executor, out_dir: Path,
+              settings: TrialsSection, seed: int, progress: bool = True,
+              on_trial: Callable[[Study, TrialResult], None] | None = None) -> StudySummary:
+    """Run (or resume) one study until trials 0..iterations-1 are all finished."""
+    space = adapter.space
+    table = trials_path(out_dir, adapter.name, study.name)
+    done = {r.trial: r for r in read_trials(table, space) if r.trial < settings.iterations}
+    search = TpeSearch(space, seed, settings.startup_trials)
+    for r in done.values():
+        search.tell(r.trial, r.params, r.objective)
+    todo = [t for t in range(settings.iterations) if t not in done]
+    ran = 0
+    if done:
+        log.info("%s %s: resuming, %d of %d trials finished", adapter.name, study.name,
+                 len(done), settings.iterations)
+    with _progress_bar(settings.iterations, len(done), f"{adapter.name} {study.name}",
+                       progress) as bar:
+        _show_best(bar, done)
+        in_flight: dict[Future[TrialResult], int] = {}
+        while todo or in_flight:
+            while todo and len(in_flight) < settings.workers:
+                tid = todo.pop(0)
+                params = propose(search, tid)
+                job = make_job(study, adapter, tid, trial_seed(seed, tid), params, out_dir, settings)
+                in_flight[executor.submit(run_trial, job)] = tid
+            finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
+            for fut in sorted(finished, key=in_flight.__getitem__):
+                tid = in_flight.pop(fut)
+                result = _result_of(fut, tid)
+                search.tell(tid, result.params, result.objective)
+                done[tid] = result
+                write_trials(table, space, done.values())
+                ran += 1
+                _report(bar, done, result)
+                if on_trial is not None:
+                    on_trial(study, result)
+    return summarize(adapter.name, study.name, done, ran, table)
+
+
+def propose(search: TpeSearch, tid: int) -> Params:
+    """Trial 0 is the baseline (defaults); every other trial is a TPE proposal."""
+    if tid == 0:
+        params = search.space.defaults()
+        search.pending(0, params)
+        return params
+    return search.ask(tid)
+
+
+def make_job(study: Study, adapter: Adapter, tid: int, seed: int, params: Params, out_dir: Path,
+             settings: TrialsSection) -> TrialJob:
+    """The picklable job of one trial."""
+    return TrialJob(adapter=settings.algorithm, algorithm=adapter.name, sequences=study.sequences,
+                    trial=tid, seed=seed, params=dict(params), out_dir=str(out_dir),
+                    length_m=settings.length_m, penalty_pct=settings.penalty_pct,
+                    jump_limit_m=settings.jump_limit_m, time_limit_s=settings.time_limit_s,
+                    adapter_options=dict(settings.adapter_options))
+
+
+def summarize(algorithm: str, sequence: str, done: dict[int, TrialResult], ran: int,
+              table: Path) -> StudySummary:
+    """Counts and the best trial (lowest objective among ok trials; the baseline if none is ok)."""
+    ok = [r for r in done.values() if r.status == "ok"]
+    best = min(ok or done.values(), key=lambda r: (r.objective, r.trial))
+    return StudySummary(algorithm, sequence, len(done), len(done) - len(ok), ran, best.trial,
+                        best.objective if ok else math.nan, dict(best.params), table)
+
+
+# -- executors -----------------------------------------------------------------------------
+
+@contextlib.contextmanager
+def open_executor(workers: int, dask: str | None = None) -> Iterator[Executor]:
+    """A concurrent.futures Executor with ``workers`` processes, shut down on exit.
+
+    ``dask=None``: ProcessPoolExecutor (spawn context). ``"local"``: a Dask LocalCluster
+    (``workers`` processes, one thread each, non-daemonic so that trials can run in child
+    processes). An address: a client of that scheduler (its workers must be non-daemonic:
+    DASK_DISTRIBUTED__WORKER__DAEMON=False).
+    """
+    if dask is None:
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        try:
+            yield pool
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+        return
+    with _dask_client(workers, dask) as client:
+        yield client.get_executor()
+
+
+@contextlib.contextmanager
+def _dask_client(workers: int, address: str) -> Iterator[Any]:
+    import dask
+    from distributed import Client, LocalCluster
+
+    if address == "local":
+        with dask.config.set({"distributed.worker.daemon": False}):
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
+        client = Client(cluster)
+        try:
+            yield client
+        finally:
+            client.close()
+            cluster.close()
+        return
+    try:
+        client = Client(address, timeout="10s")
+    except OSError as exc:
+        raise ConfigError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
+    try:
+        daemonic = [w for w, d in client.run(_is_daemon).items() if d]
+        if daemonic:
+            raise ConfigError(f"Dask worker {daemonic[0]} is daemonic and cannot run trials in child "
+                              "processes; start workers with DASK_DISTRIBUTED__WORKER__DAEMON=False")
+        yield client
+    finally:
+        client.close()
+
+
+def _is_daemon() -> bool:
+    return bool(multiprocessing.current_process().daemon)
+
+
+# -- progress ------------------------------------------------------------------------------
+
+@contextlib.contextmanager
+def _progress_bar(total: int, initial: int, desc: str, enabled: bool) -> Iterator[Any]:
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, initial=initial, desc=desc, unit="trial", file=sys.stderr,
+               disable=None if enabled else True, dynamic_ncols=True)
+    try:
+        yield bar
+    finally:
+        bar.close()
+
+
+def _show_best(bar: Any, done: dict[int, TrialResult]) -> None:
+    ok = [r.objective for r in done.values() if r.status == "ok"]
+    failed = sum(r.status != "ok" for r in done.values())
+    bar.set_postfix(best=f"{min(ok):.4g}%" if ok else "-", failed=failed, refresh=False)
+
+
+def _report(bar: Any, done: dict[int, TrialResult], result: TrialResult) -> None:
+    _show_best(bar, done)
+    bar.update(1)
+    if result.status != "ok":
+        log.debug("trial %d failed: %s", result.trial, result.error)
+
+
+def _result_of(fut: Future[TrialResult], tid: int) -> TrialResult:
+    """The result of a finished future; OdometryError when the executor itself broke."""
+    try:
+        return fut.result()
+    except Exception as exc:
+        raise OdometryError(f"trial {tid}: the executor failed ({type(exc).__name__}: {exc}); "
+                            "finished trials are saved, run again to resume") from exc

@@ -1,0 +1,71 @@
+"""The trials table of one study (CONTRACTS.md), which is also the resume state.
+
+``<OUT>/trials/algorithm=<A>/sequence=<S>/trials.parquet`` (schemas.arrow.trials_schema), one
+row per finished trial sorted by trial id, rewritten atomically after every finished trial.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from pipeline.errors import InputError, SchemaError
+from pipeline.io_utils import atomic_path
+from pipeline.odometry.base import ParameterSpace
+from pipeline.tuning.job import TrialResult
+from schemas.arrow import check_schema_version, trials_schema
+
+JOINT = "__joint__"
+"""Sequence name of a joint study (one objective over several sequences)."""
+
+
+def trials_path(out_dir: str | Path, algorithm: str, sequence: str) -> Path:
+    """Path of a study's trials table."""
+    return Path(out_dir) / "trials" / f"algorithm={algorithm}" / f"sequence={sequence}" / "trials.parquet"
+
+
+def write_trials(path: str | Path, space: ParameterSpace, results: Iterable[TrialResult]) -> None:
+    """Write the finished ``results`` (sorted by trial) as the trials table, atomically."""
+    rows = sorted(results, key=lambda r: r.trial)
+    names = space.names
+    cols: list[pa.Array] = [
+        pa.array([r.trial for r in rows], pa.int32()),
+        pa.array([r.status for r in rows], pa.string()),
+        pa.array([r.error for r in rows], pa.string()),
+        pa.array([r.objective for r in rows], pa.float64()),
+        pa.array([r.wall_time_s for r in rows], pa.float64()),
+        pa.array([r.seed for r in rows], pa.int64()),
+        pa.array([json.dumps({n: r.params[n] for n in names}) for r in rows], pa.string()),
+    ]
+    cols += [pa.array([r.params[n] for r in rows], pa.float64()) for n in names]
+    table = pa.Table.from_arrays(cols, schema=trials_schema(names))
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp)
+
+
+def read_trials(path: str | Path, space: ParameterSpace) -> list[TrialResult]:
+    """Finished trials of an earlier run ([] when there is no table yet).
+
+    SchemaError when the table was written for other parameters (another algorithm version).
+    """
+    path = Path(path)
+    if not path.is_file():
+        return []
+    try:
+        table = pq.read_table(path)
+    except (pa.ArrowInvalid, OSError) as exc:
+        raise InputError(f"{path}: not a readable trials table ({exc}); delete it to start over") from exc
+    check_schema_version(table.schema, str(path))
+    expected = trials_schema(space.names)
+    if table.schema.names != expected.names:
+        raise SchemaError(f"{path}: columns {table.schema.names} do not match the parameters "
+                          f"{space.names}; delete it to start over")
+    d = table.to_pydict()
+    return [TrialResult(trial=d["trial"][i], status=d["status"][i], error=d["error"][i],
+                        objective=d["objective"][i], wall_time_s=d["wall_time_s"][i],
+                        seed=d["seed"][i], params={n: d[f"p_{n}"][i] for n in space.names})
+            for i in range(table.num_rows)]

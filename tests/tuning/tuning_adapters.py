@@ -1,0 +1,113 @@
+"""Small real adapters for the tuner tests (registered nowhere; the tuner loads them as
+``tuning_adapters:<factory>``), and the sequence writer they run on.
+
+``drift``: dead reckoning over the ground-truth motion with a parameter-controlled error: each
+frame-to-frame translation is scaled by ``1 + 0.1 (bias - 0.2) + 0.05 ln(gain)`` and the heading
+turns by ``0.002 (window - 4)`` rad a frame, so the RTE is a real function of the parameters
+(smallest near bias=0.2, gain=1, window=4). It implements the Adapter protocol honestly on
+sequences that carry ground truth.
+``failing``: the same, but when ``bias > threshold`` it fails in one ``mode``: raise, hang
+(blocks every signal, then sleeps: only a kill ends it), nan, lose (drops the last frame),
+jump (a 1 km step).
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import time
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.geometry import inv_se3, rot_z
+from pipeline.odometry.base import ParameterSpace, ParamSpec, Schedule
+from pipeline.sequence import Scan, SequenceInfo, SequenceWriter
+from pipeline.trajectory import Trajectory
+
+SPACE = ParameterSpace((
+    ParamSpec("bias", -1.0, 1.0, 0.5),
+    ParamSpec("gain", 0.25, 4.0, 1.0, log=True),
+    ParamSpec("window", 1, 6, 3, kind="int"),
+))
+
+
+class DriftAdapter:
+    """Dead reckoning on the ground-truth motion with a parameter-controlled drift."""
+
+    name = "drift"
+    space = SPACE
+
+    def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
+        frames, stamps, poses = [], [], []
+        T = np.eye(4)
+        prev = None
+        for i, scan in enumerate(scans):
+            if scan.T_world_lidar is None:
+                raise ValueError("drift needs ground truth")
+            if prev is not None:
+                T = T @ self.step(inv_se3(prev) @ scan.T_world_lidar, schedule.at(i))
+            prev = scan.T_world_lidar
+            frames.append(scan.frame)
+            stamps.append(scan.stamp_ns)
+            poses.append(T.copy())
+        return Trajectory(np.array(frames), np.array(stamps), np.stack(poses))
+
+    @staticmethod
+    def step(dT: np.ndarray, p: dict[str, float]) -> np.ndarray:
+        out = dT.copy()
+        out[:3, 3] *= 1.0 + 0.1 * (p["bias"] - 0.2) + 0.05 * math.log(p["gain"])
+        out[:3, :3] = rot_z(0.002 * (p["window"] - 4.0)) @ out[:3, :3]
+        return out
+
+
+class FailingAdapter(DriftAdapter):
+    """DriftAdapter that fails in ``mode`` whenever bias > ``threshold``."""
+
+    name = "failing"
+
+    def __init__(self, mode: str, threshold: float = 0.0) -> None:
+        self.mode = mode
+        self.threshold = threshold
+
+    def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
+        if schedule.at(0)["bias"] <= self.threshold:
+            return super().run(scans, schedule)
+        if self.mode == "raise":
+            raise RuntimeError("odometry diverged on purpose")
+        if self.mode == "hang":
+            signal.pthread_sigmask(signal.SIG_BLOCK, set(signal.valid_signals()) - {signal.SIGKILL})
+            while True:
+                time.sleep(60)
+        traj = super().run(scans, schedule)
+        if self.mode == "nan":
+            traj.T_world_lidar[3, 0, 3] = np.nan
+        elif self.mode == "lose":
+            return Trajectory(traj.frames[:-1], traj.stamps_ns[:-1], traj.T_world_lidar[:-1])
+        elif self.mode == "jump":
+            traj.T_world_lidar[5:, 0, 3] += 1000.0
+        return traj
+
+
+def drift() -> DriftAdapter:
+    return DriftAdapter()
+
+
+def failing(mode: str, threshold: float = 0.0) -> FailingAdapter:
+    return FailingAdapter(mode, threshold)
+
+
+def write_sequence(path: Path, n_frames: int = 30, step_m: float = 1.0, yaw_rate: float = 0.02,
+                   seed: int = 0) -> Path:
+    """A small sequence MCAP: 64 random points a scan, ground truth along a gentle curve."""
+    rng = np.random.default_rng(seed)
+    with SequenceWriter(path, SequenceInfo(name=path.stem, sensor="test", source="tests")) as w:
+        T = np.eye(4)
+        for k in range(n_frames):
+            w.add(k * 100_000_000, rng.uniform(-10, 10, (64, 4)).astype(np.float32), T.copy())
+            dT = np.eye(4)
+            dT[:3, :3] = rot_z(yaw_rate)
+            dT[0, 3] = step_m
+            T = T @ dT
+    return path
