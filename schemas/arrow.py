@@ -51,4 +51,34 @@ def check_schema_version(schema: pa.Schema, what: str) -> None:
     meta = schema.metadata or {}
     got = meta.get(b"adaptune.schema_version", b"").decode()
     if got.split(".")[0] != SCHEMA_VERSION.split(".")[0]:
-        raise SchemaError(f"{what}: schema version {got or 'missing'}, this adaptune reads {SCHEMA_VERSION}")
+        raise SchemaError(f"{what}: schema version {got or 'missing'}, "
+                          f"this adaptune reads {SCHEMA_VERSION}")
+
+
+TRIALS_BASE = pa.schema(
+    [pa.field("trial", pa.int32(), nullable=False),
+     pa.field("status", pa.string(), nullable=False),
+     pa.field("error", pa.string(), nullable=False),
+     pa.field("objective", pa.float64(), nullable=False),
+     pa.field("wall_time_s", pa.float64(), nullable=False),
+     pa.field("seed", pa.int64(), nullable=False),
+     pa.field("params_json", pa.string(), nullable=False)],
+    metadata={**_META, b"adaptune.table": b"trials"},
+)
+"""One SMBO study's trials (CONTRACTS.md): these columns plus ``p_<name>`` float64 each."""
+
+TRIAL_STATUSES = ("ok", "failed")
+"""Values of the trials table's ``status`` column."""
+
+
+def trials_schema(param_names: list[str]) -> pa.Schema:
+    """Schema of ``<OUT>/trials/algorithm=<A>/sequence=<S>/trials.parquet`` for these parameters.
+
+    Columns: trial int32, status ('ok' | 'failed'), error ('' when ok), objective float64,
+    wall_time_s float64, seed int64, params_json (JSON object name -> value), then one float64
+    column ``p_<name>`` per parameter in the given order.
+    """
+    s = TRIALS_BASE
+    for name in param_names:
+        s = s.append(pa.field(f"p_{name}", pa.float64(), nullable=False))
+    return s.with_metadata(TRIALS_BASE.metadata)

@@ -31,7 +31,8 @@ def segment_ends(dist_m: F64, length_m: float) -> NDArray[np.int64]:
 def check_pair(gt: F64, est: F64) -> None:
     """Raise InputError unless ``gt`` and ``est`` are finite (N, 4, 4) stacks of equal N."""
     if gt.ndim != 3 or gt.shape[1:] != (4, 4) or est.ndim != 3 or est.shape[1:] != (4, 4):
-        raise InputError(f"poses must be (N, 4, 4), got ground truth {gt.shape}, estimate {est.shape}")
+        raise InputError(f"poses must be (N, 4, 4), got ground truth {gt.shape}, "
+                         f"estimate {est.shape}")
     if len(gt) != len(est):
         raise InputError(f"estimate has {len(est)} poses, ground truth has {len(gt)}")
     if not np.isfinite(est).all():

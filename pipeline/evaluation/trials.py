@@ -1,0 +1,92 @@
+"""The trials output layout of CONTRACTS.md: where trajectories and trials tables live; a reader.
+
+``<OUT>/trajectories/algorithm=<A>/sequence=<S>/trial=<N>/trajectory.parquet`` and
+``<OUT>/trials/algorithm=<A>/sequence=<S>/trials.parquet`` (S = ``__joint__`` for the joint SMBO).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from pipeline.errors import InputError
+from schemas.arrow import TRIAL_STATUSES, TRIALS_BASE, check_schema_version
+
+JOINT_SEQUENCE = "__joint__"
+"""The ``sequence`` of the joint SMBO's trials table (one x for all training sequences)."""
+
+
+def trajectory_path(out_dir: str | Path, algorithm: str, sequence: str, trial: int) -> Path:
+    """Path of one trial's trajectory Parquet file under ``out_dir``."""
+    return (Path(out_dir) / "trajectories" / f"algorithm={algorithm}" / f"sequence={sequence}"
+            / f"trial={trial}" / "trajectory.parquet")
+
+
+def trials_table_path(out_dir: str | Path, algorithm: str, sequence: str) -> Path:
+    """Path of the trials table of one (algorithm, sequence) study under ``out_dir``."""
+    return (Path(out_dir) / "trials" / f"algorithm={algorithm}" / f"sequence={sequence}"
+            / "trials.parquet")
+
+
+def trials_files(out_dir: str | Path) -> list[tuple[str, str, Path]]:
+    """(algorithm, sequence, path) of every trials table under ``out_dir``, sorted."""
+    found = []
+    for path in sorted(Path(out_dir).glob("trials/algorithm=*/sequence=*/trials.parquet")):
+        algorithm = path.parent.parent.name.removeprefix("algorithm=")
+        sequence = path.parent.name.removeprefix("sequence=")
+        found.append((algorithm, sequence, path))
+    return found
+
+
+def read_trials_tables(out_dir: str | Path) -> pa.Table:
+    """Every trials table under ``out_dir`` as one Arrow table.
+
+    Columns: algorithm, sequence (from the hive path), the trials_schema base columns, then the
+    union of all ``p_<name>`` columns (null where an algorithm lacks the parameter).
+    Raises InputError when ``out_dir`` is missing or a file breaks the schema.
+    """
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        raise InputError(f"{out_dir}: no such trials directory")
+    tables = [_read_one(path, algorithm, sequence)
+              for algorithm, sequence, path in trials_files(out_dir)]
+    if not tables:
+        return _empty_trials()
+    merged = pa.concat_tables(tables, promote_options="default")
+    base = ["algorithm", "sequence", *TRIALS_BASE.names]
+    params = sorted(c for c in merged.column_names if c.startswith("p_"))
+    return merged.select(base + params)
+
+
+def _read_one(path: Path, algorithm: str, sequence: str) -> pa.Table:
+    """One trials table with algorithm and sequence columns prepended; validated."""
+    try:
+        table = pq.read_table(path)
+    except (pa.ArrowInvalid, OSError) as exc:
+        raise InputError(f"{path}: not a readable Parquet file ({exc})") from exc
+    check_schema_version(table.schema, str(path))
+    for field in TRIALS_BASE:
+        if field.name not in table.column_names:
+            raise InputError(f"{path}: missing trials column '{field.name}'")
+        if not table.schema.field(field.name).type.equals(field.type):
+            raise InputError(f"{path}: column '{field.name}' is "
+                             f"{table.schema.field(field.name).type}, expected {field.type}")
+    extra = [c for c in table.column_names if c not in TRIALS_BASE.names and not c.startswith("p_")]
+    if extra:
+        raise InputError(f"{path}: unexpected trials columns {extra}")
+    bad = set(table.column("status").to_pylist()) - set(TRIAL_STATUSES)
+    if bad:
+        raise InputError(f"{path}: status must be one of {list(TRIAL_STATUSES)}, got {sorted(bad)}")
+    n = table.num_rows
+    table = table.replace_schema_metadata(None)
+    table = table.add_column(0, "sequence", pa.array([sequence] * n, pa.string()))
+    return table.add_column(0, "algorithm", pa.array([algorithm] * n, pa.string()))
+
+
+def _empty_trials() -> pa.Table:
+    """A trials table without rows and without parameter columns."""
+    schema = pa.schema([pa.field("algorithm", pa.string()), pa.field("sequence", pa.string()),
+                        *[f.with_nullable(True) for f in TRIALS_BASE]])
+    return schema.empty_table()
