@@ -10,6 +10,7 @@ Stamped poses (TUM, or pose / odometry / TF topics) are interpolated to the scan
 from __future__ import annotations
 
 from dataclasses import dataclass
+from decimal import Decimal
 from pathlib import Path
 from typing import Literal
 
@@ -36,8 +37,8 @@ class PoseFile:
     stamps_ns: NDArray[np.int64] | None
 
 
-def _numbers(path: Path) -> list[tuple[int, list[float]]]:
-    """(line number, values) of the non-empty, non-comment lines of a text file."""
+def _numbers(path: Path) -> list[tuple[int, list[float], str]]:
+    """(line number, values, first token) of the non-empty, non-comment lines of a text file."""
     if not path.is_file():
         raise InputError(f"{path}: no such pose file")
     rows = []
@@ -46,7 +47,7 @@ def _numbers(path: Path) -> list[tuple[int, list[float]]]:
         if not text:
             continue
         try:
-            rows.append((k, [float(v) for v in text.split()]))
+            rows.append((k, [float(v) for v in text.split()], text.split()[0]))
         except ValueError:
             raise InputError(
                 f"{path} line {k}: not a list of numbers: {line.strip()[:60]!r}"
@@ -63,12 +64,12 @@ def read_pose_file(path: str | Path, fmt: PoseFormat = "auto") -> PoseFile:
     if fmt == "auto":
         fmt = {12: "kitti", 8: "tum"}.get(len(rows[0][1]), "kitti")
     width = 12 if fmt == "kitti" else 8
-    for k, vals in rows:
+    for k, vals, _ in rows:
         if len(vals) != width:
             raise InputError(
                 f"{path} line {k}: expected {width} numbers ({fmt} pose file), got {len(vals)}"
             )
-    arr = np.array([v for _, v in rows], dtype=np.float64)
+    arr = np.array([v for _, v, _ in rows], dtype=np.float64)
     if not np.isfinite(arr).all():
         k = rows[int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])][0]
         raise InputError(f"{path} line {k}: pose is not finite")
@@ -76,10 +77,15 @@ def read_pose_file(path: str | Path, fmt: PoseFormat = "auto") -> PoseFile:
         T = np.tile(np.eye(4), (len(arr), 1, 1))
         T[:, :3, :] = arr.reshape(-1, 3, 4)
         return PoseFile(path, fmt, T, None)
-    stamps = np.round(arr[:, 0] * 1e9).astype(np.int64)
+    stamps = np.array([_seconds_to_ns(tok) for _, _, tok in rows], np.int64)
     if np.any(np.diff(stamps) <= 0):
         raise InputError(f"{path}: TUM stamps are not strictly increasing")
     return PoseFile(path, fmt, pose_from_xyz_quat(arr[:, 1:4], arr[:, 4:8]), stamps)
+
+
+def _seconds_to_ns(token: str) -> int:
+    """Exact ns of a decimal seconds string (a float64 would lose ~200 ns at epoch times)."""
+    return int((Decimal(token) * 1_000_000_000).to_integral_value())
 
 
 def read_kitti_calib(path: str | Path) -> NDArray[np.float64]:
