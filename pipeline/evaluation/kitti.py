@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -181,3 +183,35 @@ def check_poses(poses: F64, what: str) -> None:
     finite = np.isfinite(poses).reshape(len(poses), -1).all(axis=1)
     if not finite.all():
         raise InputError(f"{what}: non-finite pose at frame {int(np.argmin(finite))}")
+
+
+def evaluate_kitti_files(gt_path: str | Path, est_path: str | Path,
+                         lengths_m: Sequence[float] = LENGTHS_M) -> dict[str, Any]:
+    """The devkit metric of two KITTI pose files (camera frame, as the benchmark ships them).
+
+    Returns {"t_err_pct", "r_err_deg_per_m", "segments", "frames", "per_length": {length:
+    {"t_err_pct", "r_err_deg_per_m", "segments"}}}. InputError names the file when the files
+    disagree in length, hold a non-finite pose, or the path is too short for any segment.
+    """
+    from pipeline.evaluation.posefile import read_kitti_poses
+
+    gt, est = read_kitti_poses(gt_path), read_kitti_poses(est_path)
+    if len(est) != len(gt):
+        raise InputError(f"{est_path}: estimate has {len(est)} poses, "
+                         f"ground truth {gt_path} has {len(gt)}")
+    seg = kitti_errors(gt, est, lengths_m)
+    if not len(seg):
+        total = float(trajectory_distances(gt)[-1])
+        raise InputError(f"{gt_path}: path is {total:.1f} m long, too short for a "
+                         f"{min(lengths_m):g} m segment")
+    per_length = {}
+    for length in lengths_m:
+        m = seg.length_m == float(length)
+        if m.any():
+            per_length[f"{length:g}"] = {
+                "t_err_pct": float(seg.t_err[m].mean() * 100.0),
+                "r_err_deg_per_m": float(np.degrees(seg.r_err[m].mean())),
+                "segments": int(m.sum()),
+            }
+    return {"t_err_pct": seg.t_err_pct, "r_err_deg_per_m": seg.r_err_deg_per_m,
+            "segments": len(seg), "frames": len(gt), "per_length": per_length}

@@ -1,0 +1,327 @@
+"""The results database (results/adaptune.duckdb), built by the ``rte`` stage.
+
+Tables and views follow CONTRACTS.md; their DDL is schemas/tables.sql and schemas/views.sql.
+The per-start-frame RTE (``rte_frames``) and the KITTI devkit segments (``rte_kitti``) are
+computed inside DuckDB over the trajectory Parquet files (read_parquet, hive partitioning) and
+the ``ground_truth`` table: segment ends by an ASOF join on path distance, SE(3) errors by SQL
+arithmetic on the pose columns (schemas/segments.sql). The database is built in a temporary
+file and renamed into place, so a failure never leaves a half database.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pyarrow as pa
+from pydantic import Field, field_validator
+
+from pipeline.config import Section
+from pipeline.errors import InputError
+from pipeline.evaluation.kitti import LENGTHS_M, STEP_FRAMES
+from pipeline.evaluation.trials import read_trials_tables
+from pipeline.geometry import path_distances
+from pipeline.io_utils import atomic_path
+from schemas import read_text
+from schemas.arrow import POSE_COLUMNS
+
+if TYPE_CHECKING:
+    import duckdb
+
+log = logging.getLogger(__name__)
+
+STUDIES = ("trials", "fixed")
+"""Names of the SMBO outputs the database takes (per-sequence SMBO, joint SMBO)."""
+
+
+class RteSection(Section):
+    """params.yaml section ``rte``."""
+
+    length_m: float = Field(25.0, gt=0.0, description="sub-trajectory length L of rte_frames [m]")
+    kitti_lengths_m: tuple[float, ...] = Field(LENGTHS_M, description="devkit segment lengths [m]")
+    kitti_step_frames: int = Field(STEP_FRAMES, ge=1, description="devkit start-frame step")
+
+    @field_validator("kitti_lengths_m")
+    @classmethod
+    def _positive_lengths(cls, v: tuple[float, ...]) -> tuple[float, ...]:
+        if any(x <= 0 for x in v):
+            raise ValueError(f"kitti_lengths_m must all be > 0, got {list(v)}")
+        return v
+
+
+@dataclass
+class DatabaseSummary:
+    """What ``build_database`` put into the database, and how long each step took [s]."""
+
+    sequences: int = 0
+    trials: int = 0
+    trajectories: int = 0
+    rte_frames: int = 0
+    rte_kitti: int = 0
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+
+def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapping[str, Path],
+                   settings: RteSection, descriptors: Path | None = None,
+                   environment: Path | None = None) -> DatabaseSummary:
+    """Build the results database at ``db_path`` atomically.
+
+    sequences_dir: data/sequences (``*.mcap`` and optionally index.json with the splits);
+    studies: study name ('trials' | 'fixed') -> SMBO output folder (CONTRACTS.md layout);
+    descriptors / environment: the descriptor Parquet files, or None for empty tables.
+    """
+    import duckdb
+
+    unknown = sorted(set(studies) - set(STUDIES))
+    if unknown:
+        raise InputError(f"unknown study names {unknown}; known: {list(STUDIES)}")
+    summary = DatabaseSummary()
+    with atomic_path(db_path) as tmp:
+        tmp.unlink()
+        con = duckdb.connect(str(tmp))
+        try:
+            steps = [
+                ("tables", lambda: apply_sql(con, "tables.sql")),
+                ("sequences", lambda: load_sequences(con, Path(sequences_dir))),
+                ("trials", lambda: load_trials(con, studies)),
+                ("trajectories", lambda: load_trajectories(con, studies)),
+                ("rte_frames", lambda: score_frames(con, settings.length_m)),
+                ("rte_kitti", lambda: score_kitti(con, settings.kitti_lengths_m,
+                                                  settings.kitti_step_frames)),
+                ("summary", lambda: apply_sql(con, "summary.sql")),
+                ("descriptors", lambda: load_frame_table(con, "descriptors", descriptors)),
+                ("environment", lambda: load_frame_table(con, "environment", environment)),
+                ("views", lambda: apply_sql(con, "views.sql")),
+            ]
+            for name, step in steps:
+                t0 = time.perf_counter()
+                step()
+                summary.timings_s[name] = time.perf_counter() - t0
+            count_rows(con, summary)
+            con.execute("DROP TABLE IF EXISTS est; CHECKPOINT")
+        finally:
+            con.close()
+            Path(f"{tmp}.wal").unlink(missing_ok=True)
+    return summary
+
+
+def apply_sql(con: duckdb.DuckDBPyConnection, name: str) -> None:
+    """Run the statements of schemas/<name>."""
+    con.execute(read_text(name))
+
+
+def sql_literal(text: str) -> str:
+    """``text`` as a SQL string literal."""
+    return "'" + text.replace("'", "''") + "'"
+
+
+# ---------------------------------------------------------------------------- sequences
+
+
+def load_sequences(con: duckdb.DuckDBPyConnection, sequences_dir: Path) -> None:
+    """Fill sequences, frame_labels and ground_truth from every ``*.mcap`` in ``sequences_dir``."""
+    from pipeline.sequence import SequenceReader
+
+    if not sequences_dir.is_dir():
+        raise InputError(f"{sequences_dir}: no such sequences directory")
+    splits = read_splits(sequences_dir / "index.json")
+    paths = sorted(sequences_dir.glob("*.mcap"))
+    if not paths:
+        log.warning("%s: no sequence MCAP files", sequences_dir)
+    for path in paths:
+        name = path.stem
+        with SequenceReader(path) as reader:
+            info, stamps_ns, gt = reader.info, reader.stamps_ns, reader.ground_truth()
+        labels = [[x.start, x.end, x.label] for x in info.labels]
+        con.execute("INSERT INTO sequences VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    [name, str(path), len(stamps_ns), info.sensor, info.source,
+                     splits.get(name), json.dumps(labels)])
+        frames = np.arange(len(stamps_ns), dtype=np.int32)
+        label_rows = [(name, int(f), lab) for a, b, lab in labels
+                      for f in frames[(frames >= a) & (frames <= b)]]
+        if label_rows:
+            con.executemany("INSERT OR REPLACE INTO frame_labels VALUES (?, ?, ?)", label_rows)
+        if gt is None:
+            log.warning("%s: no ground truth; its trials cannot be scored", path)
+            continue
+        insert_arrow(con, "ground_truth", ground_truth_table(name, stamps_ns, gt))
+
+
+def read_splits(index_path: Path) -> dict[str, str]:
+    """Sequence name -> split from data/sequences/index.json ({} when there is none)."""
+    if not index_path.is_file():
+        return {}
+    try:
+        data = json.loads(index_path.read_text(encoding="utf-8"))
+        return {str(n): str(split) for split, names in data.items() for n in names}
+    except (json.JSONDecodeError, AttributeError, TypeError) as exc:
+        raise InputError(f"{index_path}: expected {{split: [sequence, ...]}} ({exc})") from None
+
+
+def ground_truth_table(sequence: str, stamps_ns: np.ndarray, gt: np.ndarray) -> pa.Table:
+    """Arrow rows of the ground_truth table for one sequence."""
+    flat = gt[:, :3, :].reshape(-1, 12)
+    cols: dict[str, Any] = {
+        "sequence": pa.array([sequence] * len(gt), pa.string()),
+        "frame": pa.array(np.arange(len(gt), dtype=np.int32)),
+        "stamp_ns": pa.array(np.asarray(stamps_ns, np.int64)),
+        "dist_m": pa.array(path_distances(gt)),
+    }
+    cols.update({c: pa.array(flat[:, i]) for i, c in enumerate(POSE_COLUMNS)})
+    return pa.table(cols)
+
+
+def insert_arrow(con: duckdb.DuckDBPyConnection, table: str, rows: pa.Table) -> None:
+    """INSERT the Arrow table ``rows`` into ``table`` by column name."""
+    con.register("arrow_rows", rows)
+    try:
+        con.execute(f"INSERT INTO {table} BY NAME SELECT * FROM arrow_rows")
+    finally:
+        con.unregister("arrow_rows")
+
+
+# ------------------------------------------------------------------------------- trials
+
+
+def load_trials(con: duckdb.DuckDBPyConnection, studies: Mapping[str, Path]) -> None:
+    """Fill ``trials`` from every study's trials tables; add p_<name> and summary columns."""
+    tables = {study: read_trials_tables(out) for study, out in studies.items()}
+    params = sorted({c for t in tables.values() for c in t.column_names if c.startswith("p_")})
+    for name in params:
+        con.execute(f'ALTER TABLE trials ADD COLUMN "{name}" DOUBLE')
+    con.execute("ALTER TABLE trials ADD COLUMN mean_rte_pct DOUBLE")
+    con.execute("ALTER TABLE trials ADD COLUMN rte_frames INTEGER DEFAULT 0")
+    for study, table in tables.items():
+        if table.num_rows:
+            study_col = pa.array([study] * table.num_rows, pa.string())
+            insert_arrow(con, "trials", table.add_column(0, "study", study_col))
+
+
+# ------------------------------------------------------------------------- trajectories
+
+
+def load_trajectories(con: duckdb.DuckDBPyConnection, studies: Mapping[str, Path]) -> None:
+    """Temporary table ``est`` of every trajectory of every study, validated against the data."""
+    parts = []
+    for study, out in studies.items():
+        traj_dir = Path(out) / "trajectories"
+        pattern = "algorithm=*/sequence=*/trial=*/trajectory.parquet"
+        if not any(traj_dir.glob(pattern)):
+            log.warning("%s: no trajectories", traj_dir)
+            continue
+        glob = sql_literal(str(traj_dir / "**" / "*.parquet"))
+        parts.append(
+            f"SELECT {sql_literal(study)} AS study, algorithm, sequence, trial, frame, "
+            f"{', '.join(POSE_COLUMNS)}, filename "
+            f"FROM read_parquet({glob}, hive_partitioning = true, filename = true, "
+            "hive_types = {'algorithm': VARCHAR, 'sequence': VARCHAR, 'trial': INTEGER})")
+    if not parts:
+        cols = ", ".join(f"{c} DOUBLE" for c in POSE_COLUMNS)
+        con.execute(f"CREATE TEMP TABLE est (study VARCHAR, algorithm VARCHAR, sequence VARCHAR, "
+                    f"trial INTEGER, frame INTEGER, {cols}, filename VARCHAR)")
+        return
+    import duckdb
+
+    try:
+        con.execute("CREATE TEMP TABLE est AS " + " UNION ALL ".join(parts))
+    except duckdb.Error as exc:
+        raise InputError(f"trajectories: cannot read ({first_line(exc)})") from None
+    check_trajectories(con)
+
+
+def check_trajectories(con: duckdb.DuckDBPyConnection) -> None:
+    """Raise InputError naming the first trajectory file that does not fit its sequence."""
+    finite = " AND ".join(f"isfinite({c})" for c in POSE_COLUMNS)
+    bad = con.execute(f"""
+        SELECT any_value(e.filename), e.sequence, any_value(s.frames), count(*),
+               count(DISTINCT e.frame), min(e.frame), max(e.frame), bool_and({finite})
+        FROM est AS e LEFT JOIN sequences AS s USING (sequence)
+        GROUP BY e.study, e.algorithm, e.sequence, e.trial
+        HAVING any_value(s.frames) IS NULL OR count(*) <> any_value(s.frames)
+            OR count(DISTINCT e.frame) <> count(*) OR min(e.frame) <> 0
+            OR NOT bool_and({finite})
+        LIMIT 1""").fetchone()
+    if bad is None:
+        return
+    path, sequence, frames, n, distinct, _, _, all_finite = bad
+    if frames is None:
+        raise InputError(f"{path}: sequence '{sequence}' is not in the sequences directory")
+    if not all_finite:
+        raise InputError(f"{path}: trajectory has non-finite poses")
+    if n != frames:
+        raise InputError(f"{path}: trajectory has {n} poses, "
+                         f"sequence '{sequence}' has {frames} frames")
+    raise InputError(f"{path}: trajectory frames are not 0..{frames - 1} "
+                     f"({distinct} distinct of {n})")
+
+
+# -------------------------------------------------------------------------------- scores
+
+
+def score_frames(con: duckdb.DuckDBPyConnection, length_m: float) -> None:
+    """Fill ``rte_frames``: the segment of ``length_m`` metres from every frame of every trial."""
+    con.execute("CREATE OR REPLACE TEMP TABLE seg_starts AS "
+                "SELECT sequence, frame, ?::DOUBLE AS length_m FROM ground_truth", [length_m])
+    con.execute(f"""
+        INSERT INTO rte_frames
+        SELECT study, algorithm, sequence, trial, frame, end_frame, length_m,
+               t_err * 100.0, degrees(r_err)
+        FROM ({read_text("segments.sql")})
+        ORDER BY study, algorithm, sequence, trial, frame""")
+
+
+def score_kitti(con: duckdb.DuckDBPyConnection, lengths_m: tuple[float, ...],
+                step_frames: int) -> None:
+    """Fill ``rte_kitti``: the devkit segments (every ``step_frames`` frames, every length)."""
+    if not lengths_m:
+        return
+    con.execute("CREATE OR REPLACE TEMP TABLE seg_starts AS "
+                "SELECT sequence, frame, unnest(?::DOUBLE[]) AS length_m FROM ground_truth "
+                "WHERE frame % ? = 0", [list(lengths_m), step_frames])
+    con.execute(f"""
+        INSERT INTO rte_kitti
+        SELECT study, algorithm, sequence, trial, frame, end_frame, length_m, t_err, r_err
+        FROM ({read_text("segments.sql")})
+        ORDER BY study, algorithm, sequence, trial, frame, length_m""")
+
+
+# ------------------------------------------------------------------- descriptor tables
+
+
+def load_frame_table(con: duckdb.DuckDBPyConnection, table: str, path: Path | None) -> None:
+    """Fill ``descriptors`` or ``environment`` from its Parquet file (left empty when None)."""
+    import duckdb
+
+    if path is None:
+        return
+    if not Path(path).is_file():
+        raise InputError(f"{path}: no such {table} file")
+    columns = [r[0] for r in con.execute(f"DESCRIBE {table}").fetchall()]
+    try:
+        con.execute(f"INSERT INTO {table} SELECT {', '.join(columns)} "
+                    f"FROM read_parquet({sql_literal(str(path))})")
+    except duckdb.Error as exc:
+        raise InputError(f"{path}: not a valid {table} table ({first_line(exc)})") from None
+
+
+def count_rows(con: duckdb.DuckDBPyConnection, summary: DatabaseSummary) -> None:
+    """Row counts of the main tables into ``summary``."""
+    one = lambda sql: int(con.execute(sql).fetchone()[0])  # type: ignore[index]  # noqa: E731
+    summary.sequences = one("SELECT count(*) FROM sequences")
+    summary.trials = one("SELECT count(*) FROM trials")
+    summary.trajectories = one("SELECT count(*) FROM (SELECT DISTINCT study, algorithm, "
+                               "sequence, trial FROM est)")
+    summary.rte_frames = one("SELECT count(*) FROM rte_frames")
+    summary.rte_kitti = one("SELECT count(*) FROM rte_kitti")
+
+
+def first_line(exc: BaseException) -> str:
+    """The first line of an exception message."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__

@@ -1,0 +1,99 @@
+-- adaptune results database (results/adaptune.duckdb): tables. Built by the `rte` stage
+-- (pipeline.evaluation.store); CONTRACTS.md gives the layout. `study` names the SMBO output a
+-- row comes from ('trials' = per-sequence SMBO, 'fixed' = joint SMBO), so that the two studies'
+-- trial numbers never collide.
+
+CREATE TABLE schema_info (
+    name VARCHAR PRIMARY KEY,       -- 'schema_version' or the .sql file that was applied
+    version VARCHAR NOT NULL
+);
+INSERT INTO schema_info VALUES ('schema_version', '1.0'), ('tables.sql', '1.0');
+
+CREATE TABLE sequences (
+    sequence VARCHAR PRIMARY KEY,   -- file stem of data/sequences/<sequence>.mcap
+    path VARCHAR NOT NULL,
+    frames INTEGER NOT NULL,
+    sensor VARCHAR,
+    source VARCHAR,
+    split VARCHAR,                  -- 'train' | 'validation' | ... from index.json; NULL if unlisted
+    labels JSON                     -- [[first_frame, last_frame, label], ...]
+);
+
+CREATE TABLE frame_labels (         -- environment label per frame, where known
+    sequence VARCHAR NOT NULL,
+    frame INTEGER NOT NULL,
+    label VARCHAR NOT NULL,
+    PRIMARY KEY (sequence, frame)
+);
+
+CREATE TABLE ground_truth (         -- T_world_lidar per frame, row-major 3x4; dist_m = path length
+    sequence VARCHAR NOT NULL,
+    frame INTEGER NOT NULL,
+    stamp_ns BIGINT NOT NULL,
+    dist_m DOUBLE NOT NULL,
+    T_00 DOUBLE, T_01 DOUBLE, T_02 DOUBLE, T_03 DOUBLE, T_10 DOUBLE, T_11 DOUBLE, T_12 DOUBLE, T_13 DOUBLE, T_20 DOUBLE, T_21 DOUBLE, T_22 DOUBLE, T_23 DOUBLE,
+    PRIMARY KEY (sequence, frame)
+);
+
+-- One row per trial. pipeline.evaluation.store appends one `p_<name> DOUBLE` column per
+-- parameter (union over all algorithms; NULL where an algorithm lacks it), then the summary
+-- columns mean_rte_pct DOUBLE (mean of rte_frames.t_err_pct) and rte_frames INTEGER (their count).
+-- For the joint SMBO (sequence = '__joint__') the summary pools the frames of all sequences.
+CREATE TABLE trials (
+    study VARCHAR NOT NULL,
+    algorithm VARCHAR NOT NULL,
+    sequence VARCHAR NOT NULL,
+    trial INTEGER NOT NULL,
+    status VARCHAR NOT NULL,        -- 'ok' | 'failed'
+    error VARCHAR NOT NULL,         -- '' when ok
+    objective DOUBLE,               -- the SMBO objective: mean RTE [%] or the failure penalty
+    wall_time_s DOUBLE,
+    seed BIGINT,
+    params_json VARCHAR,            -- JSON object name -> value
+    PRIMARY KEY (study, algorithm, sequence, trial)
+);
+
+CREATE TABLE rte_frames (           -- per-start-frame RTE (the paper's y_ij); frames with a segment
+    study VARCHAR NOT NULL,
+    algorithm VARCHAR NOT NULL,
+    sequence VARCHAR NOT NULL,
+    trial INTEGER NOT NULL,
+    frame INTEGER NOT NULL,         -- first frame of the segment
+    end_frame INTEGER NOT NULL,     -- first frame whose path distance > dist(frame) + length_m
+    length_m DOUBLE NOT NULL,
+    t_err_pct DOUBLE NOT NULL,      -- |E.t| / length_m * 100, E = inv(dEst) dGT
+    r_err_deg_per_m DOUBLE NOT NULL -- angle(E.R) / length_m in degrees per metre
+);
+
+CREATE TABLE rte_kitti (            -- KITTI devkit segments (start every 10 frames, 100..800 m)
+    study VARCHAR NOT NULL,
+    algorithm VARCHAR NOT NULL,
+    sequence VARCHAR NOT NULL,
+    trial INTEGER NOT NULL,
+    first_frame INTEGER NOT NULL,
+    last_frame INTEGER NOT NULL,
+    length_m DOUBLE NOT NULL,
+    t_err DOUBLE NOT NULL,          -- devkit units: |E.t| / length (fraction; x100 for %)
+    r_err DOUBLE NOT NULL           -- devkit units: angle(E.R) / length [rad/m]
+);
+
+CREATE TABLE descriptors (          -- from data/descriptors.parquet (schemas.arrow.DESCRIPTORS)
+    sequence VARCHAR NOT NULL,
+    frame INTEGER NOT NULL,
+    stamp_ns BIGINT NOT NULL,
+    d0 FLOAT, d1 FLOAT, d2 FLOAT, d3 FLOAT, d4 FLOAT, d5 FLOAT, d6 FLOAT, d7 FLOAT, d8 FLOAT, d9 FLOAT,
+    d10 FLOAT, d11 FLOAT, d12 FLOAT, d13 FLOAT, d14 FLOAT, d15 FLOAT, d16 FLOAT, d17 FLOAT, d18 FLOAT, d19 FLOAT,
+    d20 FLOAT, d21 FLOAT, d22 FLOAT, d23 FLOAT, d24 FLOAT, d25 FLOAT, d26 FLOAT, d27 FLOAT, d28 FLOAT, d29 FLOAT,
+    d30 FLOAT, d31 FLOAT, d32 FLOAT, d33 FLOAT, d34 FLOAT, d35 FLOAT, d36 FLOAT, d37 FLOAT, d38 FLOAT, d39 FLOAT,
+    d40 FLOAT, d41 FLOAT, d42 FLOAT, d43 FLOAT, d44 FLOAT, d45 FLOAT, d46 FLOAT, d47 FLOAT, d48 FLOAT, d49 FLOAT,
+    d50 FLOAT, d51 FLOAT, d52 FLOAT, d53 FLOAT, d54 FLOAT, d55 FLOAT, d56 FLOAT, d57 FLOAT, d58 FLOAT, d59 FLOAT,
+    d60 FLOAT, d61 FLOAT, d62 FLOAT, d63 FLOAT, d64 FLOAT, d65 FLOAT, d66 FLOAT, d67 FLOAT, d68 FLOAT, d69 FLOAT,
+    d70 FLOAT, d71 FLOAT, d72 FLOAT, d73 FLOAT, d74 FLOAT, d75 FLOAT, d76 FLOAT, d77 FLOAT, d78 FLOAT, d79 FLOAT,
+    d80 FLOAT, d81 FLOAT, d82 FLOAT, d83 FLOAT, d84 FLOAT, d85 FLOAT, d86 FLOAT, d87 FLOAT, d88 FLOAT, d89 FLOAT
+);
+
+CREATE TABLE environment (          -- from data/environment.parquet: PCA of the descriptors
+    sequence VARCHAR NOT NULL,
+    frame INTEGER NOT NULL,
+    e0 FLOAT, e1 FLOAT, e2 FLOAT, e3 FLOAT, e4 FLOAT, e5 FLOAT, e6 FLOAT, e7 FLOAT, e8 FLOAT, e9 FLOAT
+);

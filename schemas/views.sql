@@ -1,0 +1,20 @@
+-- adaptune results database: views. Applied after the tables are filled (tables.sql).
+INSERT INTO schema_info VALUES ('views.sql', '1.0');
+
+-- Training rows of the surrogate: one row per (algorithm, sequence, trial, frame) of the ok
+-- trials of the per-sequence SMBO, with the frame's environment (e0..e9), the trial's
+-- parameters (p_<name>, every algorithm's) and the target y = per-start-frame RTE [%].
+CREATE VIEW surrogate_rows AS
+SELECT r.algorithm, r.sequence, r.trial, r.frame,
+       COLUMNS('^e[0-9]+$'), COLUMNS('^p_'),
+       r.t_err_pct AS y
+FROM rte_frames AS r
+JOIN trials AS t USING (study, algorithm, sequence, trial)
+JOIN environment AS e USING (sequence, frame)
+WHERE r.study = 'trials' AND t.status = 'ok';
+
+-- RTE per environment label: each rte_frames row with the label of its start frame.
+CREATE VIEW rte_labelled AS
+SELECT r.*, l.label
+FROM rte_frames AS r
+LEFT JOIN frame_labels AS l USING (sequence, frame);
