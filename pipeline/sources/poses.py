@@ -141,10 +141,15 @@ def interpolate_poses(
     q = np.asarray(query_ns, np.int64)
     outside = (q < t[0] - MATCH_TOLERANCE_NS) | (q > t[-1] + MATCH_TOLERANCE_NS)
     if outside.any():
+        which = (
+            f"the scan at {q[0] / 1e9:.3f} s lies"
+            if len(q) == 1
+            else f"{int(outside.sum())} of {len(q)} scans (first at "
+            f"{q[outside][0] / 1e9:.3f} s) lie"
+        )
         raise InputError(
-            f"{what}: {int(outside.sum())} of {len(q)} scans lie outside the "
-            f"ground-truth time span [{t[0] / 1e9:.3f}, {t[-1] / 1e9:.3f}] s "
-            f"(first at {q[outside][0] / 1e9:.3f} s)"
+            f"{what}: {which} outside the ground-truth time span "
+            f"[{t[0] / 1e9:.3f}, {t[-1] / 1e9:.3f}] s"
         )
     qc = np.clip(q, t[0], t[-1])
     hi = np.clip(np.searchsorted(t, qc, side="left"), 0, len(t) - 1)

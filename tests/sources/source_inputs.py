@@ -37,7 +37,9 @@ def load_kitti(root: Path, seq: str, n: int | None = None) -> KittiFrames:
     d = root / "sequences" / seq
     bins = sorted((d / "velodyne").glob("*.bin"))[:n]
     times = np.loadtxt(d / "times.txt")[: len(bins)]
-    calib = {k: v for k, _, v in (ln.partition(":") for ln in (d / "calib.txt").read_text().splitlines())}
+    calib = {
+        k: v for k, _, v in (ln.partition(":") for ln in (d / "calib.txt").read_text().splitlines())
+    }
     Tr = np.vstack([np.array(calib["Tr"].split(), float).reshape(3, 4), [0, 0, 0, 1]])
     P = np.loadtxt(root / "poses" / f"{seq}.txt")[: len(bins)].reshape(-1, 3, 4)
     T_world_cam = np.concatenate([P, np.tile([[[0, 0, 0, 1.0]]], (len(P), 1, 1))], axis=1)
@@ -47,13 +49,17 @@ def load_kitti(root: Path, seq: str, n: int | None = None) -> KittiFrames:
 
 # ---------------------------------------------------------------- ROS messages (rosbags)
 
+
 def typestore(ros1: bool) -> Any:
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
     if "tf2_msgs/msg/TFMessage" not in ts.fielddefs:
-        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms",
-                                       "tf2_msgs/msg/TFMessage"))
+        ts.register(
+            get_types_from_msg(
+                "geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"
+            )
+        )
     return ts
 
 
@@ -68,7 +74,10 @@ def header(ts: Any, stamp_ns: int, frame_id: str, ros1: bool) -> Any:
 LAYOUTS = {
     # name: [(field, datatype, offset)], point_step, numpy dtype of a point
     "xyzi32": ([("x", 7, 0), ("y", 7, 4), ("z", 7, 8), ("intensity", 7, 12)], 16),
-    "xyzi64_ring": ([("x", 8, 0), ("y", 8, 8), ("z", 8, 16), ("intensity", 8, 24), ("ring", 4, 32)], 40),
+    "xyzi64_ring": (
+        [("x", 8, 0), ("y", 8, 8), ("z", 8, 16), ("intensity", 8, 24), ("ring", 4, 32)],
+        40,
+    ),
     "x_int16": ([("x", 3, 0), ("y", 7, 4), ("z", 7, 8)], 12),
     "no_z": ([("x", 7, 0), ("y", 7, 4), ("intensity", 7, 8)], 12),
 }
@@ -87,15 +96,26 @@ def cloud_bytes(points: NDArray[np.float32], layout: str) -> bytes:
     return buf.tobytes()
 
 
-def cloud_msg(ts: Any, stamp_ns: int, points: NDArray[np.float32], ros1: bool,
-              layout: str = "xyzi32") -> Any:
+def cloud_msg(
+    ts: Any, stamp_ns: int, points: NDArray[np.float32], ros1: bool, layout: str = "xyzi32"
+) -> Any:
     T = ts.types
     fields, step = LAYOUTS[layout]
-    pf = [T["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=d, count=1) for n, d, o in fields]
+    pf = [
+        T["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=d, count=1) for n, d, o in fields
+    ]
     data = np.frombuffer(cloud_bytes(points, layout), np.uint8)
     return T["sensor_msgs/msg/PointCloud2"](
-        header=header(ts, stamp_ns, "velodyne", ros1), height=1, width=len(points), fields=pf,
-        is_bigendian=False, point_step=step, row_step=step * len(points), data=data, is_dense=False)
+        header=header(ts, stamp_ns, "velodyne", ros1),
+        height=1,
+        width=len(points),
+        fields=pf,
+        is_bigendian=False,
+        point_step=step,
+        row_step=step * len(points),
+        data=data,
+        is_dense=False,
+    )
 
 
 def _pose_msg(ts: Any, T_w: NDArray[np.float64]) -> Any:
@@ -103,44 +123,68 @@ def _pose_msg(ts: Any, T_w: NDArray[np.float64]) -> Any:
     q = rot_to_quat(T_w[:3, :3])
     return T["geometry_msgs/msg/Pose"](
         position=T["geometry_msgs/msg/Point"](x=T_w[0, 3], y=T_w[1, 3], z=T_w[2, 3]),
-        orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]))
+        orientation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]),
+    )
 
 
-def _transform_stamped(ts: Any, stamp_ns: int, T_w: NDArray[np.float64], child: str, ros1: bool) -> Any:
+def _transform_stamped(
+    ts: Any, stamp_ns: int, T_w: NDArray[np.float64], child: str, ros1: bool
+) -> Any:
     T = ts.types
     q = rot_to_quat(T_w[:3, :3])
     tf = T["geometry_msgs/msg/Transform"](
         translation=T["geometry_msgs/msg/Vector3"](x=T_w[0, 3], y=T_w[1, 3], z=T_w[2, 3]),
-        rotation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]))
-    return T["geometry_msgs/msg/TransformStamped"](header=header(ts, stamp_ns, "world", ros1),
-                                                   child_frame_id=child, transform=tf)
+        rotation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]),
+    )
+    return T["geometry_msgs/msg/TransformStamped"](
+        header=header(ts, stamp_ns, "world", ros1), child_frame_id=child, transform=tf
+    )
 
 
-def gt_msg(ts: Any, kind: str, stamp_ns: int, T_w: NDArray[np.float64], ros1: bool) -> tuple[str, Any]:
+def gt_msg(
+    ts: Any, kind: str, stamp_ns: int, T_w: NDArray[np.float64], ros1: bool
+) -> tuple[str, Any]:
     """(msgtype, message) of a ground-truth pose: kind pose | odom | tf."""
     T = ts.types
     if kind == "pose":
         return "geometry_msgs/msg/PoseStamped", T["geometry_msgs/msg/PoseStamped"](
-            header=header(ts, stamp_ns, "world", ros1), pose=_pose_msg(ts, T_w))
+            header=header(ts, stamp_ns, "world", ros1), pose=_pose_msg(ts, T_w)
+        )
     if kind == "odom":
         cov = np.zeros(36)
         return "nav_msgs/msg/Odometry", T["nav_msgs/msg/Odometry"](
-            header=header(ts, stamp_ns, "world", ros1), child_frame_id="velodyne",
+            header=header(ts, stamp_ns, "world", ros1),
+            child_frame_id="velodyne",
             pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=_pose_msg(ts, T_w), covariance=cov),
             twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                twist=T["geometry_msgs/msg/Twist"](linear=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0),
-                                                   angular=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0)),
-                covariance=cov))
+                twist=T["geometry_msgs/msg/Twist"](
+                    linear=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0),
+                    angular=T["geometry_msgs/msg/Vector3"](x=0, y=0, z=0),
+                ),
+                covariance=cov,
+            ),
+        )
     decoy = T_w.copy()
     decoy[:3, 3] += 5.0  # another frame in the same TF message, that must not be taken
-    return "tf2_msgs/msg/TFMessage", T["tf2_msgs/msg/TFMessage"](transforms=[
-        _transform_stamped(ts, stamp_ns, decoy, "base_link", ros1),
-        _transform_stamped(ts, stamp_ns, T_w, "velodyne", ros1)])
+    return "tf2_msgs/msg/TFMessage", T["tf2_msgs/msg/TFMessage"](
+        transforms=[
+            _transform_stamped(ts, stamp_ns, decoy, "base_link", ros1),
+            _transform_stamped(ts, stamp_ns, T_w, "velodyne", ros1),
+        ]
+    )
 
 
-def write_bag(path: Path, kf: KittiFrames, *, ros: int, storage: str = "sqlite3", gt: str | None = "pose",
-              layout: str = "xyzi32", cloud_topic: str = "/velodyne_points",
-              extra_topics: tuple[str, ...] = ()) -> Path:
+def write_bag(
+    path: Path,
+    kf: KittiFrames,
+    *,
+    ros: int,
+    storage: str = "sqlite3",
+    gt: str | None = "pose",
+    layout: str = "xyzi32",
+    cloud_topic: str = "/velodyne_points",
+    extra_topics: tuple[str, ...] = (),
+) -> Path:
     """A real ROS 1 .bag (ros=1) or ROS 2 bag folder (ros=2, sqlite3 | mcap storage) of ``kf``.
 
     Scan k is at BAG_T0_NS + kf.stamps_ns[k]; ground truth (``gt`` pose | odom | tf | None)
@@ -150,15 +194,16 @@ def write_bag(path: Path, kf: KittiFrames, *, ros: int, storage: str = "sqlite3"
     ts = typestore(ros1)
     stamps = BAG_T0_NS + kf.stamps_ns
     if ros1:
-        from rosbags.rosbag1 import Writer as W1
+        from rosbags.rosbag1 import Writer as Writer1
 
-        writer: Any = W1(path)
+        writer: Any = Writer1(path)
         serialize = ts.serialize_ros1
     else:
-        from rosbags.rosbag2 import StoragePlugin, Writer as W2
+        from rosbags.rosbag2 import StoragePlugin
+        from rosbags.rosbag2 import Writer as Writer2
 
         plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
-        writer = W2(path, version=9, storage_plugin=plugin)
+        writer = Writer2(path, version=9, storage_plugin=plugin)
         serialize = ts.serialize_cdr
     with writer:
         pc2 = "sensor_msgs/msg/PointCloud2"
@@ -167,8 +212,9 @@ def write_bag(path: Path, kf: KittiFrames, *, ros: int, storage: str = "sqlite3"
         gt_conn = None
         if gt is not None:
             msgtype = gt_msg(ts, gt, 0, np.eye(4), ros1)[0]
-            gt_conn = writer.add_connection({"pose": "/ground_truth", "odom": "/odom", "tf": "/tf"}[gt],
-                                            msgtype, typestore=ts)
+            gt_conn = writer.add_connection(
+                {"pose": "/ground_truth", "odom": "/odom", "tf": "/tf"}[gt], msgtype, typestore=ts
+            )
         for k, pts in enumerate(kf.points):
             t = int(stamps[k])
             writer.write(conn, t, serialize(cloud_msg(ts, t, pts, ros1, layout), pc2))
@@ -183,12 +229,15 @@ def write_bag(path: Path, kf: KittiFrames, *, ros: int, storage: str = "sqlite3"
 
 # ---------------------------------------------------------------- scan files
 
+
 def write_pcd(path: Path, points: NDArray[np.float32], ascii_data: bool = False) -> None:
     """A PCD v0.7 file with float32 x, y, z, intensity (binary or ascii), written by hand."""
-    head = ("# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity\n"
-            "SIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n"
-            f"WIDTH {len(points)}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(points)}\n"
-            f"DATA {'ascii' if ascii_data else 'binary'}\n")
+    head = (
+        "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity\n"
+        "SIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n"
+        f"WIDTH {len(points)}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(points)}\n"
+        f"DATA {'ascii' if ascii_data else 'binary'}\n"
+    )
     if ascii_data:
         body = "\n".join(" ".join(f"{v:.9g}" for v in row) for row in points).encode() + b"\n"
     else:
@@ -204,5 +253,7 @@ def write_tum(path: Path, stamps_ns: NDArray[np.int64], T: NDArray[np.float64]) 
     lines = ["# timestamp tx ty tz qx qy qz qw"]
     for t, P in zip(stamps_ns, T, strict=True):
         q = rot_to_quat(P[:3, :3])
-        lines.append(f"{t // 10**9}.{t % 10**9:09d} " + " ".join(f"{v:.15g}" for v in [*P[:3, 3], *q]))
+        lines.append(
+            f"{t // 10**9}.{t % 10**9:09d} " + " ".join(f"{v:.15g}" for v in [*P[:3, 3], *q])
+        )
     path.write_text("\n".join(lines) + "\n")
