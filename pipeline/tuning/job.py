@@ -15,6 +15,7 @@ The child writes the trajectory Parquet files (atomically) and sends back a smal
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import multiprocessing
@@ -40,7 +41,7 @@ MAX_ERROR_CHARS = 400
 class TrialJob:
     """Everything a worker needs for one trial (plain data, picklable).
 
-    adapter: a registry name (``ndt``) or ``module:factory`` (a callable ``(**options) -> Adapter``).
+    adapter: a registry name (``ndt``) or ``module:factory`` (``(**options) -> Adapter``).
     algorithm: the name used in output paths (the adapter's ``name``).
     sequences: ((sequence name, MCAP path), ...); more than one for a joint trial.
     """
@@ -61,7 +62,7 @@ class TrialJob:
 
 @dataclass(frozen=True)
 class TrialResult:
-    """Outcome of one trial. objective: mean translational RTE [%] (mean over sequences) or the penalty."""
+    """Outcome of one trial; objective: mean translational RTE [%] (over sequences) or penalty."""
 
     trial: int
     status: str  # 'ok' | 'failed'
@@ -88,7 +89,7 @@ def resolve_adapter(ref: str, options: Mapping[str, Any] | None = None) -> Adapt
 
 
 def trajectory_path(out_dir: str | Path, algorithm: str, sequence: str, trial: int) -> Path:
-    """``<OUT>/trajectories/algorithm=<A>/sequence=<S>/trial=<N>/trajectory.parquet`` (CONTRACTS.md)."""
+    """``<OUT>/trajectories/algorithm=<A>/sequence=<S>/trial=<N>/trajectory.parquet``."""
     return (Path(out_dir) / "trajectories" / f"algorithm={algorithm}" / f"sequence={sequence}"
             / f"trial={trial}" / "trajectory.parquet")
 
@@ -113,7 +114,7 @@ def evaluate_trial(job: TrialJob) -> dict[str, Any]:
     """Run, check, score and write every sequence of ``job``; raises on any failure.
 
     Returns {"objective": mean RTE [%] over sequences, "rte_pct": {sequence: RTE}, "odometry_s"}.
-    ``pipeline.odometry.run_sequence`` checks frames, stamps and finiteness; ``check_jump`` the rest.
+    ``pipeline.odometry.run_sequence`` checks frames, stamps, finiteness; ``check_jump`` jumps.
     """
     from pipeline.evaluation.rte import mean_rte_pct
     from pipeline.odometry import run_sequence
@@ -134,7 +135,8 @@ def evaluate_trial(job: TrialJob) -> dict[str, Any]:
         write_trajectory(trajectory_path(job.out_dir, job.algorithm, name, job.trial), traj, {
             "algorithm": job.algorithm, "sequence": name, "trial": str(job.trial),
             "params_json": json.dumps(job.params, sort_keys=True)})
-    return {"objective": float(np.mean(list(rte.values()))), "rte_pct": rte, "odometry_s": odometry_s}
+    objective = float(np.mean(list(rte.values())))
+    return {"objective": objective, "rte_pct": rte, "odometry_s": odometry_s}
 
 
 def load_ground_truth(path: str | Path) -> NDArray[np.float64]:
@@ -168,10 +170,8 @@ def _context(job: TrialJob) -> multiprocessing.context.BaseContext:
     ctx = multiprocessing.get_context("forkserver")
     if not _PRELOADED:
         modules = ["pipeline.tuning.job", "pipeline.evaluation.rte", "pipeline.odometry"]
-        try:
+        with contextlib.suppress(Exception):  # the child reports the error as a failed trial
             modules.append(type(resolve_adapter(job.adapter, job.adapter_options)).__module__)
-        except Exception:
-            pass
         ctx.set_forkserver_preload(modules)  # type: ignore[attr-defined]
         _PRELOADED.update(modules)
     return ctx
@@ -190,8 +190,8 @@ def _child_main(job: TrialJob, conn: Any) -> None:
 def _run_in_child(job: TrialJob, limit_s: float) -> dict[str, Any]:
     """``evaluate_trial(job)`` in a child process, killed after ``limit_s`` seconds."""
     if multiprocessing.current_process().daemon:
-        raise OdometryError("cannot enforce the time limit in a daemonic worker process; start Dask "
-                            "workers with DASK_DISTRIBUTED__WORKER__DAEMON=False")
+        raise OdometryError("cannot enforce the time limit in a daemonic worker process; "
+                            "start Dask workers with DASK_DISTRIBUTED__WORKER__DAEMON=False")
     ctx = _context(job)
     recv, send = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child_main, args=(job, send), name=f"trial-{job.trial}")

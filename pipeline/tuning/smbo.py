@@ -165,7 +165,8 @@ def run_study(study: Study, adapter: Adapter, executor: Executor, out_dir: Path,
             while todo and len(in_flight) < settings.workers:
                 tid = todo.pop(0)
                 params = propose(search, tid)
-                job = make_job(study, adapter, tid, trial_seed(seed, tid), params, out_dir, settings)
+                job = make_job(study, adapter, tid, trial_seed(seed, tid), params, out_dir,
+                               settings)
                 in_flight[executor.submit(run_trial, job)] = tid
             finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
             for fut in sorted(finished, key=in_flight.__getitem__):
@@ -221,7 +222,8 @@ def open_executor(workers: int, dask: str | None = None) -> Iterator[Executor]:
     DASK_DISTRIBUTED__WORKER__DAEMON=False).
     """
     if dask is None:
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        pool = ProcessPoolExecutor(max_workers=workers,
+                                   mp_context=multiprocessing.get_context("spawn"))
         try:
             yield pool
         finally:
@@ -254,8 +256,9 @@ def _dask_client(workers: int, address: str) -> Iterator[Any]:
     try:
         daemonic = [w for w, d in client.run(_is_daemon).items() if d]
         if daemonic:
-            raise ConfigError(f"Dask worker {daemonic[0]} is daemonic and cannot run trials in child "
-                              "processes; start workers with DASK_DISTRIBUTED__WORKER__DAEMON=False")
+            raise ConfigError(f"Dask worker {daemonic[0]} is daemonic and cannot run trials in "
+                              "child processes; start workers with "
+                              "DASK_DISTRIBUTED__WORKER__DAEMON=False")
         yield client
     finally:
         client.close()
@@ -299,3 +302,25 @@ def _result_of(fut: Future[TrialResult], tid: int) -> TrialResult:
     except Exception as exc:
         raise OdometryError(f"trial {tid}: the executor failed ({type(exc).__name__}: {exc}); "
                             "finished trials are saved, run again to resume") from exc
+
+
+def sequences_of_split(folder: str | Path, split: str) -> list[Path]:
+    """The MCAPs of ``split`` in ``folder/index.json`` ({"train": [stem, ...], ...})."""
+    import json
+
+    folder = Path(folder)
+    index = folder / "index.json"
+    try:
+        data = json.loads(index.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"{index}: no such sequence index") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{index}: not valid JSON ({exc})") from None
+    if not isinstance(data, dict) or not isinstance(data.get(split), list) or not data[split]:
+        known = ", ".join(sorted(data)) if isinstance(data, dict) else "none"
+        raise InputError(f"{index}: no sequences in split {split!r} (splits: {known})")
+    paths = [folder / f"{name}.mcap" for name in data[split]]
+    missing = [p for p in paths if not p.is_file()]
+    if missing:
+        raise InputError(f"{index}: split {split!r} lists {missing[0].name}, which does not exist")
+    return paths

@@ -34,7 +34,7 @@ def to_hyperopt(space: ParameterSpace) -> dict[str, Any]:
 
 
 def from_hyperopt_vals(space: ParameterSpace, vals: Mapping[str, Any]) -> Params:
-    """Params from a trial's ``misc.vals`` ({name: [value]} or {name: value}); clipped, ints rounded."""
+    """Params from ``misc.vals`` ({name: [value]} or {name: value}); clipped, ints rounded."""
     out: Params = {}
     for s in space.specs:
         v = vals[s.name]

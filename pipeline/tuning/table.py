@@ -25,7 +25,8 @@ JOINT = "__joint__"
 
 def trials_path(out_dir: str | Path, algorithm: str, sequence: str) -> Path:
     """Path of a study's trials table."""
-    return Path(out_dir) / "trials" / f"algorithm={algorithm}" / f"sequence={sequence}" / "trials.parquet"
+    return (Path(out_dir) / "trials" / f"algorithm={algorithm}" / f"sequence={sequence}"
+            / "trials.parquet")
 
 
 def write_trials(path: str | Path, space: ParameterSpace, results: Iterable[TrialResult]) -> None:
@@ -58,7 +59,8 @@ def read_trials(path: str | Path, space: ParameterSpace) -> list[TrialResult]:
     try:
         table = pq.read_table(path)
     except (pa.ArrowInvalid, OSError) as exc:
-        raise InputError(f"{path}: not a readable trials table ({exc}); delete it to start over") from exc
+        raise InputError(f"{path}: not a readable trials table ({exc}); "
+                         "delete it to start over") from exc
     check_schema_version(table.schema, str(path))
     expected = trials_schema(space.names)
     if table.schema.names != expected.names:

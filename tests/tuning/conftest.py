@@ -11,17 +11,19 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))  # tuning_adapters, also for spawned workers
 
-import tuning_adapters  # noqa: E402
+import tuning_adapters
 
-from pipeline.tuning.smbo import TrialsSection, open_executor  # noqa: E402
+from pipeline.tuning.smbo import TrialsSection, open_executor
 
 
 @pytest.fixture(scope="session")
 def sequences(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     """Two small sequences with ground truth (30 frames, 1 m a frame)."""
     root = tmp_path_factory.mktemp("sequences")
-    return [tuning_adapters.write_sequence(root / "seq_a.mcap", seed=0),
-            tuning_adapters.write_sequence(root / "seq_b.mcap", yaw_rate=-0.05, seed=1)]
+    return [
+        tuning_adapters.write_sequence(root / "seq_a.mcap", seed=0),
+        tuning_adapters.write_sequence(root / "seq_b.mcap", yaw_rate=-0.05, seed=1),
+    ]
 
 
 @pytest.fixture(scope="session")
@@ -33,7 +35,13 @@ def pool() -> Iterator[Executor]:
 
 def settings(**kw: object) -> TrialsSection:
     """Small, fast settings for the drift adapter."""
-    base: dict[str, object] = dict(algorithm="tuning_adapters:drift", iterations=6, workers=1,
-                                   startup_trials=3, length_m=5.0, time_limit_s=20.0)
+    base: dict[str, object] = dict(
+        algorithm="tuning_adapters:drift",
+        iterations=6,
+        workers=1,
+        startup_trials=3,
+        length_m=5.0,
+        time_limit_s=20.0,
+    )
     base.update(kw)
     return TrialsSection(**base)

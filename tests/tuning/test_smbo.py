@@ -29,11 +29,14 @@ def without_time(d: dict[str, list]) -> dict[str, list]:
     return {k: v for k, v in d.items() if k != "wall_time_s"}
 
 
-def test_serial_runs_with_one_seed_are_identical(sequences: list[Path], pool: Executor,
-                                                 tmp_path: Path) -> None:
+def test_serial_runs_with_one_seed_are_identical(
+    sequences: list[Path], pool: Executor, tmp_path: Path
+) -> None:
     s = settings()
-    runs = [run_trials(sequences[:1], tmp_path / f"r{i}", s, seed=seed, progress=False, executor=pool)
-            for i, seed in enumerate((7, 7, 8))]
+    runs = [
+        run_trials(sequences[:1], tmp_path / f"r{i}", s, seed=seed, progress=False, executor=pool)
+        for i, seed in enumerate((7, 7, 8))
+    ]
     a, b, c = (table(tmp_path / f"r{i}", "drift", "seq_a") for i in range(3))
     assert a["trial"] == list(range(6)) and set(a["status"]) == {"ok"}
     assert without_time(a) == without_time(b)
@@ -46,13 +49,24 @@ def test_serial_runs_with_one_seed_are_identical(sequences: list[Path], pool: Ex
         assert trajectory_path(tmp_path / "r0", "drift", "seq_a", tid).is_file()
 
 
-@pytest.mark.parametrize("mode, message", [("raise", "RuntimeError: odometry diverged on purpose"),
-                                           ("nan", "non-finite pose"), ("lose", "poses for 30 frames"),
-                                           ("jump", "implausible jump")])
-def test_failing_adapters_give_failed_trials(sequences: list[Path], pool: Executor, tmp_path: Path,
-                                             mode: str, message: str) -> None:
-    s = settings(algorithm="tuning_adapters:failing", adapter_options={"mode": mode, "threshold": 0.0},
-                 iterations=8, penalty_pct=77.0)
+@pytest.mark.parametrize(
+    "mode, message",
+    [
+        ("raise", "RuntimeError: odometry diverged on purpose"),
+        ("nan", "non-finite pose"),
+        ("lose", "poses for 30 frames"),
+        ("jump", "implausible jump"),
+    ],
+)
+def test_failing_adapters_give_failed_trials(
+    sequences: list[Path], pool: Executor, tmp_path: Path, mode: str, message: str
+) -> None:
+    s = settings(
+        algorithm="tuning_adapters:failing",
+        adapter_options={"mode": mode, "threshold": 0.0},
+        iterations=8,
+        penalty_pct=77.0,
+    )
     (summary,) = run_trials(sequences[:1], tmp_path, s, seed=1, progress=False, executor=pool)
     t = table(tmp_path, "failing", "seq_a")
     failed = [i for i, st in enumerate(t["status"]) if st == "failed"]
@@ -66,10 +80,16 @@ def test_failing_adapters_give_failed_trials(sequences: list[Path], pool: Execut
         assert trajectory_path(tmp_path, "failing", "seq_a", i).is_file() != bad
 
 
-def test_hanging_adapter_is_killed_at_the_time_limit(sequences: list[Path], pool: Executor,
-                                                     tmp_path: Path) -> None:
-    s = settings(algorithm="tuning_adapters:failing", adapter_options={"mode": "hang", "threshold": 0.0},
-                 iterations=3, time_limit_s=1.0, workers=2)
+def test_hanging_adapter_is_killed_at_the_time_limit(
+    sequences: list[Path], pool: Executor, tmp_path: Path
+) -> None:
+    s = settings(
+        algorithm="tuning_adapters:failing",
+        adapter_options={"mode": "hang", "threshold": 0.0},
+        iterations=3,
+        time_limit_s=1.0,
+        workers=2,
+    )
     (summary,) = run_trials(sequences[:1], tmp_path, s, seed=4, progress=False, executor=pool)
     t = table(tmp_path, "failing", "seq_a")
     assert t["trial"] == [0, 1, 2]
@@ -81,8 +101,9 @@ class Interrupt(KeyboardInterrupt):
     pass
 
 
-def test_killed_run_resumes_to_exactly_n_trials(sequences: list[Path], pool: Executor,
-                                                tmp_path: Path) -> None:
+def test_killed_run_resumes_to_exactly_n_trials(
+    sequences: list[Path], pool: Executor, tmp_path: Path
+) -> None:
     s = settings(iterations=7)
     seen: list[int] = []
 
@@ -92,38 +113,76 @@ def test_killed_run_resumes_to_exactly_n_trials(sequences: list[Path], pool: Exe
             raise Interrupt
 
     with pytest.raises(Interrupt):
-        run_trials(sequences[:1], tmp_path / "killed", s, seed=5, progress=False,
-                   on_trial=kill_after_three, executor=pool)
+        run_trials(
+            sequences[:1],
+            tmp_path / "killed",
+            s,
+            seed=5,
+            progress=False,
+            on_trial=kill_after_three,
+            executor=pool,
+        )
     assert table(tmp_path / "killed", "drift", "seq_a")["trial"] == [0, 1, 2]
     seen.clear()
-    (summary,) = run_trials(sequences[:1], tmp_path / "killed", s, seed=5, progress=False,
-                            on_trial=lambda st, r: seen.append(r.trial), executor=pool)
+    (summary,) = run_trials(
+        sequences[:1],
+        tmp_path / "killed",
+        s,
+        seed=5,
+        progress=False,
+        on_trial=lambda st, r: seen.append(r.trial),
+        executor=pool,
+    )
     assert seen == [3, 4, 5, 6] and summary.ran == 4 and summary.trials == 7
     resumed = table(tmp_path / "killed", "drift", "seq_a")
     assert resumed["trial"] == list(range(7))
     run_trials(sequences[:1], tmp_path / "whole", s, seed=5, progress=False, executor=pool)
     assert without_time(resumed) == without_time(table(tmp_path / "whole", "drift", "seq_a"))
     # a finished study runs nothing more
-    (again,) = run_trials(sequences[:1], tmp_path / "killed", s, seed=5, progress=False, executor=pool)
+    (again,) = run_trials(
+        sequences[:1], tmp_path / "killed", s, seed=5, progress=False, executor=pool
+    )
     assert again.ran == 0 and again.trials == 7
 
 
 def test_parallel_trials_in_flight(sequences: list[Path], pool: Executor, tmp_path: Path) -> None:
-    (summary,) = run_trials(sequences[:1], tmp_path, settings(iterations=8, workers=2), seed=2,
-                            progress=False, executor=pool)
+    (summary,) = run_trials(
+        sequences[:1],
+        tmp_path,
+        settings(iterations=8, workers=2),
+        seed=2,
+        progress=False,
+        executor=pool,
+    )
     t = table(tmp_path, "drift", "seq_a")
     assert t["trial"] == list(range(8)) and set(t["status"]) == {"ok"}
-    assert len(set(t["params_json"])) == 8
+    assert len(set(t["params_json"])) == 8 and summary.trials == 8
 
 
-def test_dask_local_cluster_gives_the_same_number_of_valid_trials(sequences: list[Path], pool: Executor,
-                                                                  tmp_path: Path) -> None:
-    s = settings(algorithm="tuning_adapters:failing", adapter_options={"mode": "raise", "threshold": 0.3},
-                 iterations=6, workers=2)
-    run_trials(sequences[:1], tmp_path / "pool", s.model_copy(update={"workers": 1}), seed=3,
-               progress=False, executor=pool)
-    (summary,) = run_trials(sequences[:1], tmp_path / "dask", s.model_copy(update={"dask": "local"}),
-                            seed=3, progress=False)
+def test_dask_local_cluster_gives_the_same_number_of_valid_trials(
+    sequences: list[Path], pool: Executor, tmp_path: Path
+) -> None:
+    s = settings(
+        algorithm="tuning_adapters:failing",
+        adapter_options={"mode": "raise", "threshold": 0.3},
+        iterations=6,
+        workers=2,
+    )
+    run_trials(
+        sequences[:1],
+        tmp_path / "pool",
+        s.model_copy(update={"workers": 1}),
+        seed=3,
+        progress=False,
+        executor=pool,
+    )
+    (summary,) = run_trials(
+        sequences[:1],
+        tmp_path / "dask",
+        s.model_copy(update={"dask": "local"}),
+        seed=3,
+        progress=False,
+    )
     ref = table(tmp_path / "pool", "failing", "seq_a")
     got = table(tmp_path / "dask", "failing", "seq_a")
     assert got["trial"] == list(range(6)) and summary.trials == 6
@@ -134,11 +193,13 @@ def test_dask_local_cluster_gives_the_same_number_of_valid_trials(sequences: lis
     assert got["p_bias"][:3] == ref["p_bias"][:3]  # baseline + random start-up: same seeds
 
 
-def test_joint_objective_is_the_mean_over_sequences(sequences: list[Path], pool: Executor,
-                                                    tmp_path: Path) -> None:
+def test_joint_objective_is_the_mean_over_sequences(
+    sequences: list[Path], pool: Executor, tmp_path: Path
+) -> None:
     s = settings(iterations=3)
-    (joint,) = run_trials(sequences, tmp_path / "fixed", s, seed=9, joint=True, progress=False,
-                          executor=pool)
+    (joint,) = run_trials(
+        sequences, tmp_path / "fixed", s, seed=9, joint=True, progress=False, executor=pool
+    )
     assert joint.sequence == "__joint__"
     t = table(tmp_path / "fixed", "drift", "__joint__")
     for tid, objective in zip(t["trial"], t["objective"], strict=True):
@@ -151,8 +212,14 @@ def test_joint_objective_is_the_mean_over_sequences(sequences: list[Path], pool:
         assert per_seq[0] != pytest.approx(per_seq[1])
         assert objective == pytest.approx(np.mean(per_seq), rel=1e-12)
     # the baseline of the joint study is the mean of the per-sequence baselines
-    run_trials(sequences, tmp_path / "per", s.model_copy(update={"iterations": 1}), seed=9,
-               progress=False, executor=pool)
+    run_trials(
+        sequences,
+        tmp_path / "per",
+        s.model_copy(update={"iterations": 1}),
+        seed=9,
+        progress=False,
+        executor=pool,
+    )
     base = [table(tmp_path / "per", "drift", seq.stem)["objective"][0] for seq in sequences]
     assert t["objective"][0] == pytest.approx(np.mean(base), rel=1e-12)
 
@@ -161,7 +228,7 @@ def test_settings_rules() -> None:
     from pipeline.config import validate_section
     from pipeline.errors import ConfigError
 
-    with pytest.raises(ConfigError, match="trials.iterations"):
+    with pytest.raises(ConfigError, match=r"trials\.iterations"):
         validate_section(TrialsSection, "trials", {"iterations": 0})
     with pytest.raises(ConfigError, match="dask must be 'local' or a scheduler address"):
         validate_section(TrialsSection, "trials", {"dask": "somewhere"})

@@ -22,8 +22,9 @@ def test_space_round_trip() -> None:
     assert set(hp_space) == set(space.names)
     params = space.defaults()
     assert from_hyperopt_vals(space, to_hyperopt_vals(space, params)) == params
-    assert from_hyperopt_vals(space, {"bias": [2.0], "gain": 0.1, "window": [3.4], "k": [70.0]}) == {
-        "bias": 1.0, "gain": 0.25, "window": 3.0, "k": 64.0}
+    assert from_hyperopt_vals(
+        space, {"bias": [2.0], "gain": 0.1, "window": [3.4], "k": [70.0]}
+    ) == {"bias": 1.0, "gain": 0.25, "window": 3.0, "k": 64.0}
 
 
 @pytest.mark.parametrize("startup", [1, 50])  # TPE proper, and its random start-up phase

@@ -26,11 +26,13 @@ from pipeline.odometry.base import ParameterSpace, ParamSpec, Schedule
 from pipeline.sequence import Scan, SequenceInfo, SequenceWriter
 from pipeline.trajectory import Trajectory
 
-SPACE = ParameterSpace((
-    ParamSpec("bias", -1.0, 1.0, 0.5),
-    ParamSpec("gain", 0.25, 4.0, 1.0, log=True),
-    ParamSpec("window", 1, 6, 3, kind="int"),
-))
+SPACE = ParameterSpace(
+    (
+        ParamSpec("bias", -1.0, 1.0, 0.5),
+        ParamSpec("gain", 0.25, 4.0, 1.0, log=True),
+        ParamSpec("window", 1, 6, 3, kind="int"),
+    )
+)
 
 
 class DriftAdapter:
@@ -98,8 +100,9 @@ def failing(mode: str, threshold: float = 0.0) -> FailingAdapter:
     return FailingAdapter(mode, threshold)
 
 
-def write_sequence(path: Path, n_frames: int = 30, step_m: float = 1.0, yaw_rate: float = 0.02,
-                   seed: int = 0) -> Path:
+def write_sequence(
+    path: Path, n_frames: int = 30, step_m: float = 1.0, yaw_rate: float = 0.02, seed: int = 0
+) -> Path:
     """A small sequence MCAP: 64 random points a scan, ground truth along a gentle curve."""
     rng = np.random.default_rng(seed)
     with SequenceWriter(path, SequenceInfo(name=path.stem, sensor="test", source="tests")) as w:

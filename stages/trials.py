@@ -1,0 +1,102 @@
+"""``adaptune trials``: SMBO (hyperopt TPE) trials of an odometry algorithm (dvc stages
+``trials`` and, with ``--joint``, ``fixed``).
+
+Sequences are given as MCAP paths, or (DVC form) as ``--sequences DIR`` with the split of
+``DIR/index.json`` (``--split``, default params ``trials.split``). Options override the params
+section ``trials``; the seed defaults to ``base.seed``.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import click
+
+from stages.common import params_option
+
+log = logging.getLogger(__name__)
+
+
+@click.command()
+@click.argument("sequence_paths", nargs=-1, type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Output folder (results/trials, or results/fixed with --joint).",
+)
+@click.option(
+    "--sequences",
+    "sequence_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Sequence folder with index.json (instead of SEQ.mcap paths).",
+)
+@click.option("--split", default=None, help="Split of index.json to use [trials.split].")
+@click.option("--algorithm", default=None, help="Adapter name [trials.algorithm].")
+@click.option("--iterations", type=int, default=None, help="Trials per study [trials.iterations].")
+@click.option("--seed", type=int, default=None, help="Base seed [base.seed].")
+@click.option("--workers", type=int, default=None, help="Trials in flight [trials.workers].")
+@click.option("--dask", "dask", default=None, help="'local' or a scheduler address [trials.dask].")
+@click.option("--length-m", type=float, default=None, help="RTE segment length [trials.length_m].")
+@click.option(
+    "--time-limit-s", type=float, default=None, help="Per sequence run [trials.time_limit_s]."
+)
+@click.option(
+    "--joint", is_flag=True, help="One study over all sequences (the 'fixed' parameters)."
+)
+@params_option
+def trials(
+    sequence_paths: tuple[Path, ...],
+    out_dir: Path,
+    sequence_dir: Path | None,
+    split: str | None,
+    algorithm: str | None,
+    iterations: int | None,
+    seed: int | None,
+    workers: int | None,
+    dask: str | None,
+    length_m: float | None,
+    time_limit_s: float | None,
+    joint: bool,
+    params_path: Path,
+) -> None:
+    """SMBO trials: per sequence, or one joint study (--joint) into OUT."""
+    from pipeline.config import BaseSection, load_section, validate_section
+    from pipeline.errors import ConfigError
+    from pipeline.tuning.smbo import TrialsSection, run_trials, sequences_of_split
+
+    section = load_section(params_path, "trials", TrialsSection)
+    overrides = dict(
+        algorithm=algorithm,
+        iterations=iterations,
+        workers=workers,
+        dask=dask,
+        length_m=length_m,
+        time_limit_s=time_limit_s,
+        split=split,
+    )
+    settings = validate_section(
+        TrialsSection,
+        "trials",
+        {**section.model_dump(), **{k: v for k, v in overrides.items() if v is not None}},
+    )
+    if seed is None:
+        seed = load_section(params_path, "base", BaseSection).seed
+    if bool(sequence_paths) == (sequence_dir is not None):
+        raise ConfigError("give either SEQ.mcap paths or --sequences DIR, not both or neither")
+    paths = (
+        list(sequence_paths) if sequence_paths else sequences_of_split(sequence_dir, settings.split)
+    )
+    for s in run_trials(paths, out_dir, settings, seed, joint=joint):
+        log.info(
+            "trials %s %s: %d trials (%d run now), %d failed, best objective %.4g %% (trial %d)",
+            s.algorithm,
+            s.sequence,
+            s.trials,
+            s.ran,
+            s.failed,
+            s.best_objective,
+            s.best_trial,
+        )

@@ -1,0 +1,142 @@
+"""``adaptune trials`` through the CLI, and the tuner on the real ndt adapter."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+
+from pipeline.tuning.job import trajectory_path
+from pipeline.tuning.table import trials_path
+from stages.cli import main
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "odometry"))
+
+
+def params_file(tmp_path: Path, **trials: object) -> Path:
+    p = tmp_path / "params.yaml"
+    section = dict(
+        algorithm="tuning_adapters:drift",
+        iterations=3,
+        length_m=5.0,
+        time_limit_s=20.0,
+        startup_trials=2,
+    )
+    section.update(trials)
+    p.write_text(json.dumps({"base": {"seed": 3}, "trials": section}))
+    return p
+
+
+def test_dvc_form_reads_the_split_of_index_json(sequences: list[Path], tmp_path: Path) -> None:
+    folder = sequences[0].parent
+    (folder / "index.json").write_text(json.dumps({"train": ["seq_a", "seq_b"], "validation": []}))
+    out = tmp_path / "results" / "fixed"
+    res = CliRunner().invoke(
+        main,
+        [
+            "trials",
+            "--sequences",
+            str(folder),
+            "--joint",
+            "--out",
+            str(out),
+            "--params",
+            str(params_file(tmp_path)),
+            "--iterations",
+            "2",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    t = pq.read_table(trials_path(out, "drift", "__joint__")).to_pydict()
+    assert t["trial"] == [0, 1] and t["seed"][0] != t["seed"][1]
+    assert trajectory_path(out, "drift", "seq_b", 1).is_file()
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--length-m", "500"], "not longer than length_m=500.0"),
+        (["--algorithm", "nope"], "unknown odometry algorithm 'nope'"),
+        (["--iterations", "0"], "trials.iterations: Input should be greater than or equal to 1"),
+        (["--dask", "nowhere"], "dask must be 'local' or a scheduler address"),
+    ],
+)
+def test_bad_input_exits_1_without_output(
+    sequences: list[Path], tmp_path: Path, args: list[str], message: str
+) -> None:
+    out = tmp_path / "out"
+    res = CliRunner().invoke(
+        main,
+        [
+            "trials",
+            str(sequences[0]),
+            "--out",
+            str(out),
+            "--params",
+            str(params_file(tmp_path)),
+            *args,
+        ],
+    )
+    assert res.exit_code == 1
+    assert "adaptune: error: " in res.output and message in res.output, res.output
+    assert not out.exists()
+
+
+def test_missing_split_is_one_line(sequences: list[Path], tmp_path: Path) -> None:
+    folder = tmp_path / "seqs"
+    folder.mkdir()
+    (folder / "index.json").write_text(json.dumps({"train": ["gone"]}))
+    res = CliRunner().invoke(
+        main,
+        [
+            "trials",
+            "--sequences",
+            str(folder),
+            "--out",
+            str(tmp_path / "o"),
+            "--params",
+            str(params_file(tmp_path)),
+        ],
+    )
+    assert (
+        res.exit_code == 1 and "split 'train' lists gone.mcap, which does not exist" in res.output
+    )
+
+
+def test_ndt_trials_on_a_ray_cast_sequence(tmp_path: Path) -> None:
+    from odometry_data import write_synthetic_sequence
+
+    seq = write_synthetic_sequence(
+        tmp_path / "yard.mcap", n_frames=12, step_m=0.8, azimuth_steps=450
+    )
+    out = tmp_path / "trials"
+    res = CliRunner().invoke(
+        main,
+        [
+            "trials",
+            str(seq),
+            "--out",
+            str(out),
+            "--algorithm",
+            "ndt",
+            "--iterations",
+            "5",
+            "--params",
+            str(params_file(tmp_path, algorithm="ndt", time_limit_s=60.0)),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    t = pq.read_table(trials_path(out, "ndt", "yard")).to_pydict()
+    assert t["trial"] == list(range(5))
+    assert t["p_resolution"][0] == 4.0 and t["p_keyframe_interval"][0] == 4.0
+    ok = [o for o, s in zip(t["objective"], t["status"], strict=True) if s == "ok"]
+    assert t["status"][0] == "ok" and t["objective"][0] < 10.0  # the baseline tracks the yard
+    assert min(ok) <= t["objective"][0]
+    assert all(
+        trajectory_path(out, "ndt", "yard", i).is_file() == (s == "ok")
+        for i, s in enumerate(t["status"])
+    )
