@@ -28,6 +28,7 @@ import json
 import logging
 import os
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -131,9 +132,8 @@ class CommandAdapter:
         base = self.options.workdir
         if base:
             Path(base).mkdir(parents=True, exist_ok=True)
-        tmp = tempfile.TemporaryDirectory(prefix="adaptune-cmd-", dir=base)
+        work = Path(tempfile.mkdtemp(prefix="adaptune-cmd-", dir=base))
         try:
-            work = Path(tmp.name)
             sequence, stamps_ns = self._sequence(scans, work)
             if len(schedule) != len(stamps_ns):
                 raise OdometryError(f"command: schedule has {len(schedule)} rows for "
@@ -147,9 +147,9 @@ class CommandAdapter:
             return Trajectory(np.arange(len(stamps_ns)), stamps_ns, T)
         finally:
             if self.options.keep_workdir:
-                log.info("command: work directory kept at %s", tmp.name)
+                log.info("command: work directory kept at %s", work)
             else:
-                tmp.cleanup()
+                shutil.rmtree(work, ignore_errors=True)
 
     def _sequence(self, scans: Iterable[Scan], work: Path) -> tuple[Path, np.ndarray]:
         """The sequence MCAP holding ``scans`` (theirs, or one written into ``work``) and stamps."""

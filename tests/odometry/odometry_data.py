@@ -1,4 +1,4 @@
-"""Test and bench sequences for the odometry adapters.
+"""Test and bench sequences (and test helpers) for the odometry adapters.
 
 - ``write_synthetic_sequence``: an HDL-32E-like sensor (32 beams, -30.67..+10.67 deg, 1800
   azimuth steps, ~50k points a scan) ray-cast with open3d into a walled yard with boxes of random
@@ -9,12 +9,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.geometry import rot_z
-from pipeline.sequence import SequenceInfo, SequenceWriter
+from pipeline.geometry import inv_se3, rot_z
+from pipeline.sequence import Scan, SequenceInfo, SequenceReader, SequenceWriter
 
 F64 = NDArray[np.float64]
 
@@ -126,3 +127,48 @@ def write_kitti_sequence(path: Path, kitti_root: Path, seq: str = "04", n_frames
             pts = np.fromfile(base / "velodyne" / f"{i:06d}.bin", np.float32).reshape(-1, 4)
             w.add(round(float(times[i]) * 1e9) + 1, pts, poses[i])
     return path
+
+
+SCRIPTS = Path(__file__).resolve().parent / "scripts"
+
+
+def command_options(fmt: str = "kitti") -> dict[str, Any]:
+    """Options of the ``command`` adapter driving the real scan-to-scan GICP test script."""
+    return {
+        "command": ["{python}", str(SCRIPTS / "s2s_gicp.py"), "{sequence}", "{schedule}", "{out}",
+                    fmt],
+        "space": str(SCRIPTS / "s2s_gicp_space.yaml"),
+        "format": fmt,
+    }
+
+
+ADAPTER_OPTIONS: dict[str, dict[str, Any]] = {"command": command_options()}
+
+
+def make_adapter(name: str) -> Any:
+    """Adapter ``name`` with the options the tests use."""
+    from pipeline.odometry import get_adapter
+
+    return get_adapter(name, **ADAPTER_OPTIONS.get(name, {}))
+
+
+class Seq:
+    """A sequence MCAP loaded once: path, scans, ground truth relative to frame 0."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        with SequenceReader(path) as r:
+            self.scans: list[Scan] = list(r)
+            gt = r.ground_truth()
+        assert gt is not None
+        self.gt = inv_se3(gt[0]) @ gt
+
+    def __len__(self) -> int:
+        return len(self.scans)
+
+
+def final_errors(est: F64, gt: F64) -> tuple[float, float]:
+    """(translation [m], rotation [deg]) error of the last pose, both relative to frame 0."""
+    E = inv_se3(est[-1]) @ gt[-1]
+    angle = np.degrees(np.arccos(np.clip((np.trace(E[:3, :3]) - 1) / 2, -1, 1)))
+    return float(np.linalg.norm(E[:3, 3])), float(angle)

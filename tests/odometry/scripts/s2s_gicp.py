@@ -4,7 +4,8 @@ Usage: s2s_gicp.py SEQUENCE.mcap SCHEDULE.csv OUT.txt {kitti|tum}
 Reads the scans with adaptune's SequenceReader, registers every scan to the previous one with
 small_gicp (parameters per frame from the schedule CSV: downsampling_resolution,
 max_correspondence_distance), writes T_world_lidar as KITTI (12 numbers a line) or TUM.
-Environment ``S2S_FAIL=1`` makes it exit with status 3; ``S2S_SLEEP=<s>`` sleeps first.
+Environment ``S2S_FAIL=1`` makes it exit with status 3, ``S2S_SLEEP=<s>`` sleeps first,
+``S2S_DROP=1`` leaves the last frame out of the output.
 """
 
 from __future__ import annotations
@@ -49,6 +50,8 @@ def main(sequence: str, schedule_csv: str, out: str, fmt: str) -> int:
                 delta = result.T_target_source
                 poses.append(poses[-1] @ delta)
             prev = (cloud, tree)
+    if os.environ.get("S2S_DROP"):
+        poses, stamps = poses[:-1], stamps[:-1]
     with open(out, "w") as fh:
         for T, stamp in zip(poses, stamps, strict=True):
             if fmt == "kitti":
