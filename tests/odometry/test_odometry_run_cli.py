@@ -1,0 +1,78 @@
+"""``adaptune run`` through the CLI: fixed params, a schedule, and bad input (exit 1, no output)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from odometry_data import Seq
+
+from pipeline.odometry import get_adapter
+from pipeline.odometry.base import Schedule
+from pipeline.trajectory import read_trajectory
+from stages.cli import main
+
+
+def test_run_with_params_and_options(synthetic_seq: Seq, tmp_path: Path) -> None:
+    out = tmp_path / "t.parquet"
+    res = CliRunner().invoke(main, ["run", "-a", "ndt", "--params", '{"resolution": 3.0}',
+                                    "-o", "source_voxel_m=0.8", str(synthetic_seq.path),
+                                    "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    traj = read_trajectory(out)
+    assert len(traj) == len(synthetic_seq) and traj.is_finite()
+    odom = get_adapter("ndt", source_voxel_m=0.8).start({"resolution": 3.0})
+    direct = np.stack([odom.step(s.xyz, s.stamp_ns) for s in synthetic_seq.scans])
+    np.testing.assert_array_equal(traj.T_world_lidar[:, :3], direct[:, :3])
+
+
+def test_run_with_schedule_file(synthetic_seq: Seq, tmp_path: Path) -> None:
+    n = len(synthetic_seq)
+    sched = Schedule.constant(get_adapter("ndt").space.defaults(), n)
+    sched.values["keyframe_interval"][n // 2:] = 1.0
+    sched.write(tmp_path / "s.parquet")
+    params = tmp_path / "p.json"
+    params.write_text(json.dumps({"resolution": 4.0}))
+    out = tmp_path / "t.parquet"
+    res = CliRunner().invoke(main, ["run", "-a", "ndt", "--schedule", str(tmp_path / "s.parquet"),
+                                    str(synthetic_seq.path), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert len(read_trajectory(out)) == n
+    res = CliRunner().invoke(main, ["run", "-a", "ndt", "--params", f"@{params}",
+                                    str(synthetic_seq.path), "--out", str(tmp_path / "u.parquet")])
+    assert res.exit_code == 0, res.output
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["-a", "loam"], "unknown odometry algorithm 'loam'"),
+    (["-a", "ndt", "--params", "{resolution: 3"], "--params: not valid JSON"),
+    (["-a", "ndt", "--params", "[1, 2]"], "--params: must be a JSON object"),
+    (["-a", "ndt", "--params", '{"bogus": 1}'], "unknown parameter 'bogus'"),
+    (["-a", "ndt", "--params", '{"resolution": 50}'], "resolution must be in [1.0, 10.0], got 50"),
+    (["-a", "ndt", "-o", "neighbors=3"], "neighbors must be 1 or 7"),
+    (["-a", "ndt", "-o", "novalue"], "--option must be key=value"),
+    (["-a", "gicp", "--params", "@/nonexistent/p.json"], "cannot read parameters"),
+])
+def test_bad_input_fails_with_one_line(args: list[str], message: str, synthetic_seq: Seq,
+                                       tmp_path: Path) -> None:
+    out = tmp_path / "t.parquet"
+    res = CliRunner().invoke(main, ["run", *args, str(synthetic_seq.path), "--out", str(out)])
+    assert res.exit_code == 1, res.output
+    assert "adaptune: error: " in res.output and message in res.output
+    assert "Traceback" not in res.output
+    assert not out.exists()
+
+
+def test_missing_sequence_and_short_schedule(tmp_path: Path, synthetic_seq: Seq) -> None:
+    out = tmp_path / "t.parquet"
+    res = CliRunner().invoke(main, ["run", "-a", "ndt", str(tmp_path / "nope.mcap"),
+                                    "--out", str(out)])
+    assert res.exit_code == 1 and "nope.mcap: no such sequence file" in res.output
+    Schedule.constant(get_adapter("ndt").space.defaults(), 3).write(tmp_path / "s.parquet")
+    res = CliRunner().invoke(main, ["run", "-a", "ndt", "--schedule", str(tmp_path / "s.parquet"),
+                                    str(synthetic_seq.path), "--out", str(out)])
+    assert res.exit_code == 1 and "covers 3 frames, the sequence has 20" in res.output
+    assert not out.exists()
