@@ -66,7 +66,7 @@ def _points_per_scan(path: Path, frames: int) -> np.ndarray:
     """(frames,) point counts from the PointCloud2 headers (width x height)."""
     from mcap.reader import make_reader
 
-    counts = []
+    counts: list[int] = []
     with open(path, "rb") as fh:
         try:
             for _, _, msg in make_reader(fh).iter_messages(topics=[POINTS_TOPIC]):

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
+
+if TYPE_CHECKING:
+    from pipeline.sources.poses import PoseFormat
 
 out_option = click.option(
     "--out",
@@ -101,7 +104,7 @@ def rosbag(
     gt_topic: str | None,
     gt_child_frame: str | None,
     poses: Path | None,
-    poses_format: str,
+    poses_format: PoseFormat,
     calib: Path | None,
     name: str | None,
 ) -> None:
@@ -120,7 +123,7 @@ def rosbag(
             calib=calib,
             name=name,
         )
-    )  # type: ignore[arg-type]
+    )
 
 
 @ingest.command("folder")
@@ -143,7 +146,7 @@ def folder(
     folder: Path,
     out: Path,
     poses: Path | None,
-    poses_format: str,
+    poses_format: PoseFormat,
     times: Path | None,
     rate_hz: float,
     calib: Path | None,
@@ -157,7 +160,7 @@ def folder(
             folder,
             out,
             poses=poses,
-            poses_format=poses_format,  # type: ignore[arg-type]
+            poses_format=poses_format,
             times=times,
             calib=calib,
             rate_hz=rate_hz,
@@ -182,7 +185,7 @@ def mcap(
     gt_topic: str | None,
     gt_child_frame: str | None,
     poses: Path | None,
-    poses_format: str,
+    poses_format: PoseFormat,
     name: str | None,
 ) -> None:
     """Any MCAP with PointCloud2 messages (cdr or ros1 encoding), e.g. a ROS 2 recording."""
@@ -199,4 +202,4 @@ def mcap(
             poses_format=poses_format,
             name=name,
         )
-    )  # type: ignore[arg-type]
+    )

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
-from pipeline.sequence import SequenceInfo, SequenceWriter, drop_non_finite
+from pipeline.sequence import SequenceInfo, SequenceWriter
 
 log = logging.getLogger(__name__)
 
@@ -91,9 +91,7 @@ def write_sequence(source: Source, out: str | Path) -> IngestReport:
             leave=False,
         )
         for frame in bar:
-            pts, n_bad = drop_non_finite(_as_points(frame), frame.what)
-            if n_bad:
-                log.info("%s: dropped %d non-finite points", frame.what, n_bad)
+            pts = _as_points(frame)
             has_gt = frame.T_world_lidar is not None
             if with_gt is None:
                 with_gt = has_gt
@@ -102,8 +100,15 @@ def write_sequence(source: Source, out: str | Path) -> IngestReport:
                     f"{frame.what}: has {'a' if has_gt else 'no'} ground-truth pose "
                     f"unlike the frames before it"
                 )
-            writer.add(frame.stamp_ns, pts, frame.T_world_lidar)
-            points += len(pts)
+            before = writer.dropped_points
+            try:  # the writer drops and counts non-finite points, refuses an empty scan
+                writer.add(frame.stamp_ns, pts, frame.T_world_lidar)
+            except InputError as exc:
+                raise InputError(f"{frame.what}: {exc}") from None
+            n_bad = writer.dropped_points - before
+            if n_bad:
+                log.info("%s: dropped %d non-finite points", frame.what, n_bad)
+            points += len(pts) - n_bad
             dropped += n_bad
         frames = len(writer.stamps_ns)
     if dropped:

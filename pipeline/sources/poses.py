@@ -61,26 +61,25 @@ def read_pose_file(path: str | Path, fmt: PoseFormat = "auto") -> PoseFile:
     """Read a KITTI (12 numbers a line) or TUM (8 numbers a line) pose file."""
     path = Path(path)
     rows = _numbers(path)
-    if fmt == "auto":
-        fmt = {12: "kitti", 8: "tum"}.get(len(rows[0][1]), "kitti")
-    width = 12 if fmt == "kitti" else 8
+    kind = {12: "kitti", 8: "tum"}.get(len(rows[0][1]), "kitti") if fmt == "auto" else fmt
+    width = 12 if kind == "kitti" else 8
     for k, vals, _ in rows:
         if len(vals) != width:
             raise InputError(
-                f"{path} line {k}: expected {width} numbers ({fmt} pose file), got {len(vals)}"
+                f"{path} line {k}: expected {width} numbers ({kind} pose file), got {len(vals)}"
             )
     arr = np.array([v for _, v, _ in rows], dtype=np.float64)
     if not np.isfinite(arr).all():
         k = rows[int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])][0]
         raise InputError(f"{path} line {k}: pose is not finite")
-    if fmt == "kitti":
+    if kind == "kitti":
         T = np.tile(np.eye(4), (len(arr), 1, 1))
         T[:, :3, :] = arr.reshape(-1, 3, 4)
-        return PoseFile(path, fmt, T, None)
+        return PoseFile(path, kind, T, None)
     stamps = np.array([_seconds_to_ns(tok) for _, _, tok in rows], np.int64)
     if np.any(np.diff(stamps) <= 0):
         raise InputError(f"{path}: TUM stamps are not strictly increasing")
-    return PoseFile(path, fmt, pose_from_xyz_quat(arr[:, 1:4], arr[:, 4:8]), stamps)
+    return PoseFile(path, kind, pose_from_xyz_quat(arr[:, 1:4], arr[:, 4:8]), stamps)
 
 
 def _seconds_to_ns(token: str) -> int:

@@ -149,7 +149,7 @@ def read_open3d(path: Path) -> NDArray[np.float32]:
     """(N, 4) float32 of any point-cloud file open3d reads (.ply, compressed .pcd)."""
     import open3d as o3d  # heavy: only for the formats we do not parse ourselves
 
-    pcd = o3d.t.io.read_point_cloud(str(path))
+    pcd = o3d.t.io.read_point_cloud(path)
     if "positions" not in pcd.point or len(pcd.point.positions) == 0:
         raise InputError(f"{path}: open3d read no points (corrupt, empty or unsupported file)")
     xyz = pcd.point.positions.numpy()
