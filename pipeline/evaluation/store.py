@@ -81,6 +81,9 @@ def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapp
     unknown = sorted(set(studies) - set(STUDIES))
     if unknown:
         raise InputError(f"unknown study names {unknown}; known: {list(STUDIES)}")
+    for what, path in (("descriptors", descriptors), ("environment", environment)):
+        if path is not None and not Path(path).is_file():
+            raise InputError(f"{path}: no such {what} file")
     summary = DatabaseSummary()
     with atomic_path(db_path) as tmp:
         tmp.unlink()
@@ -138,7 +141,7 @@ def load_sequences(con: duckdb.DuckDBPyConnection, sequences_dir: Path) -> None:
         name = path.stem
         with SequenceReader(path) as reader:
             info, stamps_ns, gt = reader.info, reader.stamps_ns, reader.ground_truth()
-        labels = [[x.start, x.end, x.label] for x in info.labels]
+        labels: list[tuple[int, int, str]] = [(x.start, x.end, x.label) for x in info.labels]
         con.execute("INSERT INTO sequences VALUES (?, ?, ?, ?, ?, ?, ?)",
                     [name, str(path), len(stamps_ns), info.sensor, info.source,
                      splits.get(name), json.dumps(labels)])

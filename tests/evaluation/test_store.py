@@ -1,0 +1,281 @@
+"""The results database: rte_frames / rte_kitti in DuckDB agree with the numpy metrics; the
+rte, query and export commands; bad input gives one line and exit code 1."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import duckdb
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+from evaluation_data import gt_path, write_sequence, write_study
+
+from pipeline.evaluation.kitti import kitti_errors
+from pipeline.evaluation.posefile import read_kitti_poses, read_tum
+from pipeline.evaluation.rte import per_frame_rte
+from pipeline.evaluation.trials import read_trials_tables, trajectory_path
+from pipeline.sequence import EnvLabel, SequenceReader
+from pipeline.trajectory import Trajectory, read_trajectory, write_trajectory
+from schemas import SCHEMA_VERSION
+from stages.cli import main
+
+LENGTH_M = 10.0
+KITTI_LENGTHS = (15.0, 30.0)
+
+
+@dataclass
+class World:
+    root: Path
+    params: Path
+    gts: dict[str, np.ndarray]
+    estimates: dict[str, dict[tuple[str, int], np.ndarray]]  # study -> (sequence, trial) -> poses
+
+    def args(self, db: Path, *extra: str) -> list[str]:
+        return ["rte", "--params", str(self.params), "--sequences", str(self.root / "seq"),
+                "--trials", str(self.root / "trials"), "--fixed", str(self.root / "fixed"),
+                "--db", str(db), *extra]
+
+
+def make_world(root: Path) -> World:
+    gts, stamped = {}, {}
+    for name, n in (("cave_0", 60), ("street_0", 45)):
+        gt = gt_path(n, seed=n)
+        labels = [EnvLabel(0, 19, "cave"), EnvLabel(20, n - 1, "open")]
+        stamps = write_sequence(root / "seq" / f"{name}.mcap", gt, labels)
+        # what the store sees: the ground truth after the MCAP round trip
+        gts[name] = SequenceReader(root / "seq" / f"{name}.mcap").ground_truth()
+        stamped[name] = (stamps, gt)
+    (root / "seq" / "index.json").write_text(json.dumps({"train": ["cave_0"],
+                                                         "validation": ["street_0"]}))
+    estimates = {
+        "trials": write_study(root / "trials", "gicp", stamped, 4, ["max_corr_m", "kf_m"]),
+        "fixed": write_study(root / "fixed", "gicp", stamped, 3, ["max_corr_m", "kf_m"],
+                             seed=7, joint=True),
+    }
+    write_study(root / "trials", "ndt", {"cave_0": stamped["cave_0"]}, 2, ["resolution_m"], seed=3)
+    params = root / "params.yaml"
+    params.write_text(f"rte:\n  length_m: {LENGTH_M}\n  kitti_lengths_m: {list(KITTI_LENGTHS)}\n")
+    return World(root, params, gts, estimates)
+
+
+def write_environment(path: Path, gts: dict[str, np.ndarray]) -> None:
+    rows = [(s, f) for s, gt in gts.items() for f in range(len(gt))]
+    cols = {"sequence": pa.array([r[0] for r in rows]),
+            "frame": pa.array([r[1] for r in rows], pa.int32())}
+    cols.update({f"e{i}": pa.array(np.full(len(rows), i, np.float32)) for i in range(10)})
+    pq.write_table(pa.table(cols), path)
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory: pytest.TempPathFactory) -> World:
+    w = make_world(tmp_path_factory.mktemp("world"))
+    write_environment(w.root / "environment.parquet", w.gts)
+    db = w.root / "adaptune.duckdb"
+    result = CliRunner().invoke(main, w.args(db, "--environment",
+                                             str(w.root / "environment.parquet")))
+    assert result.exit_code == 0, result.output
+    return w
+
+
+def connect(world: World) -> duckdb.DuckDBPyConnection:
+    return duckdb.connect(str(world.root / "adaptune.duckdb"), read_only=True)
+
+
+def test_rte_frames_equal_per_frame_rte(world: World) -> None:
+    con = connect(world)
+    checked = 0
+    for study, estimates in world.estimates.items():
+        for (sequence, trial), est in estimates.items():
+            got = con.execute("SELECT frame, end_frame, length_m, t_err_pct, r_err_deg_per_m "
+                              "FROM rte_frames WHERE study = ? AND algorithm = 'gicp' "
+                              "AND sequence = ? AND trial = ? ORDER BY frame",
+                              [study, sequence, trial]).fetchnumpy()
+            t_err, r_err = per_frame_rte(world.gts[sequence], est, LENGTH_M)
+            has = np.flatnonzero(np.isfinite(t_err))
+            assert np.array_equal(got["frame"], has)
+            assert np.all(got["length_m"] == LENGTH_M)
+            np.testing.assert_allclose(got["t_err_pct"], t_err[has], rtol=1e-9)
+            np.testing.assert_allclose(got["r_err_deg_per_m"], np.degrees(r_err[has]),
+                                       rtol=1e-9, atol=1e-9)
+            checked += 1
+    assert checked == 2 * 3 + 2 * 2  # ok trials only: trial 1 failed without a trajectory
+
+
+def test_segment_end_after_standstill(world: World) -> None:
+    # frames 11..14 of every sequence stand still (same path distance as frame 10)
+    con = connect(world)
+    gt = world.gts["cave_0"]
+    dist = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1))])
+    assert dist[10] == dist[14]
+    ends = dict(con.execute("SELECT frame, end_frame FROM rte_frames WHERE study = 'trials' "
+                            "AND algorithm = 'gicp' AND sequence = 'cave_0' AND trial = 0"
+                            ).fetchall())
+    for i, j in ends.items():
+        assert dist[j] > dist[i] + LENGTH_M and dist[j - 1] <= dist[i] + LENGTH_M, (i, j)
+    # frame 0's segment ends on the first frame of the standstill, not on one of its copies
+    assert ends[0] == 10 and dist[11] == dist[10]
+
+
+def test_rte_kitti_equals_devkit_segments(world: World) -> None:
+    con = connect(world)
+    est = world.estimates["trials"][("cave_0", 2)]
+    got = con.execute("SELECT first_frame, last_frame, length_m, t_err, r_err FROM rte_kitti "
+                      "WHERE study = 'trials' AND algorithm = 'gicp' AND sequence = 'cave_0' "
+                      "AND trial = 2 ORDER BY first_frame, length_m").fetchnumpy()
+    seg = kitti_errors(world.gts["cave_0"], est, KITTI_LENGTHS)
+    assert len(seg) > 0
+    assert np.array_equal(got["first_frame"], seg.first_frame)
+    assert np.array_equal(got["last_frame"], seg.last_frame)
+    np.testing.assert_allclose(got["t_err"], seg.t_err, rtol=1e-9)
+    np.testing.assert_allclose(got["r_err"], seg.r_err, rtol=1e-7, atol=1e-12)
+
+
+def test_trials_table_and_summary(world: World) -> None:
+    con = connect(world)
+    cols = [r[0] for r in con.execute("DESCRIBE trials").fetchall()]
+    assert cols[:10] == ["study", "algorithm", "sequence", "trial", "status", "error", "objective",
+                         "wall_time_s", "seed", "params_json"]
+    assert cols[-2:] == ["mean_rte_pct", "rte_frames"]
+    assert set(cols[10:-2]) == {"p_max_corr_m", "p_kf_m", "p_resolution_m"}
+    rows = con.execute("SELECT study, algorithm, sequence, trial, status, mean_rte_pct, "
+                       "rte_frames, p_resolution_m FROM trials ORDER BY ALL").fetchall()
+    assert len(rows) == 4 * 2 + 3 + 2
+    for study, algorithm, sequence, trial, status, mean, n, p_res in rows:
+        if status == "failed":
+            assert mean is None and n == 0
+            continue
+        if algorithm == "ndt":
+            assert p_res == float(trial)
+            continue
+        assert p_res is None
+        seqs = world.gts if sequence == "__joint__" else [sequence]
+        errs = np.concatenate([per_frame_rte(world.gts[s], world.estimates[study][(s, trial)],
+                                             LENGTH_M)[0] for s in seqs])
+        errs = errs[np.isfinite(errs)]
+        assert n == len(errs)
+        assert mean == pytest.approx(errs.mean(), rel=1e-9)
+
+
+def test_sequences_labels_views_and_schema_info(world: World) -> None:
+    con = connect(world)
+    seqs = con.execute("SELECT sequence, frames, split FROM sequences ORDER BY 1").fetchall()
+    assert seqs == [("cave_0", 60, "train"), ("street_0", 45, "validation")]
+    assert con.execute("SELECT label FROM frame_labels WHERE sequence = 'cave_0' AND frame = 20"
+                       ).fetchone() == ("open",)
+    info = dict(con.execute("SELECT name, version FROM schema_info").fetchall())
+    assert info == {"schema_version": SCHEMA_VERSION, "tables.sql": SCHEMA_VERSION,
+                    "views.sql": SCHEMA_VERSION}
+    view_cols = [r[0] for r in con.execute("DESCRIBE surrogate_rows").fetchall()]
+    assert view_cols[:4] == ["algorithm", "sequence", "trial", "frame"]
+    assert view_cols[4:14] == [f"e{i}" for i in range(10)]
+    assert view_cols[-1] == "y" and {"p_kf_m", "p_max_corr_m"} <= set(view_cols)
+    n_rows = con.execute("SELECT count(*) FROM surrogate_rows").fetchone()[0]
+    n_expected = con.execute("SELECT count(*) FROM rte_frames r JOIN trials t USING "
+                             "(study, algorithm, sequence, trial) WHERE r.study = 'trials' "
+                             "AND t.status = 'ok'").fetchone()[0]
+    assert n_rows == n_expected > 0
+    dup = con.execute("SELECT count(*) FROM (SELECT algorithm, sequence, trial, frame FROM "
+                      "surrogate_rows GROUP BY ALL HAVING count(*) > 1)").fetchone()[0]
+    assert dup == 0
+    assert con.execute("SELECT count(*) FROM descriptors").fetchone()[0] == 0
+
+
+def test_read_trials_tables_unions_parameters(world: World) -> None:
+    table = read_trials_tables(world.root / "trials")
+    assert table.column_names[:3] == ["algorithm", "sequence", "trial"]
+    assert {"p_kf_m", "p_max_corr_m", "p_resolution_m"} <= set(table.column_names)
+    assert table.num_rows == 4 * 2 + 2
+
+
+def _fails(args: list[str], *needles: str) -> str:
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 1, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("adaptune: error:"), result.output
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    return lines[0]
+
+
+def test_rte_stage_bad_inputs_leave_no_database(world: World, tmp_path: Path) -> None:
+    db = tmp_path / "out.duckdb"
+    _fails(world.args(db, "--descriptors", str(tmp_path / "missing.parquet")), "missing.parquet")
+    assert not db.exists()
+    bad_params = tmp_path / "params.yaml"
+    bad_params.write_text("rte:\n  length_m: -1\n")
+    args = world.args(db)
+    args[args.index("--params") + 1] = str(bad_params)
+    _fails(args, "rte.length_m", "greater than 0")
+    assert not db.exists()
+    assert not list(tmp_path.glob(".out.duckdb*"))
+
+
+def test_rte_stage_rejects_nan_and_short_trajectories(world: World, tmp_path: Path) -> None:
+    import shutil
+
+    trials = tmp_path / "trials"
+    shutil.copytree(world.root / "trials", trials)
+    path = trajectory_path(trials, "gicp", "cave_0", 2)
+    traj = read_trajectory(path)
+    poses = traj.T_world_lidar.copy()
+    poses[5, 0, 3] = np.nan
+    write_trajectory(path, Trajectory(traj.frames, traj.stamps_ns, poses))
+    db = tmp_path / "out.duckdb"
+    args = ["rte", "--params", str(world.params), "--sequences", str(world.root / "seq"),
+            "--trials", str(trials), "--db", str(db)]
+    _fails(args, "trial=2", "non-finite")
+    write_trajectory(path, Trajectory(traj.frames[:-3], traj.stamps_ns[:-3],
+                                      traj.T_world_lidar[:-3]))
+    _fails(args, "trial=2", "57 poses", "60 frames")
+    assert not db.exists()
+
+
+def test_query_cli(world: World, tmp_path: Path) -> None:
+    db = str(world.root / "adaptune.duckdb")
+    sql = "SELECT sequence, count(*) AS n FROM rte_frames GROUP BY ALL ORDER BY 1"
+    result = CliRunner().invoke(main, ["query", "--db", db, sql])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert lines[0].split() == ["sequence", "n"] and lines[2].split()[0] == "cave_0"
+    result = CliRunner().invoke(main, ["query", "--db", db, sql, "--format", "json"])
+    assert [r["sequence"] for r in json.loads(result.output)] == ["cave_0", "street_0"]
+    out = tmp_path / "q.parquet"
+    result = CliRunner().invoke(main, ["query", "--db", db, sql, "--format", "parquet",
+                                       "--out", str(out)])
+    assert result.exit_code == 0 and pq.read_table(out).num_rows == 2
+    result = CliRunner().invoke(main, ["query", "--db", db, sql, "--format", "csv"])
+    assert result.output.splitlines()[0] == '"sequence","n"'
+
+
+def test_query_cli_errors(world: World, tmp_path: Path) -> None:
+    db = str(world.root / "adaptune.duckdb")
+    _fails(["query", "--db", db, "SELEC 1"], "syntax error")
+    _fails(["query", "--db", db, "SELECT nope FROM trials"], "nope")
+    _fails(["query", "--db", db, "DROP TABLE trials"], "read-only")
+    _fails(["query", "--db", str(tmp_path / "none.duckdb"), "SELECT 1"], "none.duckdb",
+           "no such database")
+    out = tmp_path / "x.csv"
+    _fails(["query", "--db", db, "SELEC 1", "--format", "csv", "--out", str(out)], "syntax")
+    assert not out.exists()
+
+
+def test_export_cli_round_trip(world: World, tmp_path: Path) -> None:
+    src = trajectory_path(world.root / "trials", "gicp", "cave_0", 0)
+    traj = read_trajectory(src)
+    for fmt in ("kitti", "tum"):
+        out = tmp_path / f"t.{fmt}"
+        result = CliRunner().invoke(main, ["export", str(src), "--format", fmt, "--out", str(out)])
+        assert result.exit_code == 0, result.output
+    np.testing.assert_allclose(read_kitti_poses(tmp_path / "t.kitti"), traj.T_world_lidar,
+                               atol=1e-10)
+    stamps, poses = read_tum(tmp_path / "t.tum")
+    np.testing.assert_allclose(poses, traj.T_world_lidar, atol=1e-10)
+    np.testing.assert_allclose(stamps, traj.stamps_ns / 1e9, rtol=0, atol=1e-9)
+    _fails(["export", str(tmp_path / "none.parquet"), "--format", "tum", "--out",
+            str(tmp_path / "n.tum")], "none.parquet")
+    assert not (tmp_path / "n.tum").exists()
