@@ -1,0 +1,378 @@
+"""The deployable side: load the model artifact and pick parameters from a scan.
+
+Imports numpy, scipy, the standard library and ``pipeline.descriptor`` only (a test checks that
+importing this module pulls in none of sklearn, duckdb, hyperopt, open3d, dvc, pyarrow, click),
+so a robot can carry ``model/`` and this file alone.
+
+Selection (x_t = argmin_x S(E_t, x), S = the kNN mean of k training targets):
+
+1. E_t = PCA(descriptor(scan)), scaled as the manifest says.
+2. Since E_t is fixed for a query, the joint distance of a row i to (E_t, x) is
+   |x - x_i|^2 + dE_i^2 with dE_i = |E_t - E_i|: the joint kNN is a kNN in P + 1 dimensions
+   over the points (x_i, dE_i), queried at (x, 0).
+3. Rows are grouped by training frame (environment). The frames nearest to E_t are taken until
+   ``subset_rows`` rows are gathered; a cKDTree over those rows' (x_i, dE_i) answers the k
+   nearest rows for every candidate at once. A candidate is *certified exact* when its k-th
+   neighbour distance is <= the E-distance of the first frame left out (every left-out row is
+   at least that far), so it equals the kNN over all rows; ``Prediction.exact`` says which.
+4. argmin over the certified candidates (the artifact's candidate set: every distinct trial
+   parameter vector plus a Sobol set), then a pattern search (``refine_iters`` rounds, step
+   halving, moves accepted only to certified points) around the best few.
+5. Hysteresis: the current parameters stay unless the new ones are predicted better by more
+   than ``hysteresis`` (in target units: log1p(RTE %) for the default log target, so 0.05 is
+   about 5 % relative).
+6. A scan with fewer than ``min_scan_points`` points keeps the last parameters (the defaults
+   before the first selection).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from pipeline.descriptor import DescriptorConfig, describe
+from pipeline.errors import ArtifactError
+
+SCHEMA_VERSION = "1.0"  # = schemas.SCHEMA_VERSION (not imported: schemas pulls in nothing heavy
+# today, but the runtime must stay importable on its own)
+REQUIRED_FILES = ("env.npy", "env_offsets.npy", "env_frames.npy", "rows_x.npy", "rows_t.npy",
+                  "candidates.npy", "pca_mean.npy", "pca_components.npy", "pca_scale.npy")
+MANIFEST_HASH_KEY = "manifest_sha256"
+
+Params = dict[str, float]
+
+
+def canonical_manifest_hash(manifest: dict[str, Any]) -> str:
+    """sha256 of the manifest without its own hash, as sorted compact JSON."""
+    body = {k: v for k, v in manifest.items() if k != MANIFEST_HASH_KEY}
+    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+@dataclass
+class Model:
+    """A loaded, verified artifact (see ``pipeline.surrogate.write_artifact`` for the arrays)."""
+
+    path: Path
+    manifest: dict[str, Any]
+    descriptor: DescriptorConfig
+    pca_mean: NDArray[np.float64]
+    pca_scale: NDArray[np.float64]
+    pca_components: NDArray[np.float64]
+    env: NDArray[np.float64]
+    env_offsets: NDArray[np.int64]
+    rows_x: NDArray[np.float64]
+    rows_t: NDArray[np.float64]
+    candidates_u: NDArray[np.float64]
+    space: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def algorithm(self) -> str:
+        return str(self.manifest["algorithm"])
+
+    @property
+    def names(self) -> list[str]:
+        return [str(s["name"]) for s in self.space]
+
+    @property
+    def k(self) -> int:
+        return int(self.manifest["model"]["k"])
+
+    @property
+    def target(self) -> str:
+        return str(self.manifest["model"]["target"])
+
+    @property
+    def selection(self) -> dict[str, Any]:
+        return dict(self.manifest["selection"])
+
+    @property
+    def e_factor(self) -> float:
+        env = self.manifest["scaling"]["environment"]
+        return float(env["w_e"]) / float(env["e_scale"])
+
+    @property
+    def x_scale(self) -> float:
+        return float(self.manifest["scaling"]["parameters"]["x_scale"])
+
+    def defaults(self) -> Params:
+        return {str(s["name"]): float(s["default"]) for s in self.space}
+
+    def environment(self, points_lidar: NDArray[np.floating]) -> NDArray[np.float64]:
+        """Scaled environment E_s (D,) of one scan ((N, 3|4) points, sensor frame [m])."""
+        d = describe(points_lidar, self.descriptor).astype(np.float64)
+        e = ((np.sqrt(np.maximum(d, 0.0)) - self.pca_mean) / self.pca_scale) @ self.pca_components.T
+        return e * self.e_factor
+
+    # parameter <-> unit cube, vectorised, same rules as ParameterSpace.to_unit / from_unit
+    def from_unit(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(C, P) in [0, 1] -> (C, P) parameter values (clipped; ints rounded)."""
+        U = np.clip(np.atleast_2d(np.asarray(U, np.float64)), 0.0, 1.0)
+        out = np.empty_like(U)
+        for j, s in enumerate(self.space):
+            lo, hi = float(s["low"]), float(s["high"])
+            if s["log"]:
+                v = np.exp(math.log(lo) + U[:, j] * (math.log(hi) - math.log(lo)))
+            else:
+                v = lo + U[:, j] * (hi - lo)
+            v = np.round(v) if s["kind"] == "int" else v
+            out[:, j] = np.clip(v, lo, hi)
+        return out
+
+    def to_unit(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(C, P) parameter values -> (C, P) in [0, 1]."""
+        X = np.atleast_2d(np.asarray(X, np.float64))
+        out = np.empty_like(X)
+        for j, s in enumerate(self.space):
+            lo, hi = float(s["low"]), float(s["high"])
+            if s["log"]:
+                lo, hi, x = math.log(lo), math.log(hi), np.log(X[:, j])
+            else:
+                x = X[:, j]
+            out[:, j] = (x - lo) / (hi - lo) if hi > lo else 0.0
+        return out
+
+    def snap(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Unit points moved onto realisable parameters (ints rounded): (C, P)."""
+        return self.to_unit(self.from_unit(U))
+
+    def params_of(self, u: NDArray[np.float64]) -> Params:
+        """One unit point (P,) -> {name: value}."""
+        return {n: float(v) for n, v in zip(self.names, self.from_unit(u)[0], strict=True)}
+
+
+def load_model(path: str | Path, expected_algorithm: str | None = None) -> Model:
+    """Load and verify ``path``/manifest.json and every file it lists (sha256, schema version,
+    algorithm, shapes). ArtifactError with one line otherwise. Never unpickles anything."""
+    path = Path(path)
+    manifest = _read_manifest(path)
+    major = str(manifest.get("schema_version", "")).split(".")[0]
+    if major != SCHEMA_VERSION.split(".")[0]:
+        raise ArtifactError(f"{path}: artifact schema version {manifest.get('schema_version')!r}, "
+                            f"this adaptune reads {SCHEMA_VERSION}")
+    algorithm = manifest.get("algorithm")
+    if expected_algorithm is not None and algorithm != expected_algorithm:
+        raise ArtifactError(f"{path}: artifact is for algorithm {algorithm!r}, "
+                            f"expected {expected_algorithm!r}")
+    arrays = _read_arrays(path, manifest)
+    try:
+        model = Model(path, manifest, DescriptorConfig.from_json(manifest["descriptor"]),
+                      arrays["pca_mean.npy"], arrays["pca_scale.npy"], arrays["pca_components.npy"],
+                      arrays["env.npy"], arrays["env_offsets.npy"].astype(np.int64),
+                      arrays["rows_x.npy"], arrays["rows_t.npy"], arrays["candidates.npy"],
+                      list(manifest["parameter_space"]))
+        _check_shapes(model)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ArtifactError(f"{path}: inconsistent artifact ({type(exc).__name__}: {exc})") from None
+    except Exception as exc:  # ConfigError from DescriptorConfig
+        if exc.__class__.__name__ == "ConfigError":
+            raise ArtifactError(f"{path}: {exc}") from None
+        raise
+    return model
+
+
+def _read_manifest(path: Path) -> dict[str, Any]:
+    mpath = path / "manifest.json"
+    if not mpath.is_file():
+        raise ArtifactError(f"{path}: not a model artifact (no manifest.json)")
+    try:
+        manifest = json.loads(mpath.read_bytes().decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ArtifactError(f"{mpath}: damaged manifest ({exc})") from None
+    if not isinstance(manifest, dict) or manifest.get("kind") != "adaptune.surrogate":
+        raise ArtifactError(f"{mpath}: not an adaptune surrogate manifest")
+    if manifest.get(MANIFEST_HASH_KEY) != canonical_manifest_hash(manifest):
+        raise ArtifactError(f"{mpath}: manifest checksum mismatch (the manifest was altered)")
+    return manifest
+
+
+def _read_arrays(path: Path, manifest: dict[str, Any]) -> dict[str, NDArray[Any]]:
+    files = manifest.get("files")
+    if not isinstance(files, dict):
+        raise ArtifactError(f"{path}/manifest.json: no file list")
+    missing = [f for f in REQUIRED_FILES if f not in files]
+    if missing:
+        raise ArtifactError(f"{path}/manifest.json: does not list {missing[0]}")
+    arrays = {}
+    for name, digest in files.items():
+        fpath = path / name
+        if Path(name).name != name:
+            raise ArtifactError(f"{path}/manifest.json: file name {name!r} is not a plain name")
+        try:
+            data = fpath.read_bytes()
+        except FileNotFoundError:
+            raise ArtifactError(f"{fpath}: missing (listed in manifest.json)") from None
+        if hashlib.sha256(data).hexdigest() != digest:
+            raise ArtifactError(f"{fpath}: sha256 mismatch (file altered or damaged)")
+        try:
+            arrays[name] = np.load(fpath, allow_pickle=False)
+        except ValueError as exc:
+            raise ArtifactError(f"{fpath}: not a plain numpy array ({exc})") from None
+    return arrays
+
+
+def _check_shapes(m: Model) -> None:
+    n_env, d = m.env.shape
+    p = len(m.space)
+    rows = len(m.rows_t)
+    problems = []
+    if m.pca_components.shape != (d, m.descriptor.size):
+        problems.append(f"pca_components {m.pca_components.shape} != ({d}, {m.descriptor.size})")
+    if m.pca_mean.shape != (m.descriptor.size,) or m.pca_scale.shape != (m.descriptor.size,):
+        problems.append("pca_mean/pca_scale length != descriptor size")
+    if m.env_offsets.shape != (n_env + 1,) or m.env_offsets[0] != 0 or m.env_offsets[-1] != rows \
+            or np.any(np.diff(m.env_offsets) < 0):
+        problems.append("env_offsets do not partition the rows")
+    if m.rows_x.shape != (rows, p) or m.candidates_u.ndim != 2 or m.candidates_u.shape[1] != p:
+        problems.append(f"rows_x {m.rows_x.shape} / candidates {m.candidates_u.shape} vs {p} parameters")
+    if problems:
+        raise ArtifactError(f"{m.path}: inconsistent artifact ({problems[0]})")
+
+
+@dataclass
+class Prediction:
+    """Predicted target t (mean of k rows) per query point, and whether it is certified exact."""
+
+    t: NDArray[np.float64]
+    exact: NDArray[np.bool_]
+
+
+class Neighbourhood:
+    """The rows near one environment E_s, as a (P + 1)-D tree (module docstring, step 3)."""
+
+    def __init__(self, model: Model, e_s: NDArray[np.float64], subset_rows: int) -> None:
+        d2 = np.einsum("ij,ij->i", model.env - e_s, model.env - e_s)
+        counts = np.diff(model.env_offsets)
+        n_env = len(d2)
+        order = np.argsort(d2)
+        cum = np.cumsum(counts[order])
+        n_take = min(int(np.searchsorted(cum, max(subset_rows, model.k))) + 1, n_env)
+        taken = order[:n_take]
+        self.boundary2 = float(d2[order[n_take]]) if n_take < n_env else math.inf
+        lens = counts[taken]
+        starts = model.env_offsets[taken]
+        total = int(lens.sum())
+        shift = np.repeat(starts - np.concatenate([[0], np.cumsum(lens)[:-1]]), lens)
+        self.rows = shift + np.arange(total)
+        self.k = min(model.k, total)
+        pts = np.empty((total, model.rows_x.shape[1] + 1))
+        pts[:, :-1] = model.rows_x[self.rows]
+        pts[:, -1] = np.repeat(np.sqrt(d2[taken]), lens)
+        self.t = model.rows_t[self.rows]
+        self.tree = cKDTree(pts, leafsize=16, balanced_tree=False, compact_nodes=False)
+        self.x_scale = model.x_scale
+
+    def predict(self, U: NDArray[np.float64]) -> Prediction:
+        """Prediction at unit points U (C, P)."""
+        q = np.zeros((len(U), U.shape[1] + 1))
+        q[:, :-1] = U * self.x_scale
+        dist, idx = self.tree.query(q, k=self.k)
+        if self.k == 1:
+            dist, idx = dist[:, None], idx[:, None]
+        return Prediction(self.t[idx].mean(axis=1), dist[:, -1] ** 2 <= self.boundary2)
+
+
+class Selector:
+    """Online parameter selection from scans (module docstring). Settings default to the
+    manifest's ``selection`` block."""
+
+    def __init__(self, model: Model, period_s: float | None = None, hysteresis: float | None = None,
+                 min_scan_points: int | None = None, subset_rows: int | None = None,
+                 refine_iters: int | None = None, n_starts: int = 3) -> None:
+        sel = model.selection
+        self.model = model
+        self.period_s = float(sel["period_s"] if period_s is None else period_s)
+        self.hysteresis = float(sel["hysteresis"] if hysteresis is None else hysteresis)
+        self.min_scan_points = int(sel["min_scan_points"] if min_scan_points is None else min_scan_points)
+        self.subset_rows = int(sel["subset_rows"] if subset_rows is None else subset_rows)
+        self.refine_iters = int(sel["refine_iters"] if refine_iters is None else refine_iters)
+        self.n_starts = n_starts
+        self.candidates = np.unique(model.snap(model.candidates_u), axis=0)
+        self.current_u: NDArray[np.float64] | None = None
+        self.last_stamp_ns: int | None = None
+        self.last: dict[str, Any] = {}
+
+    @property
+    def current(self) -> Params:
+        """The parameters in force (the defaults before the first selection)."""
+        if self.current_u is None:
+            return self.model.defaults()
+        return self.model.params_of(self.current_u)
+
+    def due(self, stamp_ns: int) -> bool:
+        """True when a selection is due at ``stamp_ns`` (first scan, or period_s elapsed)."""
+        return self.last_stamp_ns is None or stamp_ns - self.last_stamp_ns >= self.period_s * 1e9 - 1e6
+
+    def update(self, points_lidar: NDArray[np.floating], stamp_ns: int) -> Params:
+        """Streaming use: select when due, else keep the parameters in force."""
+        return self.select(points_lidar, stamp_ns) if self.due(stamp_ns) else self.current
+
+    def select(self, points_lidar: NDArray[np.floating], stamp_ns: int | None = None) -> Params:
+        """argmin_x S(E_t, x) for this scan, with hysteresis; too few points keep the last."""
+        if stamp_ns is not None:
+            self.last_stamp_ns = int(stamp_ns)
+        pts = np.asarray(points_lidar)
+        if pts.ndim != 2 or len(pts) < self.min_scan_points:
+            self.last = {"kept": "too_few_points", "points": int(len(pts))}
+            return self.current
+        return self.select_environment(self.model.environment(pts))
+
+    def select_environment(self, e_s: NDArray[np.float64]) -> Params:
+        """The selection for a scaled environment E_s (D,)."""
+        nb = Neighbourhood(self.model, e_s, self.subset_rows)
+        u_best, t_best, exact_frac = self._search(nb)
+        kept = False
+        if self.current_u is not None and not np.array_equal(u_best, self.current_u):
+            t_cur = float(nb.predict(self.current_u[None]).t[0])
+            if not t_best < t_cur - self.hysteresis:
+                u_best, t_best, kept = self.current_u, t_cur, True
+        self.current_u = u_best
+        self.last = {"kept": "hysteresis" if kept else "", "predicted_t": t_best,
+                     "exact_fraction": exact_frac, "subset_rows": len(nb.rows)}
+        return self.model.params_of(u_best)
+
+    def _search(self, nb: Neighbourhood) -> tuple[NDArray[np.float64], float, float]:
+        pred = nb.predict(self.candidates)
+        t = np.where(pred.exact, pred.t, np.inf)
+        if not np.isfinite(t).any():  # nothing certified: fall back to the approximate values
+            t = pred.t
+        n = min(self.n_starts, len(t))
+        starts = np.argsort(t, kind="stable")[:n]
+        best_u, best_t = self.candidates[starts].copy(), t[starts].copy()
+        step = 0.5 / max(2.0, len(self.candidates) ** (1.0 / self.candidates.shape[1]))
+        p = self.candidates.shape[1]
+        eye = np.vstack([np.eye(p), -np.eye(p)])
+        for _ in range(self.refine_iters):
+            probes = self.model.snap((best_u[:, None, :] + step * eye[None]).reshape(-1, p))
+            pp = nb.predict(probes)
+            pt = np.where(pp.exact, pp.t, np.inf).reshape(n, 2 * p)
+            j = np.argmin(pt, axis=1)
+            better = pt[np.arange(n), j] < best_t
+            if better.any():
+                best_u[better] = probes.reshape(n, 2 * p, p)[better, j[better]]
+                best_t[better] = pt[better, j[better]]
+            else:
+                step /= 2.0
+        i = int(np.argmin(best_t))
+        return best_u[i], float(best_t[i]), float(pred.exact.mean())
+
+    def schedule(self, reader: Any) -> Any:
+        """The Schedule of a whole recorded sequence (a SequenceReader): a selection every
+        period_s from the newest scan, held in between."""
+        from pipeline.odometry.base import Schedule
+
+        stamps = np.asarray(reader.stamps_ns, np.int64)
+        values = np.empty((len(stamps), len(self.model.names)))
+        for i, stamp in enumerate(stamps):
+            params = self.select(reader[i].points_lidar, int(stamp)) if self.due(int(stamp)) \
+                else self.current
+            values[i] = [params[n] for n in self.model.names]
+        return Schedule(np.arange(len(stamps), dtype=np.int32),
+                        {n: values[:, j].copy() for j, n in enumerate(self.model.names)}, stamps)

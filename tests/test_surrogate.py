@@ -1,0 +1,215 @@
+"""PCA, the kNN surrogate, its cross-validation and the artifact (pipeline/surrogate.py), and the
+`descriptors` / `surrogate` stages. Environments come from real KITTI scans."""
+
+from __future__ import annotations
+
+import functools
+import json
+from pathlib import Path
+
+import duckdb
+import jsonschema
+import numpy as np
+import pyarrow as pa
+from click.testing import CliRunner
+
+from pipeline.descriptor import DescriptorConfig, describe
+from pipeline.odometry.registry import get_adapter
+from pipeline.runtime import load_model
+from pipeline.sequence import SequenceInfo, SequenceWriter
+from pipeline.surrogate import (
+    ArtifactInfo,
+    Pca,
+    SurrogateSettings,
+    TrainingRows,
+    fit_pca,
+    fit_surrogate,
+    write_artifact,
+)
+from schemas import read_text
+from stages.cli import main
+
+SEQS = ("01", "04", "06", "10")
+SELECTION = {"period_s": 1.0, "hysteresis": 0.0, "min_scan_points": 1000, "subset_rows": 512,
+             "refine_iters": 0}
+
+
+def kitti_scan(kitti_root: Path, seq: str, frame: int) -> np.ndarray:
+    path = kitti_root / "sequences" / seq / "velodyne" / f"{frame:06d}.bin"
+    return np.fromfile(path, np.float32).reshape(-1, 4)
+
+
+@functools.lru_cache(maxsize=2)
+def kitti_descriptors(kitti_root: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(sequence names (40,), frames (40,), descriptors (40, 90)) of the KITTI mini scans."""
+    names, frames, desc = [], [], []
+    for seq in SEQS:
+        for f in range(10):
+            names.append(seq)
+            frames.append(f)
+            desc.append(describe(kitti_scan(kitti_root, seq, f)))
+    return np.array(names), np.array(frames), np.stack(desc)
+
+
+def true_y(E: np.ndarray, U: np.ndarray) -> np.ndarray:
+    """A synthetic RTE [%]: the best first parameter depends on the environment."""
+    best = 1.0 / (1.0 + np.exp(-E[:, 0] / 2.0))
+    return 0.3 + 4.0 * (U[:, 0] - best) ** 2 + 0.5 * (U[:, 1] - 0.3) ** 2
+
+
+def synthetic_rows(kitti_root: Path, trials: int = 24, seed: int = 0) -> tuple[TrainingRows, Pca]:
+    names, frames, desc = kitti_descriptors(kitti_root)
+    pca = fit_pca(desc, 10, list(SEQS))
+    pca.descriptor = DescriptorConfig().to_json()
+    E_f = pca.transform(desc)
+    rng = np.random.default_rng(seed)
+    U_trials = {s: rng.random((trials, 2)) for s in SEQS}  # each sequence has its own trials
+    E, U, S, F, T = [], [], [], [], []
+    for i, (s, f) in enumerate(zip(names, frames, strict=True)):
+        E.append(np.repeat(E_f[i][None], trials, 0))
+        U.append(U_trials[s])
+        S += [s] * trials
+        F += [f] * trials
+        T += list(range(trials))
+    E, U = np.vstack(E), np.vstack(U)
+    y = true_y(E, U) * np.exp(rng.normal(0, 0.05, len(U)))
+    return TrainingRows(E, U, y, np.array(S), np.array(F), np.array(T)), pca
+
+
+def build_model(out: Path, kitti_root: Path, algorithm: str = "ndt", selection: dict | None = None,
+                trials: int = 24, settings: SurrogateSettings | None = None) -> Path:
+    rows, pca = synthetic_rows(kitti_root, trials)
+    space = get_adapter(algorithm).space.to_json()
+    fitted = fit_surrogate(rows, space, settings or SurrogateSettings(n_sobol=256, cv_max_frames=5))
+    info = ArtifactInfo(algorithm, space, DescriptorConfig(), selection or SELECTION)
+    write_artifact(out, fitted, pca, info)
+    return out
+
+
+def test_pca_fit_on_training_frames_only(kitti_root: Path) -> None:
+    names, _, desc = kitti_descriptors(kitti_root)
+    train = names != "10"
+    pca = fit_pca(desc[train], 10, ["01", "04", "06"])
+    E = pca.transform(desc[train])
+    assert E.shape == (30, 10)
+    np.testing.assert_allclose(E.mean(0), 0.0, atol=1e-9)  # centred on the training frames
+    assert np.all(np.diff(E.var(0)) <= 1e-12)  # components by decreasing variance
+    assert 0.5 < pca.explained_variance_ratio.sum() <= 1.0
+    other = fit_pca(desc, 10)
+    assert not np.allclose(other.mean, pca.mean)  # the held-out frames changed nothing above
+
+
+def test_artifact_round_trip(tmp_path: Path, kitti_root: Path) -> None:
+    model_dir = build_model(tmp_path / "model", kitti_root)
+    manifest = json.loads((model_dir / "manifest.json").read_text())
+    jsonschema.validate(manifest, json.loads(read_text("artifact.schema.json")))
+    assert manifest["algorithm"] == "ndt" and manifest["model"]["k"] == 5
+    assert set(manifest["files"]) == {p.name for p in model_dir.iterdir()} - {"manifest.json"}
+    assert manifest["provenance"]["git_revision"]
+    assert not any(p.suffix in (".pkl", ".joblib") for p in model_dir.iterdir())
+    model = load_model(model_dir, expected_algorithm="ndt")
+    assert model.env.shape == (40, 10) and model.rows_x.shape == (40 * 24, 2)
+    # the runtime's environment of a scan = the library's PCA of its descriptor, scaled
+    rows, pca = synthetic_rows(kitti_root)
+    scan = kitti_scan(kitti_root, "04", 3)
+    e_lib = pca.transform(describe(scan)[None])[0] * model.e_factor
+    np.testing.assert_allclose(model.environment(scan), e_lib, rtol=1e-6, atol=1e-9)
+    # the stored training environment of frame 04/3 is that same vector
+    g = int(np.flatnonzero((np.array(manifest["training"]["env_sequences"]) == "04")
+                           & (np.load(model_dir / "env_frames.npy") == 3))[0])
+    np.testing.assert_allclose(model.env[g], e_lib, rtol=1e-5, atol=1e-6)
+
+
+def test_cross_validation_is_leave_one_sequence_out(tmp_path: Path, kitti_root: Path) -> None:
+    rows, _ = synthetic_rows(kitti_root)
+    fitted = fit_surrogate(rows, get_adapter("ndt").space.to_json(),
+                           SurrogateSettings(n_sobol=64, cv_max_frames=10))
+    cv = fitted.cv
+    assert cv["folds"] == 4 and set(cv["per_sequence"]) == set(SEQS)
+    assert 0 < cv["mae"] <= cv["rmse"]
+    assert cv["regret_mean"] >= 0 and cv["y_chosen_mean"] >= cv["y_oracle_mean"]
+    # the surrogate beats picking trials at random in the held-out sequences
+    assert cv["y_chosen_mean"] < rows.y.mean()
+
+
+def write_tiny_sequence(path: Path, kitti_root: Path, seq: str, n: int = 4, step: int = 3) -> None:
+    with SequenceWriter(path, SequenceInfo(name=path.stem, sensor="hdl64", source="kitti")) as w:
+        for f in range(n):
+            w.add(1_000_000_000 + f * 100_000_000, kitti_scan(kitti_root, seq, f)[::step],
+                  np.eye(4))
+
+
+def test_descriptors_stage(tmp_path: Path, kitti_root: Path) -> None:
+    seq_dir = tmp_path / "sequences"
+    seq_dir.mkdir()
+    for s in ("04", "06", "10"):
+        write_tiny_sequence(seq_dir / f"k{s}.mcap", kitti_root, s)
+    (seq_dir / "index.json").write_text(json.dumps({"train": ["k04", "k06"], "validation": ["k10"]}))
+    params = tmp_path / "params.yaml"
+    params.write_text("descriptors:\n  pca_dim: 4\n  workers: 1\n")
+    out, env, pca_dir = tmp_path / "d.parquet", tmp_path / "e.parquet", tmp_path / "pca"
+    res = CliRunner().invoke(main, ["descriptors", "--params", str(params), "--sequences",
+                                    str(seq_dir), "--out", str(out), "--environment", str(env),
+                                    "--pca", str(pca_dir)])
+    assert res.exit_code == 0, res.output
+    con = duckdb.connect()
+    d = con.execute(f"SELECT * FROM '{out}' ORDER BY sequence, frame").fetchnumpy()
+    e = con.execute(f"SELECT * FROM '{env}' ORDER BY sequence, frame").fetchnumpy()
+    assert len(d["frame"]) == 12 and len(e["e3"]) == 12 and "e4" not in e
+    vals = np.column_stack([d[f"d{i}"] for i in range(90)])
+    np.testing.assert_allclose(vals.sum(1), 1.0, rtol=1e-5)
+    pca = Pca.load(pca_dir)
+    assert pca.train_sequences == ["k04", "k06"] and pca.n_train_frames == 8
+    E = np.column_stack([e[f"e{i}"] for i in range(4)])
+    np.testing.assert_allclose(E, pca.transform(vals), rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(E[:8].mean(0), 0.0, atol=1e-5)  # centred on train frames only
+
+
+def test_descriptors_stage_bad_index(tmp_path: Path) -> None:
+    seq_dir = tmp_path / "sequences"
+    seq_dir.mkdir()
+    (seq_dir / "index.json").write_text(json.dumps({"train": ["missing"]}))
+    out = tmp_path / "d.parquet"
+    res = CliRunner().invoke(main, ["descriptors", "--params", str(tmp_path / "none.yaml"),
+                                    "--sequences", str(seq_dir), "--out", str(out),
+                                    "--environment", str(tmp_path / "e.parquet"),
+                                    "--pca", str(tmp_path / "pca")])
+    assert res.exit_code == 1
+    assert "no such params file" in res.output or "missing" in res.output
+    assert not out.exists()
+
+
+def make_db(path: Path, rows: TrainingRows, algorithm: str = "ndt") -> None:
+    """A results database holding the surrogate_rows relation of the contract."""
+    names = get_adapter(algorithm).space.names
+    space = get_adapter(algorithm).space
+    X = np.stack([[space.from_unit(u)[n] for n in names] for u in rows.U])
+    con = duckdb.connect(str(path))
+    cols = {"algorithm": np.full(len(rows.y), algorithm), "sequence": rows.sequences,
+            "trial": rows.trials, "frame": rows.frames,
+            **{f"e{i}": rows.E[:, i] for i in range(rows.E.shape[1])},
+            **{f"p_{n}": X[:, j] for j, n in enumerate(names)}, "y": rows.y}
+    con.from_arrow(pa.table(cols)).create("surrogate_rows")
+    con.close()
+
+
+def test_surrogate_stage(tmp_path: Path, kitti_root: Path) -> None:
+    rows, pca = synthetic_rows(kitti_root, trials=8)
+    db = tmp_path / "r.duckdb"
+    make_db(db, rows)
+    pca.save(tmp_path / "pca")
+    params = tmp_path / "params.yaml"
+    params.write_text("surrogate:\n  n_sobol: 32\n  cv_max_frames: 3\n")
+    out, metrics = tmp_path / "model", tmp_path / "metrics.json"
+    res = CliRunner().invoke(main, ["surrogate", "--params", str(params), "--db", str(db), "--pca",
+                                    str(tmp_path / "pca"), "--out", str(out), "--metrics", str(metrics)])
+    assert res.exit_code == 0, res.output
+    model = load_model(out, "ndt")
+    assert model.manifest["training"]["rows"] == 40 * 8
+    assert json.loads(metrics.read_text())["folds"] == 4
+    # an algorithm the database does not have: one line, exit 1, no new artifact
+    res = CliRunner().invoke(main, ["surrogate", "--params", str(params), "--db", str(db), "--pca",
+                                    str(tmp_path / "pca"), "--out", str(tmp_path / "m2"),
+                                    "--algorithm", "gicp"])
+    assert res.exit_code == 1 and "no surrogate rows for algorithm 'gicp'" in res.output
+    assert not (tmp_path / "m2").exists()
