@@ -21,23 +21,36 @@ def parse_options(model: type[OptionsT], adapter: str, options: dict[str, Any]) 
     return validate_section(model, f"{adapter} option", options)
 
 
-def voxel_keys(points: F64, voxel_m: float) -> NDArray[np.int64]:
-    """(N,) int64 keys of the voxels of side ``voxel_m`` holding ``points`` (N, 3) [m]."""
-    ijk = np.floor(points * (1.0 / voxel_m)).astype(np.int64) + KEY_OFFSET
+def voxel_indices(points: F64, voxel_m: float) -> NDArray[np.int64]:
+    """(N, 3) int64 integer coordinates of the voxels of side ``voxel_m`` holding ``points``."""
+    return np.floor(points * (1.0 / voxel_m)).astype(np.int64)
+
+
+def pack_keys(ijk: NDArray[np.int64]) -> NDArray[np.int64]:
+    """(N,) int64 keys of integer voxel coordinates (N, 3) (21 bits an axis, clipped)."""
+    ijk = ijk + KEY_OFFSET
     np.clip(ijk, 0, (1 << 21) - 1, out=ijk)
     return (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
 
 
+def voxel_keys(points: F64, voxel_m: float) -> NDArray[np.int64]:
+    """(N,) int64 keys of the voxels of side ``voxel_m`` holding ``points`` (N, 3) [m]."""
+    return pack_keys(voxel_indices(points, voxel_m))
+
+
 def voxel_downsample(points: NDArray[np.floating], voxel_m: float) -> F64:
-    """Centroid of the points in every occupied voxel of side ``voxel_m``; (M, 3) float64."""
+    """Centroid of the points in every occupied voxel of side ``voxel_m``; (M, 3) float64,
+    ordered by voxel key."""
     pts = np.asarray(points, dtype=np.float64)
     if voxel_m <= 0 or len(pts) == 0:
         return pts.copy()
-    _, inv, counts = np.unique(voxel_keys(pts, voxel_m), return_inverse=True, return_counts=True)
-    out = np.empty((len(counts), 3))
-    for k in range(3):
-        out[:, k] = np.bincount(inv, weights=pts[:, k], minlength=len(counts))
-    return out / counts[:, None]
+    keys = voxel_keys(pts, voxel_m)
+    order = np.argsort(keys)
+    sorted_keys = keys[order]
+    starts = np.flatnonzero(np.concatenate([[True], sorted_keys[1:] != sorted_keys[:-1]]))
+    sums = np.add.reduceat(pts[order], starts, axis=0)
+    counts = np.diff(np.append(starts, len(pts)))
+    return sums / counts[:, None]
 
 
 def hat(v: F64) -> F64:

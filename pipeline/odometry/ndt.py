@@ -12,7 +12,8 @@ Algorithm, per scan:
    ratio 0.55 gives d1, d2 as in Magnusson's thesis), i.e. iteratively reweighted least
    squares with weights -d1 d2/2 exp(...), Levenberg damping (a step is kept only when the
    score rises; else the damping grows tenfold), right-perturbation on SE(3), starting from a
-   constant-velocity prediction; at most ``max_iterations`` steps, stop below 1e-4.
+   constant-velocity prediction; at most ``max_iterations`` steps, stop when a step is
+   below ``convergence`` (1e-3: 1 mm / 0.06 deg).
 4. Keyframe: replaced by the current scan (transformed with its estimated pose) when the path
    length travelled since the keyframe reaches ``keyframe_interval`` [m]; 0 = every frame.
 
@@ -46,9 +47,11 @@ from pipeline.odometry.common import (
     F64,
     constant_velocity_guess,
     orthonormalize,
+    pack_keys,
     parse_options,
     se3_exp,
     voxel_downsample,
+    voxel_indices,
     voxel_keys,
 )
 from pipeline.sequence import Scan
@@ -75,6 +78,7 @@ class NdtOptions(Section):
     min_points: int = Field(5, ge=3)
     neighbors: int = Field(1, description="1 (own voxel) or 7 (and face neighbours)")
     max_iterations: int = Field(15, ge=1, le=100)
+    convergence: float = Field(1e-3, gt=0, description="stop when |step| < this [rad, m]")
     outlier_ratio: float = Field(0.55, gt=0, lt=1)
 
     def model_post_init(self, __context: object) -> None:
@@ -123,10 +127,10 @@ class VoxelMap:
     def lookup(self, points_world: F64,
                offsets: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """Pairs (point index, voxel index) of the voxels near ``points_world`` (N, 3)."""
-        ijk = np.floor(points_world * (1.0 / self.resolution)).astype(np.int64)
+        ijk = voxel_indices(points_world, self.resolution)
         pts, vox = [], []
         for off in offsets:
-            k = voxel_keys((ijk + off + 0.5) * self.resolution, self.resolution)
+            k = pack_keys(ijk + off)
             idx = np.searchsorted(self.keys, k)
             idx[idx >= len(self.keys)] = 0
             hit = np.flatnonzero(self.keys[idx] == k)
@@ -240,18 +244,18 @@ class NdtOdometry:
                 xi = -np.linalg.solve(H + lam * D, g)
             except np.linalg.LinAlgError:
                 break
-            cand = orthonormalize(T @ se3_exp(xi))
+            cand = T @ se3_exp(xi)
             c_score, c_H, c_g, c_n = self._evaluate(source, cand)
             if c_score > score and c_n >= 6:
                 T, score, H, g = cand, c_score, c_H, c_g
                 lam = max(lam * 0.1, 1e-7)
-                if np.linalg.norm(xi) < 1e-4:
+                if np.linalg.norm(xi) < self.options.convergence:
                     break
             else:
                 lam *= 10.0
                 if lam > 1e3:
                     break
-        return T
+        return orthonormalize(T)
 
 
 class NdtAdapter:
