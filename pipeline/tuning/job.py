@@ -7,9 +7,10 @@ result whose objective is ``penalty_pct`` (a fixed number, so that a resumed or 
 sees the same history) and whose ``error`` is one line of text.
 
 Time limit: with ``time_limit_s`` set (per sequence; a joint trial gets the sum), the trial runs
-in a child process forked from a ``forkserver`` (cheap: the server has numpy, the job module and
-the adapter's module preloaded) and is SIGKILLed when it outlives the limit, so even a hang
-inside C code ends. With ``time_limit_s=None`` the trial runs in the calling process.
+in a child process and is SIGKILLed when it outlives the limit, so even a hang inside C code
+ends. The child is forked from the worker, which has decoded the sequence once (the scan
+cache), or from a ``forkserver`` in threaded (Dask) workers; see ``_context``.
+With ``time_limit_s=None`` the trial runs in the calling process (with the scan cache).
 The child writes the trajectory Parquet files (atomically) and sends back a small result.
 """
 
@@ -19,6 +20,7 @@ import contextlib
 import json
 import logging
 import multiprocessing
+import threading
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -99,6 +101,7 @@ def run_trial(job: TrialJob) -> TrialResult:
     t0 = time.perf_counter()
     try:
         if job.time_limit_s is None:
+            warm_scan_cache(job)
             out = evaluate_trial(job)
         else:
             out = _run_in_child(job, job.time_limit_s * len(job.sequences))
@@ -117,7 +120,7 @@ def evaluate_trial(job: TrialJob) -> dict[str, Any]:
     ``pipeline.odometry.run_sequence`` checks frames, stamps, finiteness; ``check_jump`` jumps.
     """
     from pipeline.evaluation.rte import mean_rte_pct
-    from pipeline.odometry import run_sequence
+    from pipeline.odometry import check_trajectory, make_schedule, run_sequence
     from pipeline.trajectory import write_trajectory
 
     adapter = resolve_adapter(job.adapter, job.adapter_options)
@@ -125,8 +128,14 @@ def evaluate_trial(job: TrialJob) -> dict[str, Any]:
     odometry_s = 0.0
     for name, path in job.sequences:
         gt = load_ground_truth(path)
+        scans = _SCANS.get(path)
         t0 = time.perf_counter()
-        traj = run_sequence(adapter, path, job.params, job.time_limit_s)
+        if scans is None or getattr(adapter, "accepts_time_limit", False):
+            traj = run_sequence(adapter, path, job.params, job.time_limit_s)
+        else:  # the scans decoded once by this worker (see warm_scan_cache)
+            traj = adapter.run(scans, make_schedule(adapter, job.params, len(scans), path))
+            stamps_ns = np.array([sc.stamp_ns for sc in scans])
+            check_trajectory(traj, stamps_ns, f"{adapter.name} on {path}")
         odometry_s += time.perf_counter() - t0
         check_jump(traj, job.jump_limit_m)
         rte[name] = mean_rte_pct(gt, traj.T_world_lidar, job.length_m)
@@ -160,13 +169,54 @@ def check_jump(traj: Trajectory, jump_limit_m: float) -> None:
                                 f"(jump_limit_m={jump_limit_m})")
 
 
+# -- scan cache ----------------------------------------------------------------------------
+
+SCAN_CACHE_LIMIT_BYTES = 1 << 30
+"""Decoded sequences a worker keeps in memory (estimated from the MCAP size) at most."""
+
+_SCANS: dict[str, list[Any]] = {}
+
+
+def warm_scan_cache(job: TrialJob) -> None:
+    """Decode the job's sequences once per worker process and keep them (only these).
+
+    Every trial of a study reads the same MCAP; a trial child forked from this process inherits
+    the decoded scans (copy-on-write), so reading the MCAP is paid once, not once per trial.
+    Skipped when the sequences are too large (then each trial reads its MCAP).
+    Adapters must not modify the scans they are given (in-process runs share the cache).
+    """
+    from pipeline.sequence import SequenceReader
+
+    paths = [p for _, p in job.sequences]
+    for stale in set(_SCANS) - set(paths):
+        del _SCANS[stale]
+    if sum(Path(p).stat().st_size for p in paths) * 3 > SCAN_CACHE_LIMIT_BYTES:
+        _SCANS.clear()
+        return
+    for p in paths:
+        if p not in _SCANS:
+            with SequenceReader(p) as reader:
+                _SCANS[p] = list(reader)
+
+
 # -- the child process ---------------------------------------------------------------------
 
 _PRELOADED: set[str] = set()
 
 
 def _context(job: TrialJob) -> multiprocessing.context.BaseContext:
-    """The forkserver context; the first call sets what the server preloads."""
+    """How trial children start.
+
+    From a single-threaded worker (process pool): ``fork``, after decoding the scans once
+    (``warm_scan_cache``); the worker never runs odometry itself, so no OpenMP or other thread
+    pool state is forked. From a threaded worker (Dask): ``forkserver`` (preloaded modules;
+    each trial reads its MCAP).
+    """
+    if threading.active_count() == 1:
+        with contextlib.suppress(Exception):  # unreadable input: the child reports it
+            warm_scan_cache(job)
+        return multiprocessing.get_context("fork")
+    _SCANS.clear()
     ctx = multiprocessing.get_context("forkserver")
     if not _PRELOADED:
         modules = ["pipeline.tuning.job", "pipeline.evaluation.rte", "pipeline.odometry"]

@@ -1,0 +1,101 @@
+"""SMBO tuner figures: trials/s with 1 and 2 workers, and the pipeline's overhead around a trial.
+
+Sequence: 60 ray-cast HDL-32E frames (~50k points each, 0.8 m a frame) of the test yard
+(tests/odometry/odometry_data.py), adapter ``ndt`` at its baseline.
+- bare odometry: ``adapter.run`` over scans already in memory (best of 3);
+- one trial: ``run_trial`` as the executor runs it (forkserver child with the time limit,
+  read MCAP + run + check + RTE + write Parquet, result back through a pipe; best of 3, warm);
+  overhead = (trial - bare) / bare;
+- trials/s: ``run_trials`` of 8 trials on an already started process pool of W workers.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from common import Row, best_of
+
+ROOT = Path(__file__).resolve().parents[1]
+N_FRAMES = 60
+
+
+def run() -> list[Row]:
+    sys.path.insert(0, str(ROOT / "tests" / "odometry"))
+    from odometry_data import write_synthetic_sequence
+
+    from pipeline.odometry.base import Schedule
+    from pipeline.odometry.registry import get_adapter
+    from pipeline.sequence import SequenceReader
+    from pipeline.tuning.job import TrialJob, run_trial
+    from pipeline.tuning.smbo import TrialsSection, open_executor, run_trials
+
+    with tempfile.TemporaryDirectory() as tmp:
+        seq = write_synthetic_sequence(Path(tmp) / "yard.mcap", n_frames=N_FRAMES, step_m=0.8)
+        adapter = get_adapter("ndt")
+        params = adapter.space.defaults()
+        with SequenceReader(seq) as r:
+            scans = list(r)
+        bare_s = best_of(
+            lambda: adapter.run(scans, Schedule.constant(params, len(scans))), repeat=3
+        )
+
+        def job(limit: float | None) -> TrialJob:
+            return TrialJob(
+                adapter="ndt",
+                algorithm="ndt",
+                sequences=(("yard", str(seq)),),
+                trial=0,
+                seed=0,
+                params=params,
+                out_dir=str(Path(tmp) / "one"),
+                length_m=25.0,
+                penalty_pct=100.0,
+                jump_limit_m=5.0,
+                time_limit_s=limit,
+            )
+
+        assert run_trial(job(600.0)).status == "ok"  # starts the forkserver
+        child_s = best_of(lambda: run_trial(job(600.0)), repeat=3)
+        inproc_s = best_of(lambda: run_trial(job(None)), repeat=3)
+
+        rates = {}
+        for workers in (1, 2):
+            settings = TrialsSection(
+                algorithm="ndt", iterations=8, workers=workers, length_m=25.0, time_limit_s=600.0
+            )
+            with open_executor(workers) as ex:
+                ex.submit(time.sleep, 0).result()
+                t0 = time.perf_counter()
+                run_trials(
+                    [seq], Path(tmp) / f"w{workers}", settings, seed=0, progress=False, executor=ex
+                )
+                rates[workers] = 8 / (time.perf_counter() - t0)
+
+    fps = N_FRAMES / bare_s
+    return [
+        Row("ndt bare odometry, 60 HDL-32E frames", bare_s, "s", f"{fps:.0f} frames/s"),
+        Row(
+            "pipeline overhead around a trial (child process, read, check, score, write)",
+            100 * (child_s - bare_s) / bare_s,
+            "% of bare run",
+            f"trial {child_s:.3f} s",
+            "<= 5 %",
+        ),
+        Row(
+            "pipeline overhead around a trial (in-process, no time limit)",
+            100 * (inproc_s - bare_s) / bare_s,
+            "% of bare run",
+            f"trial {inproc_s:.3f} s",
+            "<= 5 %",
+        ),
+        Row("ndt trials/s, 1 worker (60 frames a trial)", rates[1], "trials/s"),
+        Row(
+            "ndt trials/s, 2 workers (60 frames a trial)",
+            rates[2],
+            "trials/s",
+            f"{rates[2] / rates[1]:.2f}x of 1 worker (2 shared cores)",
+        ),
+    ]
