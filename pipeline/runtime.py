@@ -376,3 +376,60 @@ class Selector:
             values[i] = [params[n] for n in self.model.names]
         return Schedule(np.arange(len(stamps), dtype=np.int32),
                         {n: values[:, j].copy() for j, n in enumerate(self.model.names)}, stamps)
+
+
+PARAMS_TOPIC = "/adaptune/params"
+POSE_TOPIC = "/odometry/pose"
+
+
+def params_json_schema(model: Model) -> dict[str, Any]:
+    """JSON Schema of the ``/adaptune/params`` messages (Foxglove plots every number)."""
+    props: dict[str, Any] = {n: {"type": "number"} for n in model.names}
+    props.update({"frame": {"type": "integer"}, "selected": {"type": "boolean"},
+                  "predicted_rte_pct": {"type": ["number", "null"]}, "kept": {"type": "string"}})
+    return {"type": "object", "title": "adaptune.params", "properties": props,
+            "required": [*model.names, "frame"]}
+
+
+def run_live(model: Model, sequence: str | Path, out: str | Path,
+             selector: Selector | None = None) -> dict[str, int]:
+    """Stream ``sequence`` through the model's odometry (``adapter.start`` / ``set_params``),
+    selecting parameters online; write ``out`` (scans, ground truth, poses, parameters).
+
+    This is the one place of the runtime that needs the full pipeline (odometry adapters, the
+    MCAP writer): imported lazily, so ``import pipeline.runtime`` stays light.
+    """
+    from pipeline.odometry.registry import get_adapter
+    from pipeline.sequence import SequenceReader, SequenceWriter
+
+    selector = selector or Selector(model)
+    adapter = get_adapter(model.algorithm)
+    schema = params_json_schema(model)
+    odom = None
+    selections = changes = 0
+    with SequenceReader(sequence) as reader:
+        info = reader.info
+        info.extra = {**info.extra, "adaptune.model": str(model.path),
+                      "adaptune.algorithm": model.algorithm}
+        with SequenceWriter(out, info) as writer:
+            for scan in reader:
+                selected = selector.due(scan.stamp_ns)
+                before = selector.current
+                params = selector.update(scan.points_lidar, scan.stamp_ns)
+                selections += selected
+                if odom is None:
+                    odom = adapter.start(params)  # type: ignore[attr-defined]
+                elif params != before:
+                    odom.set_params(params)
+                    changes += 1
+                T = odom.step(scan.xyz, scan.stamp_ns)
+                writer.add(scan.stamp_ns, scan.points_lidar, scan.T_world_lidar)
+                writer.add_pose(POSE_TOPIC, scan.stamp_ns, T)
+                t = selector.last.get("predicted_t") if selected else None
+                pred = None if t is None else float(np.expm1(t) if model.target == "log" else t)
+                writer.add_json(PARAMS_TOPIC, scan.stamp_ns,
+                                {**params, "frame": scan.frame, "selected": bool(selected),
+                                 "predicted_rte_pct": pred,
+                                 "kept": str(selector.last.get("kept", "")) if selected else ""},
+                                schema)
+    return {"frames": len(reader), "selections": selections, "changes": changes}

@@ -1,0 +1,29 @@
+"""`adaptune select MODEL SEQ.mcap --out SCHEDULE.parquet`: the parameter schedule of a recorded
+sequence (a selection every period_s from the newest scan, held in between)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command()
+@click.argument("model_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.argument("sequence", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="The schedule Parquet (frame, stamp_ns, one column per parameter).")
+@click.option("--algorithm", default=None, help="Refuse a model made for another algorithm.")
+@click.option("--period-s", type=float, default=None, help="Override the model's period [s].")
+def select(model_dir: Path, sequence: Path, out: Path, algorithm: str | None,
+           period_s: float | None) -> None:
+    """Parameter schedule of a recorded sequence from a model artifact."""
+    from pipeline.runtime import Selector, load_model
+    from pipeline.sequence import SequenceReader
+
+    model = load_model(model_dir, expected_algorithm=algorithm)
+    with SequenceReader(sequence) as reader:
+        schedule = Selector(model, period_s=period_s).schedule(reader)
+    schedule.write(out)
+    click.echo(f"{model.algorithm}: {len(schedule)} frames, {len(schedule.changes())} parameter "
+               f"changes -> {out}", err=True)

@@ -1,0 +1,179 @@
+"""The deployable runtime: light imports, artifact verification, selection, schedules, CLI."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from sklearn.neighbors import KNeighborsRegressor
+from test_surrogate import build_model, kitti_scan, write_tiny_sequence
+
+from pipeline.errors import ArtifactError
+from pipeline.odometry.base import Schedule
+from pipeline.odometry.registry import get_adapter
+from pipeline.runtime import Neighbourhood, Selector, canonical_manifest_hash, load_model
+from pipeline.sequence import SequenceReader
+from stages.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+HEAVY = ("sklearn", "duckdb", "hyperopt", "open3d", "dvc", "pyarrow", "click", "small_gicp",
+         "kiss_icp", "dask", "matplotlib", "pydantic")
+
+
+@pytest.fixture(scope="module")
+def model_dir(tmp_path_factory: pytest.TempPathFactory, kitti_root: Path) -> Path:
+    return build_model(tmp_path_factory.mktemp("m") / "model", kitti_root)
+
+
+def test_import_is_light() -> None:
+    out = subprocess.run([sys.executable, "-c",
+                          "import pipeline.runtime, sys; print(sorted(sys.modules))"],
+                         cwd=REPO, capture_output=True, text=True, check=True).stdout
+    loaded = {m.split(".")[0] for m in eval(out)}  # noqa: S307 - our own printed list
+    assert not loaded & set(HEAVY), loaded & set(HEAVY)
+    assert "numpy" in loaded and "scipy" in loaded
+
+
+def copy_model(src: Path, dst: Path) -> Path:
+    dst.mkdir()
+    for p in src.iterdir():
+        (dst / p.name).write_bytes(p.read_bytes())
+    return dst
+
+
+def test_every_flipped_byte_is_refused(model_dir: Path, tmp_path: Path) -> None:
+    names = sorted(p.name for p in model_dir.iterdir())
+    assert "manifest.json" in names and len(names) == 10
+    for name in names:
+        size = (model_dir / name).stat().st_size
+        positions = [0, size // 2, size - 2] if name != "manifest.json" else \
+            list(range(0, size, max(1, size // 40)))
+        for pos in positions:
+            bad = copy_model(model_dir, tmp_path / f"{name}.{pos}")
+            data = bytearray((bad / name).read_bytes())
+            data[pos] ^= 0x01
+            (bad / name).write_bytes(bytes(data))
+            with pytest.raises(ArtifactError) as exc:
+                load_model(bad)
+            msg = str(exc.value)
+            assert "\n" not in msg and str(bad) in msg, msg
+
+
+def rewrite_manifest(dst: Path, **changes: object) -> None:
+    manifest = json.loads((dst / "manifest.json").read_text())
+    manifest.update(changes)
+    manifest["manifest_sha256"] = canonical_manifest_hash(manifest)
+    (dst / "manifest.json").write_text(json.dumps(manifest))
+
+
+def test_wrong_schema_version_and_algorithm(model_dir: Path, tmp_path: Path) -> None:
+    bad = copy_model(model_dir, tmp_path / "v2")
+    rewrite_manifest(bad, schema_version="2.0")
+    with pytest.raises(ArtifactError, match="schema version '2.0'"):
+        load_model(bad)
+    with pytest.raises(ArtifactError, match="algorithm 'ndt', expected 'gicp'"):
+        load_model(model_dir, expected_algorithm="gicp")
+    gone = copy_model(model_dir, tmp_path / "gone")
+    (gone / "rows_t.npy").unlink()
+    with pytest.raises(ArtifactError, match="rows_t.npy: missing"):
+        load_model(gone)
+
+
+def test_cli_refuses_bad_artifacts(model_dir: Path, tmp_path: Path, kitti_root: Path) -> None:
+    seq = tmp_path / "s.mcap"
+    write_tiny_sequence(seq, kitti_root, "04", n=3)
+    flipped = copy_model(model_dir, tmp_path / "flipped")
+    data = bytearray((flipped / "env.npy").read_bytes())
+    data[-3] ^= 0x10
+    (flipped / "env.npy").write_bytes(bytes(data))
+    v2 = copy_model(model_dir, tmp_path / "v2")
+    rewrite_manifest(v2, schema_version="2.0")
+    cases = [(["select", str(flipped), str(seq)], "sha256 mismatch"),
+             (["select", str(v2), str(seq)], "schema version"),
+             (["select", str(model_dir), str(seq), "--algorithm", "gicp"], "expected 'gicp'"),
+             (["live", str(model_dir), str(seq), "--algorithm", "kiss_icp"], "expected 'kiss_icp'")]
+    for i, (args, message) in enumerate(cases):
+        out = tmp_path / f"out{i}.{'mcap' if args[0] == 'live' else 'parquet'}"
+        res = CliRunner().invoke(main, [*args, "--out", str(out)])
+        assert res.exit_code == 1, res.output
+        assert res.output.startswith("adaptune: error: ") and message in res.output
+        assert res.output.count("\n") == 1 and "Traceback" not in res.output
+        assert not out.exists()
+
+
+def test_schedule_in_range_for_every_scan(model_dir: Path, tmp_path: Path, kitti_root: Path) -> None:
+    seq = tmp_path / "s.mcap"
+    write_tiny_sequence(seq, kitti_root, "06", n=8, step=2)
+    model = load_model(model_dir, "ndt")
+    space = get_adapter("ndt").space
+    with SequenceReader(seq) as reader:
+        sched = Selector(model, period_s=0.3).schedule(reader)
+    sched.validate(space, 8)  # every frame covered, every value in range
+    # selections at frames 0, 3, 6 (0.3 s at 10 Hz), held in between
+    for a, b in ((0, 1), (1, 2), (3, 4), (4, 5), (6, 7)):
+        assert sched.at(a) == sched.at(b)
+    out = tmp_path / "sched.parquet"
+    res = CliRunner().invoke(main, ["select", str(model_dir), str(seq), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    read = Schedule.read(out)
+    read.validate(space, 8)
+    assert len(read.changes()) == 1  # period 1 s from the manifest: one selection in 0.8 s
+
+
+def test_too_few_points_keep_last(model_dir: Path, kitti_root: Path) -> None:
+    model = load_model(model_dir)
+    sel = Selector(model)
+    assert sel.select(np.zeros((10, 4), np.float32)) == model.defaults()  # before any selection
+    first = sel.select(kitti_scan(kitti_root, "01", 0))
+    assert sel.select(kitti_scan(kitti_root, "04", 0)[:999]) == sel.current
+    assert sel.last["kept"] == "too_few_points"
+    assert sel.current_u is not None and model.params_of(sel.current_u) == sel.current
+    assert set(first) == {"resolution", "keyframe_interval"}
+
+
+def full_knn(model, e_s: np.ndarray, U: np.ndarray) -> np.ndarray:
+    """scikit-learn's kNN over ALL rows of the artifact, at (e_s, U)."""
+    counts = np.diff(model.env_offsets)
+    feats = np.hstack([np.repeat(model.env, counts, axis=0), model.rows_x])
+    knn = KNeighborsRegressor(n_neighbors=model.k).fit(feats, model.rows_t)
+    q = np.hstack([np.repeat(e_s[None], len(U), 0), U * model.x_scale])
+    return knn.predict(q)
+
+
+def test_selection_agrees_with_brute_force(model_dir: Path, kitti_root: Path) -> None:
+    model = load_model(model_dir)
+    for seq, frame in (("01", 5), ("10", 2), ("06", 9)):
+        e_s = model.environment(kitti_scan(kitti_root, seq, frame))
+        sel = Selector(model, hysteresis=0.0, refine_iters=0, subset_rows=200)
+        nb = Neighbourhood(model, e_s, 200)
+        pred = nb.predict(sel.candidates)
+        brute = full_knn(model, e_s, sel.candidates)
+        assert pred.exact.any()
+        np.testing.assert_allclose(pred.t[pred.exact], brute[pred.exact], rtol=1e-12)
+        # with every row in the subset every candidate is certified and exact
+        everything = Neighbourhood(model, e_s, len(model.rows_t))
+        allp = everything.predict(sel.candidates)
+        assert allp.exact.all()
+        np.testing.assert_allclose(allp.t, brute, rtol=1e-12)
+        chosen = sel.select_environment(e_s)
+        best = sel.candidates[int(np.argmin(np.where(pred.exact, brute, np.inf)))]
+        assert chosen == model.params_of(best)
+
+
+def test_refinement_and_hysteresis(model_dir: Path, kitti_root: Path) -> None:
+    model = load_model(model_dir)
+    e_s = model.environment(kitti_scan(kitti_root, "01", 1))
+    plain = Selector(model, refine_iters=0)
+    refined = Selector(model, refine_iters=6)
+    plain.select_environment(e_s)
+    refined.select_environment(e_s)
+    assert refined.last["predicted_t"] <= plain.last["predicted_t"]
+    sticky = Selector(model, hysteresis=1e9)
+    p0 = sticky.select_environment(model.environment(kitti_scan(kitti_root, "01", 0)))
+    assert sticky.select_environment(model.environment(kitti_scan(kitti_root, "10", 9))) == p0
+    assert sticky.last["kept"] == "hysteresis"
