@@ -87,8 +87,9 @@ class DescriptorConfig:
         if not 0 < self.t_e < 1:
             raise ConfigError(f"t_e must be in (0, 1), got {self.t_e}")
         if self.range_bins < 1 or not self.bin_m > 0:
-            raise ConfigError("range_bins must be >= 1 and bin_m > 0, "
-                              f"got ({self.range_bins}, {self.bin_m})")
+            raise ConfigError(
+                f"range_bins must be >= 1 and bin_m > 0, got ({self.range_bins}, {self.bin_m})"
+            )
 
     @property
     def size(self) -> int:
@@ -110,8 +111,9 @@ class DescriptorConfig:
             raise ConfigError(f"descriptor settings: {exc}") from None
 
 
-def describe(points_lidar: NDArray[np.floating], config: DescriptorConfig = DescriptorConfig()
-             ) -> NDArray[np.float32]:
+def describe(
+    points_lidar: NDArray[np.floating], config: DescriptorConfig = DescriptorConfig()
+) -> NDArray[np.float32]:
     """The descriptor of one scan: (config.size,) float32 (90 values by default).
 
     points_lidar: (N, 3) or (N, 4) points in the sensor frame [m] (a 4th column is ignored).
@@ -121,8 +123,9 @@ def describe(points_lidar: NDArray[np.floating], config: DescriptorConfig = Desc
     hist = np.zeros((config.range_bins, N_CLASSES, N_SUB), np.float64)
     if len(counts):
         cls, sub = classify(cov, config.t_e)
-        rbin = np.minimum((np.linalg.norm(mean, axis=1) / config.bin_m).astype(np.int64),
-                          config.range_bins - 1)
+        rbin = np.minimum(
+            (np.linalg.norm(mean, axis=1) / config.bin_m).astype(np.int64), config.range_bins - 1
+        )
         flat = (rbin * N_CLASSES + cls) * N_SUB + sub
         hist = np.bincount(flat, minlength=config.size).astype(np.float64)
         if config.normalize:
@@ -130,8 +133,9 @@ def describe(points_lidar: NDArray[np.floating], config: DescriptorConfig = Desc
     return np.asarray(hist, np.float32).reshape(-1)
 
 
-def _crop(points_lidar: NDArray[np.floating], max_range_m: float
-          ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
+def _crop(
+    points_lidar: NDArray[np.floating], max_range_m: float
+) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
     """x, y, z (each (M,) float32) of the finite points within ``max_range_m`` of the sensor.
 
     The kept points are interleaved (stride ``_STRIDE``): neighbouring scan points fall into the
@@ -156,9 +160,11 @@ def _crop(points_lidar: NDArray[np.floating], max_range_m: float
 _STRIDE = 16
 
 
-def voxel_moments(xyz: tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]],
-                  voxel_size_m: float, min_points: int
-                  ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+def voxel_moments(
+    xyz: tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]],
+    voxel_size_m: float,
+    min_points: int,
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
     """Per voxel with >= min_points points: counts (M,), mean (M, 3) [m], covariance (M, 3, 3).
 
     xyz: the point coordinates x, y, z [m], each (N,) float32 (as ``_crop`` returns them).
@@ -176,8 +182,9 @@ def voxel_moments(xyz: tuple[NDArray[np.float32], NDArray[np.float32], NDArray[n
     dims = np.array([c.max() for c in cells], np.int64) - lo + 1
     n_cells = int(dims[0] * dims[1] * dims[2])
     if n_cells >= 2**24:  # float32 cell keys are exact below 2^24
-        key = ((cells[0].astype(np.int64) - lo[0]) * dims[1] + (cells[1].astype(np.int64) - lo[1])
-               ) * dims[2] + (cells[2].astype(np.int64) - lo[2])
+        key = (
+            (cells[0].astype(np.int64) - lo[0]) * dims[1] + (cells[1].astype(np.int64) - lo[1])
+        ) * dims[2] + (cells[2].astype(np.int64) - lo[2])
     else:
         kf = cells[0] * np.float32(dims[1] * dims[2])
         kf += cells[1] * np.float32(dims[2])
@@ -223,9 +230,12 @@ def sym3_eigvals(cov: NDArray[np.float64]) -> NDArray[np.float64]:
     p2 = b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1
     p = np.sqrt(p2 / 6.0)
     safe = np.where(p > 0, p, 1.0)
-    det = (b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02)
-           + a02 * (a01 * a12 - b11 * a02))
-    r = np.clip(det / (2.0 * safe ** 3), -1.0, 1.0)
+    det = (
+        b00 * (b11 * b22 - a12 * a12)
+        - a01 * (a01 * b22 - a12 * a02)
+        + a02 * (a01 * a12 - b11 * a02)
+    )
+    r = np.clip(det / (2.0 * safe**3), -1.0, 1.0)
     phi = np.arccos(r) / 3.0
     l1 = q + 2.0 * p * np.cos(phi)
     l3 = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
@@ -291,5 +301,9 @@ def classify(cov: NDArray[np.float64], t_e: float) -> tuple[NDArray[np.int64], N
 
 def bin_names(config: DescriptorConfig = DescriptorConfig()) -> list[str]:
     """Human-readable name of every descriptor value, e.g. ``r03_planar_vertical_plane``."""
-    return [f"r{b:02d}_{CLASS_NAMES[c]}_{SUB_NAMES[c][s]}"
-            for b in range(config.range_bins) for c in range(N_CLASSES) for s in range(N_SUB)]
+    return [
+        f"r{b:02d}_{CLASS_NAMES[c]}_{SUB_NAMES[c][s]}"
+        for b in range(config.range_bins)
+        for c in range(N_CLASSES)
+        for s in range(N_SUB)
+    ]

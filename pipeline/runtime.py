@@ -43,8 +43,17 @@ from pipeline.errors import ArtifactError
 
 SCHEMA_VERSION = "1.0"  # = schemas.SCHEMA_VERSION (not imported: schemas pulls in nothing heavy
 # today, but the runtime must stay importable on its own)
-REQUIRED_FILES = ("env.npy", "env_offsets.npy", "env_frames.npy", "rows_x.npy", "rows_t.npy",
-                  "candidates.npy", "pca_mean.npy", "pca_components.npy", "pca_scale.npy")
+REQUIRED_FILES = (
+    "env.npy",
+    "env_offsets.npy",
+    "env_frames.npy",
+    "rows_x.npy",
+    "rows_t.npy",
+    "candidates.npy",
+    "pca_mean.npy",
+    "pca_components.npy",
+    "pca_scale.npy",
+)
 MANIFEST_HASH_KEY = "manifest_sha256"
 
 Params = dict[str, float]
@@ -53,7 +62,9 @@ Params = dict[str, float]
 def canonical_manifest_hash(manifest: dict[str, Any]) -> str:
     """sha256 of the manifest without its own hash, as sorted compact JSON."""
     body = {k: v for k, v in manifest.items() if k != MANIFEST_HASH_KEY}
-    return hashlib.sha256(json.dumps(body, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+    return hashlib.sha256(
+        json.dumps(body, sort_keys=True, separators=(",", ":")).encode()
+    ).hexdigest()
 
 
 @dataclass
@@ -155,22 +166,36 @@ def load_model(path: str | Path, expected_algorithm: str | None = None) -> Model
     manifest = _read_manifest(path)
     major = str(manifest.get("schema_version", "")).split(".")[0]
     if major != SCHEMA_VERSION.split(".")[0]:
-        raise ArtifactError(f"{path}: artifact schema version {manifest.get('schema_version')!r}, "
-                            f"this adaptune reads {SCHEMA_VERSION}")
+        raise ArtifactError(
+            f"{path}: artifact schema version {manifest.get('schema_version')!r}, "
+            f"this adaptune reads {SCHEMA_VERSION}"
+        )
     algorithm = manifest.get("algorithm")
     if expected_algorithm is not None and algorithm != expected_algorithm:
-        raise ArtifactError(f"{path}: artifact is for algorithm {algorithm!r}, "
-                            f"expected {expected_algorithm!r}")
+        raise ArtifactError(
+            f"{path}: artifact is for algorithm {algorithm!r}, expected {expected_algorithm!r}"
+        )
     arrays = _read_arrays(path, manifest)
     try:
-        model = Model(path, manifest, DescriptorConfig.from_json(manifest["descriptor"]),
-                      arrays["pca_mean.npy"], arrays["pca_scale.npy"], arrays["pca_components.npy"],
-                      arrays["env.npy"], arrays["env_offsets.npy"].astype(np.int64),
-                      arrays["rows_x.npy"], arrays["rows_t.npy"], arrays["candidates.npy"],
-                      list(manifest["parameter_space"]))
+        model = Model(
+            path,
+            manifest,
+            DescriptorConfig.from_json(manifest["descriptor"]),
+            arrays["pca_mean.npy"],
+            arrays["pca_scale.npy"],
+            arrays["pca_components.npy"],
+            arrays["env.npy"],
+            arrays["env_offsets.npy"].astype(np.int64),
+            arrays["rows_x.npy"],
+            arrays["rows_t.npy"],
+            arrays["candidates.npy"],
+            list(manifest["parameter_space"]),
+        )
         _check_shapes(model)
     except (KeyError, TypeError, ValueError) as exc:
-        raise ArtifactError(f"{path}: inconsistent artifact ({type(exc).__name__}: {exc})") from None
+        raise ArtifactError(
+            f"{path}: inconsistent artifact ({type(exc).__name__}: {exc})"
+        ) from None
     except Exception as exc:  # ConfigError from DescriptorConfig
         if exc.__class__.__name__ == "ConfigError":
             raise ArtifactError(f"{path}: {exc}") from None
@@ -227,11 +252,17 @@ def _check_shapes(m: Model) -> None:
         problems.append(f"pca_components {m.pca_components.shape} != ({d}, {m.descriptor.size})")
     if m.pca_mean.shape != (m.descriptor.size,) or m.pca_scale.shape != (m.descriptor.size,):
         problems.append("pca_mean/pca_scale length != descriptor size")
-    if m.env_offsets.shape != (n_env + 1,) or m.env_offsets[0] != 0 or m.env_offsets[-1] != rows \
-            or np.any(np.diff(m.env_offsets) < 0):
+    if (
+        m.env_offsets.shape != (n_env + 1,)
+        or m.env_offsets[0] != 0
+        or m.env_offsets[-1] != rows
+        or np.any(np.diff(m.env_offsets) < 0)
+    ):
         problems.append("env_offsets do not partition the rows")
     if m.rows_x.shape != (rows, p) or m.candidates_u.ndim != 2 or m.candidates_u.shape[1] != p:
-        problems.append(f"rows_x {m.rows_x.shape} / candidates {m.candidates_u.shape} vs {p} parameters")
+        problems.append(
+            f"rows_x {m.rows_x.shape} / candidates {m.candidates_u.shape} vs {p} parameters"
+        )
     if problems:
         raise ArtifactError(f"{m.path}: inconsistent artifact ({problems[0]})")
 
@@ -283,14 +314,23 @@ class Selector:
     """Online parameter selection from scans (module docstring). Settings default to the
     manifest's ``selection`` block."""
 
-    def __init__(self, model: Model, period_s: float | None = None, hysteresis: float | None = None,
-                 min_scan_points: int | None = None, subset_rows: int | None = None,
-                 refine_iters: int | None = None, n_starts: int = 3) -> None:
+    def __init__(
+        self,
+        model: Model,
+        period_s: float | None = None,
+        hysteresis: float | None = None,
+        min_scan_points: int | None = None,
+        subset_rows: int | None = None,
+        refine_iters: int | None = None,
+        n_starts: int = 3,
+    ) -> None:
         sel = model.selection
         self.model = model
         self.period_s = float(sel["period_s"] if period_s is None else period_s)
         self.hysteresis = float(sel["hysteresis"] if hysteresis is None else hysteresis)
-        self.min_scan_points = int(sel["min_scan_points"] if min_scan_points is None else min_scan_points)
+        self.min_scan_points = int(
+            sel["min_scan_points"] if min_scan_points is None else min_scan_points
+        )
         self.subset_rows = int(sel["subset_rows"] if subset_rows is None else subset_rows)
         self.refine_iters = int(sel["refine_iters"] if refine_iters is None else refine_iters)
         self.n_starts = n_starts
@@ -308,7 +348,9 @@ class Selector:
 
     def due(self, stamp_ns: int) -> bool:
         """True when a selection is due at ``stamp_ns`` (first scan, or period_s elapsed)."""
-        return self.last_stamp_ns is None or stamp_ns - self.last_stamp_ns >= self.period_s * 1e9 - 1e6
+        return (
+            self.last_stamp_ns is None or stamp_ns - self.last_stamp_ns >= self.period_s * 1e9 - 1e6
+        )
 
     def update(self, points_lidar: NDArray[np.floating], stamp_ns: int) -> Params:
         """Streaming use: select when due, else keep the parameters in force."""
@@ -320,7 +362,7 @@ class Selector:
             self.last_stamp_ns = int(stamp_ns)
         pts = np.asarray(points_lidar)
         if pts.ndim != 2 or len(pts) < self.min_scan_points:
-            self.last = {"kept": "too_few_points", "points": int(len(pts))}
+            self.last = {"kept": "too_few_points", "points": len(pts)}
             return self.current
         return self.select_environment(self.model.environment(pts))
 
@@ -334,8 +376,12 @@ class Selector:
             if not t_best < t_cur - self.hysteresis:
                 u_best, t_best, kept = self.current_u, t_cur, True
         self.current_u = u_best
-        self.last = {"kept": "hysteresis" if kept else "", "predicted_t": t_best,
-                     "exact_fraction": exact_frac, "subset_rows": len(nb.rows)}
+        self.last = {
+            "kept": "hysteresis" if kept else "",
+            "predicted_t": t_best,
+            "exact_fraction": exact_frac,
+            "subset_rows": len(nb.rows),
+        }
         return self.model.params_of(u_best)
 
     def _search(self, nb: Neighbourhood) -> tuple[NDArray[np.float64], float, float]:
@@ -371,11 +417,17 @@ class Selector:
         stamps = np.asarray(reader.stamps_ns, np.int64)
         values = np.empty((len(stamps), len(self.model.names)))
         for i, stamp in enumerate(stamps):
-            params = self.select(reader[i].points_lidar, int(stamp)) if self.due(int(stamp)) \
+            params = (
+                self.select(reader[i].points_lidar, int(stamp))
+                if self.due(int(stamp))
                 else self.current
+            )
             values[i] = [params[n] for n in self.model.names]
-        return Schedule(np.arange(len(stamps), dtype=np.int32),
-                        {n: values[:, j].copy() for j, n in enumerate(self.model.names)}, stamps)
+        return Schedule(
+            np.arange(len(stamps), dtype=np.int32),
+            {n: values[:, j].copy() for j, n in enumerate(self.model.names)},
+            stamps,
+        )
 
 
 PARAMS_TOPIC = "/adaptune/params"
@@ -385,14 +437,25 @@ POSE_TOPIC = "/odometry/pose"
 def params_json_schema(model: Model) -> dict[str, Any]:
     """JSON Schema of the ``/adaptune/params`` messages (Foxglove plots every number)."""
     props: dict[str, Any] = {n: {"type": "number"} for n in model.names}
-    props.update({"frame": {"type": "integer"}, "selected": {"type": "boolean"},
-                  "predicted_rte_pct": {"type": ["number", "null"]}, "kept": {"type": "string"}})
-    return {"type": "object", "title": "adaptune.params", "properties": props,
-            "required": [*model.names, "frame"]}
+    props.update(
+        {
+            "frame": {"type": "integer"},
+            "selected": {"type": "boolean"},
+            "predicted_rte_pct": {"type": ["number", "null"]},
+            "kept": {"type": "string"},
+        }
+    )
+    return {
+        "type": "object",
+        "title": "adaptune.params",
+        "properties": props,
+        "required": [*model.names, "frame"],
+    }
 
 
-def run_live(model: Model, sequence: str | Path, out: str | Path,
-             selector: Selector | None = None) -> dict[str, int]:
+def run_live(
+    model: Model, sequence: str | Path, out: str | Path, selector: Selector | None = None
+) -> dict[str, int]:
     """Stream ``sequence`` through the model's odometry (``adapter.start`` / ``set_params``),
     selecting parameters online; write ``out`` (scans, ground truth, poses, parameters).
 
@@ -409,8 +472,11 @@ def run_live(model: Model, sequence: str | Path, out: str | Path,
     selections = changes = 0
     with SequenceReader(sequence) as reader:
         info = reader.info
-        info.extra = {**info.extra, "adaptune.model": str(model.path),
-                      "adaptune.algorithm": model.algorithm}
+        info.extra = {
+            **info.extra,
+            "adaptune.model": str(model.path),
+            "adaptune.algorithm": model.algorithm,
+        }
         with SequenceWriter(out, info) as writer:
             for scan in reader:
                 selected = selector.due(scan.stamp_ns)
@@ -427,9 +493,16 @@ def run_live(model: Model, sequence: str | Path, out: str | Path,
                 writer.add_pose(POSE_TOPIC, scan.stamp_ns, T)
                 t = selector.last.get("predicted_t") if selected else None
                 pred = None if t is None else float(np.expm1(t) if model.target == "log" else t)
-                writer.add_json(PARAMS_TOPIC, scan.stamp_ns,
-                                {**params, "frame": scan.frame, "selected": bool(selected),
-                                 "predicted_rte_pct": pred,
-                                 "kept": str(selector.last.get("kept", "")) if selected else ""},
-                                schema)
+                writer.add_json(
+                    PARAMS_TOPIC,
+                    scan.stamp_ns,
+                    {
+                        **params,
+                        "frame": scan.frame,
+                        "selected": bool(selected),
+                        "predicted_rte_pct": pred,
+                        "kept": str(selector.last.get("kept", "")) if selected else "",
+                    },
+                    schema,
+                )
     return {"frames": len(reader), "selections": selections, "changes": changes}

@@ -56,8 +56,9 @@ ARTIFACT_SCHEMA = "artifact.schema.json"
 # descriptors of sequences
 
 
-def describe_sequence(path: str | Path, config: DescriptorConfig
-                      ) -> tuple[NDArray[np.int32], NDArray[np.int64], NDArray[np.float32]]:
+def describe_sequence(
+    path: str | Path, config: DescriptorConfig
+) -> tuple[NDArray[np.int32], NDArray[np.int64], NDArray[np.float32]]:
     """Descriptor of every frame of one sequence MCAP: frames (N,), stamps_ns (N,), (N, 90)."""
     from pipeline.sequence import SequenceReader
 
@@ -96,10 +97,15 @@ class Pca:
         return ((h - self.mean) / self.scale) @ self.components.T
 
     def to_json(self) -> dict[str, Any]:
-        return {"transform": "hellinger_sqrt", "dim": self.dim, "features": int(self.mean.shape[0]),
-                "n_train_frames": self.n_train_frames, "train_sequences": self.train_sequences,
-                "explained_variance_ratio": [float(v) for v in self.explained_variance_ratio],
-                "descriptor": dict(self.descriptor)}
+        return {
+            "transform": "hellinger_sqrt",
+            "dim": self.dim,
+            "features": int(self.mean.shape[0]),
+            "n_train_frames": self.n_train_frames,
+            "train_sequences": self.train_sequences,
+            "explained_variance_ratio": [float(v) for v in self.explained_variance_ratio],
+            "descriptor": dict(self.descriptor),
+        }
 
     def save(self, folder: str | Path) -> None:
         """Write mean.npy, components.npy, scale.npy and pca.json (with sha256) into ``folder``,
@@ -124,30 +130,41 @@ class Pca:
                 arr[name] = np.load(folder / name, allow_pickle=False)
         except (FileNotFoundError, KeyError, ValueError) as exc:
             raise InputError(f"{folder}: not a PCA folder ({type(exc).__name__}: {exc})") from None
-        return cls(arr["mean.npy"], arr["scale.npy"], arr["components.npy"],
-                   np.asarray(meta["explained_variance_ratio"]), int(meta["n_train_frames"]),
-                   list(meta["train_sequences"]), dict(meta.get("descriptor") or {}))
+        return cls(
+            arr["mean.npy"],
+            arr["scale.npy"],
+            arr["components.npy"],
+            np.asarray(meta["explained_variance_ratio"]),
+            int(meta["n_train_frames"]),
+            list(meta["train_sequences"]),
+            dict(meta.get("descriptor") or {}),
+        )
 
 
-def fit_pca(descriptors: NDArray[np.floating], dim: int, train_sequences: Sequence[str] = ()) -> Pca:
+def fit_pca(
+    descriptors: NDArray[np.floating], dim: int, train_sequences: Sequence[str] = ()
+) -> Pca:
     """PCA of (N, F) training descriptors to ``dim`` components (module docstring: scaling)."""
     d = np.asarray(descriptors, np.float64)
     if d.ndim != 2 or len(d) < 2:
         raise InputError(f"PCA needs at least 2 training frames, got {len(d)}")
     if dim > min(d.shape):
-        raise ConfigError(f"descriptors.pca_dim must be <= min(frames, features) = "
-                          f"{min(d.shape)}, got {dim}")
+        raise ConfigError(
+            f"descriptors.pca_dim must be <= min(frames, features) = {min(d.shape)}, got {dim}"
+        )
     h = np.sqrt(np.maximum(d, 0.0))
     mean = h.mean(axis=0)
     centred = h - mean
-    rms = float(np.sqrt(np.mean(centred ** 2))) or 1.0
+    rms = float(np.sqrt(np.mean(centred**2))) or 1.0
     _, sv, vt = np.linalg.svd(centred / rms, full_matrices=False)
-    var = sv ** 2
+    var = sv**2
     comps = vt[:dim]
     # sign convention: the largest |loading| of every component is positive (deterministic)
     signs = np.sign(comps[np.arange(dim), np.argmax(np.abs(comps), axis=1)])
     comps = comps * np.where(signs == 0, 1.0, signs)[:, None]
-    return Pca(mean, np.full(d.shape[1], rms), comps, var[:dim] / var.sum(), len(d), list(train_sequences))
+    return Pca(
+        mean, np.full(d.shape[1], rms), comps, var[:dim] / var.sum(), len(d), list(train_sequences)
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -188,7 +205,9 @@ class TrainingRows:
             raise InputError("no surrogate rows (no ok trials with per-frame RTE and environment)")
         for name in ("E", "U", "sequences", "frames", "trials"):
             if len(getattr(self, name)) != m:
-                raise InputError(f"surrogate rows: {name} has {len(getattr(self, name))} rows, y has {m}")
+                raise InputError(
+                    f"surrogate rows: {name} has {len(getattr(self, name))} rows, y has {m}"
+                )
         bad = ~np.isfinite(self.y) | ~np.isfinite(self.E).all(1) | ~np.isfinite(self.U).all(1)
         if bad.any():
             raise InputError(f"surrogate rows: {int(bad.sum())} rows with NaN/inf values")
@@ -232,8 +251,9 @@ def from_target(t: NDArray[np.float64], target: str) -> NDArray[np.float64]:
     return np.expm1(t) if target == "log" else t
 
 
-def fit_surrogate(rows: TrainingRows, space_json: list[dict[str, Any]],
-                  settings: SurrogateSettings) -> FittedSurrogate:
+def fit_surrogate(
+    rows: TrainingRows, space_json: list[dict[str, Any]], settings: SurrogateSettings
+) -> FittedSurrogate:
     """Scale the rows, group them by environment, build candidates, cross-validate."""
     if settings.target not in ("log", "linear"):
         raise ConfigError(f"surrogate.target must be 'log' or 'linear', got {settings.target!r}")
@@ -255,19 +275,34 @@ def fit_surrogate(rows: TrainingRows, space_json: list[dict[str, Any]],
     rows_t = to_target(rows.y[order], settings.target)
     cands = candidate_set(rows.U, len(space_json), settings.n_sobol, settings.seed)
     summary = {
-        "rows": len(rows.y), "environments": len(uniq), "sequences": sorted(set(rows.sequences.tolist())),
+        "rows": len(rows.y),
+        "environments": len(uniq),
+        "sequences": sorted(set(rows.sequences.tolist())),
         "trials": len(np.unique(seq_code * (int(rows.trials.max()) + 1) + rows.trials)),
-        "y_mean": float(rows.y.mean()), "y_median": float(np.median(rows.y)),
+        "y_mean": float(rows.y.mean()),
+        "y_median": float(np.median(rows.y)),
         "candidates": len(cands),
     }
     cv = cross_validate(rows, settings, e_scale, x_scale)
-    return FittedSurrogate(settings, e_scale, x_scale, env, offsets,
-                           [str(seq_names[u // span]) for u in uniq],
-                           (uniq % span).astype(np.int64),
-                           rows_x, rows_t, cands, summary, cv)
+    return FittedSurrogate(
+        settings,
+        e_scale,
+        x_scale,
+        env,
+        offsets,
+        [str(seq_names[u // span]) for u in uniq],
+        (uniq % span).astype(np.int64),
+        rows_x,
+        rows_t,
+        cands,
+        summary,
+        cv,
+    )
 
 
-def candidate_set(U: NDArray[np.float64], n_params: int, n_sobol: int, seed: int) -> NDArray[np.float64]:
+def candidate_set(
+    U: NDArray[np.float64], n_params: int, n_sobol: int, seed: int
+) -> NDArray[np.float64]:
     """(C, P) candidates in [0, 1]: every distinct trial parameter vector plus a scrambled Sobol set."""
     from scipy.stats import qmc
 
@@ -279,8 +314,9 @@ def candidate_set(U: NDArray[np.float64], n_params: int, n_sobol: int, seed: int
     return np.clip(np.vstack(parts), 0.0, 1.0)
 
 
-def cross_validate(rows: TrainingRows, settings: SurrogateSettings, e_scale: float,
-                   x_scale: float) -> dict[str, Any]:
+def cross_validate(
+    rows: TrainingRows, settings: SurrogateSettings, e_scale: float, x_scale: float
+) -> dict[str, Any]:
     """Leave-one-sequence-out CV (module docstring). Held-out frames are subsampled to at most
     ``cv_max_frames`` per sequence (all trials of a kept frame stay, for the regret)."""
     from sklearn.neighbors import KNeighborsRegressor
@@ -289,8 +325,15 @@ def cross_validate(rows: TrainingRows, settings: SurrogateSettings, e_scale: flo
     t = to_target(rows.y, settings.target)
     seqs = sorted(set(rows.sequences.tolist()))
     if len(seqs) < 2:
-        return {"method": "leave-one-sequence-out", "folds": 0, "note": "needs >= 2 sequences",
-                "mae": None, "rmse": None, "regret_mean": None, "per_sequence": {}}
+        return {
+            "method": "leave-one-sequence-out",
+            "folds": 0,
+            "note": "needs >= 2 sequences",
+            "mae": None,
+            "rmse": None,
+            "regret_mean": None,
+            "per_sequence": {},
+        }
     rng = np.random.default_rng(settings.seed)
     errs, per_seq, regrets, chosen, best = [], {}, [], [], []
     for seq in seqs:
@@ -307,8 +350,11 @@ def cross_validate(rows: TrainingRows, settings: SurrogateSettings, e_scale: flo
         true_y = rows.y[test]
         err = pred_y - true_y
         errs.append(err)
-        per_seq[seq] = {"rows": int(test.sum()), "mae": float(np.mean(np.abs(err))),
-                        "rmse": float(np.sqrt(np.mean(err ** 2)))}
+        per_seq[seq] = {
+            "rows": int(test.sum()),
+            "mae": float(np.mean(np.abs(err))),
+            "rmse": float(np.sqrt(np.mean(err**2))),
+        }
         fr = rows.frames[test]
         for f in np.unique(fr):
             sel = fr == f
@@ -317,13 +363,25 @@ def cross_validate(rows: TrainingRows, settings: SurrogateSettings, e_scale: flo
             chosen.append(yt[np.argmin(yp)])
             best.append(yt.min())
     if not errs:
-        return {"method": "leave-one-sequence-out", "folds": 0, "mae": None, "rmse": None,
-                "regret_mean": None, "per_sequence": {}}
+        return {
+            "method": "leave-one-sequence-out",
+            "folds": 0,
+            "mae": None,
+            "rmse": None,
+            "regret_mean": None,
+            "per_sequence": {},
+        }
     e = np.concatenate(errs)
-    return {"method": "leave-one-sequence-out", "folds": len(per_seq),
-            "mae": float(np.mean(np.abs(e))), "rmse": float(np.sqrt(np.mean(e ** 2))),
-            "regret_mean": float(np.mean(regrets)), "y_chosen_mean": float(np.mean(chosen)),
-            "y_oracle_mean": float(np.mean(best)), "per_sequence": per_seq}
+    return {
+        "method": "leave-one-sequence-out",
+        "folds": len(per_seq),
+        "mae": float(np.mean(np.abs(e))),
+        "rmse": float(np.sqrt(np.mean(e**2))),
+        "regret_mean": float(np.mean(regrets)),
+        "y_chosen_mean": float(np.mean(chosen)),
+        "y_oracle_mean": float(np.mean(best)),
+        "per_sequence": per_seq,
+    }
 
 
 # ---------------------------------------------------------------------------------------------
@@ -341,8 +399,13 @@ class ArtifactInfo:
     inputs: Mapping[str, str] = field(default_factory=dict)
 
 
-def write_artifact(out: str | Path, fitted: FittedSurrogate, pca: Pca, info: ArtifactInfo,
-                   repo: str | Path | None = None) -> dict[str, Any]:
+def write_artifact(
+    out: str | Path,
+    fitted: FittedSurrogate,
+    pca: Pca,
+    info: ArtifactInfo,
+    repo: str | Path | None = None,
+) -> dict[str, Any]:
     """Write ``out``/ (manifest.json + .npy arrays) atomically; returns the manifest.
 
     The manifest is validated against schemas/artifact.schema.json before the rename.
@@ -350,11 +413,15 @@ def write_artifact(out: str | Path, fitted: FittedSurrogate, pca: Pca, info: Art
     from schemas import SCHEMA_VERSION
 
     arrays = {
-        "env.npy": fitted.env, "env_offsets.npy": fitted.env_offsets,
+        "env.npy": fitted.env,
+        "env_offsets.npy": fitted.env_offsets,
         "env_frames.npy": fitted.env_frames,
-        "rows_x.npy": fitted.rows_x, "rows_t.npy": fitted.rows_t,
+        "rows_x.npy": fitted.rows_x,
+        "rows_t.npy": fitted.rows_t,
         "candidates.npy": fitted.candidates_u,
-        "pca_mean.npy": pca.mean, "pca_components.npy": pca.components, "pca_scale.npy": pca.scale,
+        "pca_mean.npy": pca.mean,
+        "pca_components.npy": pca.components,
+        "pca_scale.npy": pca.scale,
     }
     with atomic_dir(out) as tmp:
         files = {name: _save_npy(tmp / name, arr) for name, arr in arrays.items()}
@@ -365,13 +432,26 @@ def write_artifact(out: str | Path, fitted: FittedSurrogate, pca: Pca, info: Art
             "parameter_space": info.space,
             "descriptor": info.descriptor.to_json(),
             "pca": pca.to_json(),
-            "model": {"type": "knn", "k": fitted.settings.k, "weights": "uniform",
-                      "metric": "euclidean", "target": fitted.settings.target},
-            "scaling": {"environment": {"w_e": fitted.settings.w_e, "e_scale": fitted.e_scale,
-                                        "formula": "E_s = w_e * E / e_scale"},
-                        "parameters": {"w_x": fitted.settings.w_x, "x_scale": fitted.x_scale,
-                                       "formula": "X_s = x_scale * to_unit(x), x_scale = w_x*sqrt(12)"},
-                        "target": fitted.settings.target},
+            "model": {
+                "type": "knn",
+                "k": fitted.settings.k,
+                "weights": "uniform",
+                "metric": "euclidean",
+                "target": fitted.settings.target,
+            },
+            "scaling": {
+                "environment": {
+                    "w_e": fitted.settings.w_e,
+                    "e_scale": fitted.e_scale,
+                    "formula": "E_s = w_e * E / e_scale",
+                },
+                "parameters": {
+                    "w_x": fitted.settings.w_x,
+                    "x_scale": fitted.x_scale,
+                    "formula": "X_s = x_scale * to_unit(x), x_scale = w_x*sqrt(12)",
+                },
+                "target": fitted.settings.target,
+            },
             "selection": dict(info.selection),
             "training": {**fitted.summary, "env_sequences": fitted.env_sequences},
             "cross_validation": fitted.cv,
@@ -403,14 +483,34 @@ def provenance(repo: str | Path | None, inputs: Mapping[str, str]) -> dict[str, 
     repo = Path(repo) if repo else Path.cwd()
     git_rev, dirty = None, None
     try:
-        git_rev = subprocess.run(["git", "rev-parse", "HEAD"], cwd=repo, capture_output=True,
-                                 text=True, check=True, timeout=10).stdout.strip() or None
-        dirty = bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                                    cwd=repo, capture_output=True, text=True, timeout=10).stdout.strip())
+        git_rev = (
+            subprocess.run(
+                ["git", "rev-parse", "HEAD"],
+                cwd=repo,
+                capture_output=True,
+                text=True,
+                check=True,
+                timeout=10,
+            ).stdout.strip()
+            or None
+        )
+        dirty = bool(
+            subprocess.run(
+                ["git", "status", "--porcelain", "--untracked-files=no"],
+                cwd=repo,
+                capture_output=True,
+                text=True,
+                timeout=10,
+            ).stdout.strip()
+        )
     except (OSError, subprocess.SubprocessError):
         pass
-    return {"git_revision": git_rev, "git_dirty": dirty, "dvc": _dvc_lock_info(repo, inputs),
-            "inputs": dict(inputs)}
+    return {
+        "git_revision": git_rev,
+        "git_dirty": dirty,
+        "dvc": _dvc_lock_info(repo, inputs),
+        "inputs": dict(inputs),
+    }
 
 
 def _dvc_lock_info(repo: Path, inputs: Mapping[str, str]) -> dict[str, Any] | None:
@@ -450,8 +550,9 @@ class atomic_dir:  # noqa: N801 - used like contextlib helpers
 
     def __enter__(self) -> Path:
         self.final.parent.mkdir(parents=True, exist_ok=True)
-        self.tmp = Path(tempfile.mkdtemp(prefix=f".{self.final.name}.", suffix=".tmp",
-                                         dir=self.final.parent))
+        self.tmp = Path(
+            tempfile.mkdtemp(prefix=f".{self.final.name}.", suffix=".tmp", dir=self.final.parent)
+        )
         return self.tmp
 
     def __exit__(self, exc_type: object, *rest: object) -> None:
@@ -495,7 +596,11 @@ def read_index(sequences_dir: str | Path) -> dict[str, list[str]]:
         raise InputError(f"{path}: no such index (written by the simulate stage)") from None
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(index, dict) or not isinstance(index.get("train"), list) or not index["train"]:
+    if (
+        not isinstance(index, dict)
+        or not isinstance(index.get("train"), list)
+        or not index["train"]
+    ):
         raise InputError(f"{path}: needs a non-empty 'train' list of sequence names")
     for split, names in index.items():
         for name in names:
@@ -508,8 +613,9 @@ def _describe_job(args: tuple[str, DescriptorConfig]) -> tuple[NDArray[Any], ...
     return describe_sequence(args[0], args[1])
 
 
-def describe_dataset(sequences_dir: str | Path, config: DescriptorConfig, pca_dim: int,
-                     workers: int = 1) -> DescriptorSet:
+def describe_dataset(
+    sequences_dir: str | Path, config: DescriptorConfig, pca_dim: int, workers: int = 1
+) -> DescriptorSet:
     """Descriptor of every frame of every sequence in index.json (a process pool over the
     sequences) and the PCA fitted on the 'train' frames only."""
     from concurrent.futures import ProcessPoolExecutor
@@ -522,8 +628,9 @@ def describe_dataset(sequences_dir: str | Path, config: DescriptorConfig, pca_di
             results = list(pool.map(_describe_job, jobs))
     else:
         results = [_describe_job(j) for j in jobs]
-    seqs = np.concatenate([np.full(len(r[0]), n, dtype=object) for n, r in zip(names, results,
-                                                                                 strict=True)])
+    seqs = np.concatenate(
+        [np.full(len(r[0]), n, dtype=object) for n, r in zip(names, results, strict=True)]
+    )
     frames = np.concatenate([r[0] for r in results])
     stamps = np.concatenate([r[1] for r in results])
     desc = np.concatenate([r[2] for r in results])
@@ -533,8 +640,9 @@ def describe_dataset(sequences_dir: str | Path, config: DescriptorConfig, pca_di
     return DescriptorSet(seqs.astype(str), frames, stamps, desc, pca)
 
 
-def write_descriptor_set(ds: DescriptorSet, out: str | Path, environment: str | Path,
-                         pca_dir: str | Path) -> None:
+def write_descriptor_set(
+    ds: DescriptorSet, out: str | Path, environment: str | Path, pca_dir: str | Path
+) -> None:
     """descriptors Parquet (schemas.arrow.DESCRIPTORS), environment Parquet (sequence, frame,
     e0..) and the PCA folder, each written atomically."""
     import pyarrow as pa
@@ -544,19 +652,26 @@ def write_descriptor_set(ds: DescriptorSet, out: str | Path, environment: str | 
     from schemas.arrow import DESCRIPTORS
 
     if ds.descriptors.shape[1] != 90:
-        raise ConfigError(f"the DESCRIPTORS table has 90 columns, the descriptor has "
-                          f"{ds.descriptors.shape[1]} (range_bins must be 10)")
+        raise ConfigError(
+            f"the DESCRIPTORS table has 90 columns, the descriptor has "
+            f"{ds.descriptors.shape[1]} (range_bins must be 10)"
+        )
     base = [pa.array(ds.sequences, pa.string()), pa.array(ds.frames, pa.int32())]
     cols = [*base, pa.array(ds.stamps_ns, pa.int64())]
     cols += [pa.array(ds.descriptors[:, i], pa.float32()) for i in range(90)]
     table = pa.Table.from_arrays(cols, schema=DESCRIPTORS)
     env = ds.environment
     env_schema = pa.schema(
-        [pa.field("sequence", pa.string(), nullable=False), pa.field("frame", pa.int32(), nullable=False)]
+        [
+            pa.field("sequence", pa.string(), nullable=False),
+            pa.field("frame", pa.int32(), nullable=False),
+        ]
         + [pa.field(f"e{i}", pa.float32(), nullable=False) for i in range(env.shape[1])],
-        metadata={**(DESCRIPTORS.metadata or {}), b"adaptune.table": b"environment"})
-    env_table = pa.Table.from_arrays(base + [pa.array(env[:, i], pa.float32())
-                                             for i in range(env.shape[1])], schema=env_schema)
+        metadata={**(DESCRIPTORS.metadata or {}), b"adaptune.table": b"environment"},
+    )
+    env_table = pa.Table.from_arrays(
+        base + [pa.array(env[:, i], pa.float32()) for i in range(env.shape[1])], schema=env_schema
+    )
     with atomic_path(out) as tmp:
         pq.write_table(table, tmp)
     with atomic_path(environment) as tmp:
@@ -568,8 +683,9 @@ def write_descriptor_set(ds: DescriptorSet, out: str | Path, environment: str | 
 # rows from the results database (the `surrogate` stage)
 
 
-def read_training_rows(db_path: str | Path, algorithm: str | None,
-                       space_of: Any) -> tuple[str, list[dict[str, Any]], TrainingRows]:
+def read_training_rows(
+    db_path: str | Path, algorithm: str | None, space_of: Any
+) -> tuple[str, list[dict[str, Any]], TrainingRows]:
     """Rows of the ``surrogate_rows`` view of ``db_path`` for ``algorithm`` (None: the only one
     in the view). ``space_of(name)`` -> ParameterSpace. Returns (algorithm, space json, rows)."""
     import duckdb
@@ -583,38 +699,60 @@ def read_training_rows(db_path: str | Path, algorithm: str | None,
         raise InputError(f"{db_path}: not a DuckDB database ({exc})") from None
     try:
         try:
-            algos = [r[0] for r in con.execute(
-                "SELECT DISTINCT algorithm FROM surrogate_rows ORDER BY 1").fetchall()]
+            algos = [
+                r[0]
+                for r in con.execute(
+                    "SELECT DISTINCT algorithm FROM surrogate_rows ORDER BY 1"
+                ).fetchall()
+            ]
         except duckdb.Error as exc:
-            raise InputError(f"{db_path}: no surrogate_rows view ({str(exc).splitlines()[0]})") from None
+            raise InputError(
+                f"{db_path}: no surrogate_rows view ({str(exc).splitlines()[0]})"
+            ) from None
         if algorithm is None:
             if len(algos) != 1:
-                raise ConfigError(f"{db_path}: surrogate_rows holds algorithms {algos}; "
-                                  "choose one with --algorithm")
+                raise ConfigError(
+                    f"{db_path}: surrogate_rows holds algorithms {algos}; "
+                    "choose one with --algorithm"
+                )
             algorithm = algos[0]
         if algorithm not in algos:
-            raise InputError(f"{db_path}: no surrogate rows for algorithm {algorithm!r} "
-                             f"(have: {', '.join(algos) or 'none'})")
+            raise InputError(
+                f"{db_path}: no surrogate rows for algorithm {algorithm!r} "
+                f"(have: {', '.join(algos) or 'none'})"
+            )
         space = space_of(algorithm)
         cols = [r[0] for r in con.execute("DESCRIBE surrogate_rows").fetchall()]
-        e_cols = sorted((c for c in cols if c[0] == "e" and c[1:].isdigit()), key=lambda c: int(c[1:]))
+        e_cols = sorted(
+            (c for c in cols if c[0] == "e" and c[1:].isdigit()), key=lambda c: int(c[1:])
+        )
         p_cols = [f"p_{n}" for n in space.names]
         missing = [c for c in p_cols if c not in cols]
         if missing:
             raise InputError(f"{db_path}: surrogate_rows has no column {missing[0]}")
-        sql = (f"SELECT sequence, trial, frame, {', '.join(e_cols)}, {', '.join(p_cols)}, y "
-               "FROM surrogate_rows WHERE algorithm = ? AND y IS NOT NULL "
-               "ORDER BY sequence, frame, trial")
+        sql = (
+            f"SELECT sequence, trial, frame, {', '.join(e_cols)}, {', '.join(p_cols)}, y "
+            "FROM surrogate_rows WHERE algorithm = ? AND y IS NOT NULL "
+            "ORDER BY sequence, frame, trial"
+        )
         table = con.execute(sql, [algorithm]).fetchnumpy()
     finally:
         con.close()
     E = np.column_stack([np.asarray(table[c], np.float64) for c in e_cols])
     X = np.column_stack([np.asarray(table[c], np.float64) for c in p_cols])
-    U = np.stack([space.to_unit(dict(zip(space.names, x, strict=True))) for x in X]) \
-        if len(X) < 50_000 else _to_unit_fast(space, X)
-    rows = TrainingRows(E, U, np.asarray(table["y"], np.float64),
-                        np.asarray(table["sequence"]).astype(str),
-                        np.asarray(table["frame"], np.int64), np.asarray(table["trial"], np.int64))
+    U = (
+        np.stack([space.to_unit(dict(zip(space.names, x, strict=True))) for x in X])
+        if len(X) < 50_000
+        else _to_unit_fast(space, X)
+    )
+    rows = TrainingRows(
+        E,
+        U,
+        np.asarray(table["y"], np.float64),
+        np.asarray(table["sequence"]).astype(str),
+        np.asarray(table["frame"], np.int64),
+        np.asarray(table["trial"], np.int64),
+    )
     return algorithm, space.to_json(), rows
 
 

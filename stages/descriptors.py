@@ -26,24 +26,48 @@ class DescriptorsSection(Section):
 
 @click.command()
 @params_option
-@click.option("--sequences", "sequences_dir", required=True,
-              type=click.Path(file_okay=False, path_type=Path), help="Folder with index.json.")
-@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="descriptors Parquet (sequence, frame, stamp_ns, d0..d89).")
-@click.option("--environment", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="environment Parquet (sequence, frame, e0..e9).")
-@click.option("--pca", "pca_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="PCA folder (mean.npy, components.npy, scale.npy, pca.json).")
-def descriptors(params_path: Path, sequences_dir: Path, out: Path, environment: Path,
-                pca_dir: Path) -> None:
+@click.option(
+    "--sequences",
+    "sequences_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder with index.json.",
+)
+@click.option(
+    "--out",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="descriptors Parquet (sequence, frame, stamp_ns, d0..d89).",
+)
+@click.option(
+    "--environment",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="environment Parquet (sequence, frame, e0..e9).",
+)
+@click.option(
+    "--pca",
+    "pca_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="PCA folder (mean.npy, components.npy, scale.npy, pca.json).",
+)
+def descriptors(
+    params_path: Path, sequences_dir: Path, out: Path, environment: Path, pca_dir: Path
+) -> None:
     """Descriptor of every frame of every sequence; PCA fitted on the training frames."""
     from pipeline.descriptor import DescriptorConfig
     from pipeline.surrogate import describe_dataset, write_descriptor_set
 
     p = load_section(params_path, "descriptors", DescriptorsSection)
-    config = DescriptorConfig(p.voxel_size_m, p.min_points, p.t_e, p.range_bins, p.bin_m, p.normalize)
+    config = DescriptorConfig(
+        p.voxel_size_m, p.min_points, p.t_e, p.range_bins, p.bin_m, p.normalize
+    )
     ds = describe_dataset(sequences_dir, config, p.pca_dim, p.workers)
     write_descriptor_set(ds, out, environment, pca_dir)
     ratio = float(ds.pca.explained_variance_ratio.sum())
-    click.echo(f"{len(ds.frames)} frames of {len(set(ds.sequences.tolist()))} sequences -> {out}; "
-               f"PCA {ds.pca.dim} components explain {ratio:.1%} (training frames)", err=True)
+    click.echo(
+        f"{len(ds.frames)} frames of {len(set(ds.sequences.tolist()))} sequences -> {out}; "
+        f"PCA {ds.pca.dim} components explain {ratio:.1%} (training frames)",
+        err=True,
+    )

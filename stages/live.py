@@ -12,15 +12,25 @@ import click
 @click.command()
 @click.argument("model_dir", type=click.Path(file_okay=False, path_type=Path))
 @click.argument("sequence", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="Output MCAP (scans, ground truth, estimated poses, chosen parameters).")
-@click.option("--algorithm", default=None,
-              help="Odometry algorithm (default: the model's; another one is refused).")
+@click.option(
+    "--out",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Output MCAP (scans, ground truth, estimated poses, chosen parameters).",
+)
+@click.option(
+    "--algorithm",
+    default=None,
+    help="Odometry algorithm (default: the model's; another one is refused).",
+)
 def live(model_dir: Path, sequence: Path, out: Path, algorithm: str | None) -> None:
     """Stream a sequence through odometry with online parameter selection."""
     from pipeline.runtime import load_model, run_live
 
     model = load_model(model_dir, expected_algorithm=algorithm)
     summary = run_live(model, sequence, out)
-    click.echo(f"{model.algorithm}: {summary['frames']} frames, {summary['selections']} selections, "
-               f"{summary['changes']} parameter changes -> {out}", err=True)
+    click.echo(
+        f"{model.algorithm}: {summary['frames']} frames, {summary['selections']} selections, "
+        f"{summary['changes']} parameter changes -> {out}",
+        err=True,
+    )

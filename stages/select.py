@@ -11,12 +11,17 @@ import click
 @click.command()
 @click.argument("model_dir", type=click.Path(file_okay=False, path_type=Path))
 @click.argument("sequence", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="The schedule Parquet (frame, stamp_ns, one column per parameter).")
+@click.option(
+    "--out",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="The schedule Parquet (frame, stamp_ns, one column per parameter).",
+)
 @click.option("--algorithm", default=None, help="Refuse a model made for another algorithm.")
 @click.option("--period-s", type=float, default=None, help="Override the model's period [s].")
-def select(model_dir: Path, sequence: Path, out: Path, algorithm: str | None,
-           period_s: float | None) -> None:
+def select(
+    model_dir: Path, sequence: Path, out: Path, algorithm: str | None, period_s: float | None
+) -> None:
     """Parameter schedule of a recorded sequence from a model artifact."""
     from pipeline.runtime import Selector, load_model
     from pipeline.sequence import SequenceReader
@@ -25,5 +30,8 @@ def select(model_dir: Path, sequence: Path, out: Path, algorithm: str | None,
     with SequenceReader(sequence) as reader:
         schedule = Selector(model, period_s=period_s).schedule(reader)
     schedule.write(out)
-    click.echo(f"{model.algorithm}: {len(schedule)} frames, {len(schedule.changes())} parameter "
-               f"changes -> {out}", err=True)
+    click.echo(
+        f"{model.algorithm}: {len(schedule)} frames, {len(schedule.changes())} parameter "
+        f"changes -> {out}",
+        err=True,
+    )

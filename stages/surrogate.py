@@ -32,17 +32,42 @@ class SurrogateSection(Section):
 
 @click.command()
 @params_option
-@click.option("--db", "db_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="results/adaptune.duckdb (surrogate_rows view).")
-@click.option("--pca", "pca_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="The PCA folder written by `adaptune descriptors`.")
-@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="The artifact folder (model/).")
+@click.option(
+    "--db",
+    "db_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="results/adaptune.duckdb (surrogate_rows view).",
+)
+@click.option(
+    "--pca",
+    "pca_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="The PCA folder written by `adaptune descriptors`.",
+)
+@click.option(
+    "--out",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="The artifact folder (model/).",
+)
 @click.option("--algorithm", default=None, help="Algorithm of the rows (default: the only one).")
-@click.option("--metrics", "metrics_path", default=None,
-              type=click.Path(dir_okay=False, path_type=Path), help="Write the CV error here (JSON).")
-def surrogate(params_path: Path, db_path: Path, pca_dir: Path, out: Path, algorithm: str | None,
-              metrics_path: Path | None) -> None:
+@click.option(
+    "--metrics",
+    "metrics_path",
+    default=None,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the CV error here (JSON).",
+)
+def surrogate(
+    params_path: Path,
+    db_path: Path,
+    pca_dir: Path,
+    out: Path,
+    algorithm: str | None,
+    metrics_path: Path | None,
+) -> None:
     """Fit the kNN surrogate S(E, x) ~ y and write the deployable artifact."""
     from pipeline.descriptor import DescriptorConfig
     from pipeline.io_utils import atomic_write_text
@@ -63,18 +88,30 @@ def surrogate(params_path: Path, db_path: Path, pca_dir: Path, out: Path, algori
     algo, space, rows = read_training_rows(db_path, algorithm, lambda a: get_adapter(a).space)
     settings = SurrogateSettings(p.k, p.w_e, p.w_x, p.target, p.n_sobol, p.seed, p.cv_max_frames)
     fitted = fit_surrogate(rows, space, settings)
-    selection = {"period_s": p.period_s, "hysteresis": p.hysteresis,
-                 "min_scan_points": p.min_scan_points, "subset_rows": p.subset_rows,
-                 "refine_iters": p.refine_iters}
+    selection = {
+        "period_s": p.period_s,
+        "hysteresis": p.hysteresis,
+        "min_scan_points": p.min_scan_points,
+        "subset_rows": p.subset_rows,
+        "refine_iters": p.refine_iters,
+    }
     # the descriptor settings the PCA was fitted with win (pca.json); params only as fallback
-    descriptor = DescriptorConfig.from_json(pca.descriptor) if pca.descriptor else DescriptorConfig(
-        d.voxel_size_m, d.min_points, d.t_e, d.range_bins, d.bin_m, d.normalize)
-    info = ArtifactInfo(algo, space, descriptor, selection,
-                        {"db": str(db_path), "pca": str(pca_dir)})
+    descriptor = (
+        DescriptorConfig.from_json(pca.descriptor)
+        if pca.descriptor
+        else DescriptorConfig(
+            d.voxel_size_m, d.min_points, d.t_e, d.range_bins, d.bin_m, d.normalize
+        )
+    )
+    info = ArtifactInfo(
+        algo, space, descriptor, selection, {"db": str(db_path), "pca": str(pca_dir)}
+    )
     manifest = write_artifact(out, fitted, pca, info)
     cv = manifest["cross_validation"]
     if metrics_path is not None:
         atomic_write_text(metrics_path, json.dumps({"algorithm": algo, **cv}, indent=2))
-    click.echo(f"{algo}: {fitted.summary['rows']} rows, {fitted.summary['environments']} frames "
-               f"-> {out}; LOSO CV MAE {cv['mae']}, RMSE {cv['rmse']}, regret {cv['regret_mean']}",
-               err=True)
+    click.echo(
+        f"{algo}: {fitted.summary['rows']} rows, {fitted.summary['environments']} frames "
+        f"-> {out}; LOSO CV MAE {cv['mae']}, RMSE {cv['rmse']}, regret {cv['regret_mean']}",
+        err=True,
+    )

@@ -19,8 +19,9 @@ from pipeline.errors import ConfigError
 
 
 def kitti(kitti_root: Path, seq: str, frame: int) -> np.ndarray:
-    return np.fromfile(kitti_root / "sequences" / seq / "velodyne" / f"{frame:06d}.bin",
-                       np.float32).reshape(-1, 4)
+    return np.fromfile(
+        kitti_root / "sequences" / seq / "velodyne" / f"{frame:06d}.bin", np.float32
+    ).reshape(-1, 4)
 
 
 def rot_z(deg: float) -> np.ndarray:
@@ -55,8 +56,14 @@ def test_yaw_invariance_real_scan(kitti_root: Path) -> None:
         assert np.abs(describe(rotated(scan, deg)).reshape(10, 3, 3).sum(0) - tot).sum() <= 0.1
 
 
-def grid_plane(normal: np.ndarray, centre: np.ndarray, size: float, rng: np.random.Generator,
-               n: int = 4000, noise: float = 0.01) -> np.ndarray:
+def grid_plane(
+    normal: np.ndarray,
+    centre: np.ndarray,
+    size: float,
+    rng: np.random.Generator,
+    n: int = 4000,
+    noise: float = 0.01,
+) -> np.ndarray:
     normal = normal / np.linalg.norm(normal)
     a = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
     a /= np.linalg.norm(a)
@@ -71,8 +78,9 @@ def classes_of(points: np.ndarray, config: DescriptorConfig = DescriptorConfig()
 
 
 @pytest.mark.parametrize(("normal", "sub"), [((0, 0, 1), 0), ((1, 0, 1), 1), ((1, 1, 0.1), 2)])
-def test_plane_gives_planar_voxels_of_its_tilt(rng: np.random.Generator, normal: tuple,
-                                               sub: int) -> None:
+def test_plane_gives_planar_voxels_of_its_tilt(
+    rng: np.random.Generator, normal: tuple, sub: int
+) -> None:
     pts = grid_plane(np.array(normal, float), np.array([10.3, 4.1, -1.2]), 6.0, rng, n=20000)
     c = classes_of(pts)
     # planar voxels of the right sub-class (horizontal / slope / vertical plane) dominate; the
@@ -82,8 +90,9 @@ def test_plane_gives_planar_voxels_of_its_tilt(rng: np.random.Generator, normal:
 
 
 @pytest.mark.parametrize(("direction", "sub"), [((0, 0, 1), 2), ((1, 0.3, 0), 0), ((1, 0, 1), 1)])
-def test_pole_gives_linear_voxels_of_its_tilt(rng: np.random.Generator, direction: tuple,
-                                              sub: int) -> None:
+def test_pole_gives_linear_voxels_of_its_tilt(
+    rng: np.random.Generator, direction: tuple, sub: int
+) -> None:
     d = np.array(direction, float) / np.linalg.norm(direction)
     t = rng.uniform(-3, 3, (6000, 1))
     pts = np.array([-7.2, 5.5, 0.4]) + t * d + rng.normal(0, 0.01, (6000, 3))

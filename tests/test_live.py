@@ -15,9 +15,17 @@ from stages.cli import main
 
 
 def test_live_writes_poses_and_params(tmp_path: Path, kitti_root: Path) -> None:
-    model_dir = build_model(tmp_path / "model", kitti_root, selection={
-        "period_s": 0.2, "hysteresis": 0.0, "min_scan_points": 1000, "subset_rows": 256,
-        "refine_iters": 2})
+    model_dir = build_model(
+        tmp_path / "model",
+        kitti_root,
+        selection={
+            "period_s": 0.2,
+            "hysteresis": 0.0,
+            "min_scan_points": 1000,
+            "subset_rows": 256,
+            "refine_iters": 2,
+        },
+    )
     seq = tmp_path / "s.mcap"
     write_tiny_sequence(seq, kitti_root, "04", n=5, step=4)
     out = tmp_path / "live.mcap"

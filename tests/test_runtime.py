@@ -21,8 +21,20 @@ from pipeline.sequence import SequenceReader
 from stages.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
-HEAVY = ("sklearn", "duckdb", "hyperopt", "open3d", "dvc", "pyarrow", "click", "small_gicp",
-         "kiss_icp", "dask", "matplotlib", "pydantic")
+HEAVY = (
+    "sklearn",
+    "duckdb",
+    "hyperopt",
+    "open3d",
+    "dvc",
+    "pyarrow",
+    "click",
+    "small_gicp",
+    "kiss_icp",
+    "dask",
+    "matplotlib",
+    "pydantic",
+)
 
 
 @pytest.fixture(scope="module")
@@ -31,10 +43,14 @@ def model_dir(tmp_path_factory: pytest.TempPathFactory, kitti_root: Path) -> Pat
 
 
 def test_import_is_light() -> None:
-    out = subprocess.run([sys.executable, "-c",
-                          "import pipeline.runtime, sys; print(sorted(sys.modules))"],
-                         cwd=REPO, capture_output=True, text=True, check=True).stdout
-    loaded = {m.split(".")[0] for m in eval(out)}  # noqa: S307 - our own printed list
+    out = subprocess.run(
+        [sys.executable, "-c", "import pipeline.runtime, sys; print(sorted(sys.modules))"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    loaded = {m.split(".")[0] for m in eval(out)}
     assert not loaded & set(HEAVY), loaded & set(HEAVY)
     assert "numpy" in loaded and "scipy" in loaded
 
@@ -51,8 +67,11 @@ def test_every_flipped_byte_is_refused(model_dir: Path, tmp_path: Path) -> None:
     assert "manifest.json" in names and len(names) == 10
     for name in names:
         size = (model_dir / name).stat().st_size
-        positions = [0, size // 2, size - 2] if name != "manifest.json" else \
-            list(range(0, size, max(1, size // 40)))
+        positions = (
+            [0, size // 2, size - 2]
+            if name != "manifest.json"
+            else list(range(0, size, max(1, size // 40)))
+        )
         for pos in positions:
             bad = copy_model(model_dir, tmp_path / f"{name}.{pos}")
             data = bytearray((bad / name).read_bytes())
@@ -93,10 +112,12 @@ def test_cli_refuses_bad_artifacts(model_dir: Path, tmp_path: Path, kitti_root: 
     (flipped / "env.npy").write_bytes(bytes(data))
     v2 = copy_model(model_dir, tmp_path / "v2")
     rewrite_manifest(v2, schema_version="2.0")
-    cases = [(["select", str(flipped), str(seq)], "sha256 mismatch"),
-             (["select", str(v2), str(seq)], "schema version"),
-             (["select", str(model_dir), str(seq), "--algorithm", "gicp"], "expected 'gicp'"),
-             (["live", str(model_dir), str(seq), "--algorithm", "kiss_icp"], "expected 'kiss_icp'")]
+    cases = [
+        (["select", str(flipped), str(seq)], "sha256 mismatch"),
+        (["select", str(v2), str(seq)], "schema version"),
+        (["select", str(model_dir), str(seq), "--algorithm", "gicp"], "expected 'gicp'"),
+        (["live", str(model_dir), str(seq), "--algorithm", "kiss_icp"], "expected 'kiss_icp'"),
+    ]
     for i, (args, message) in enumerate(cases):
         out = tmp_path / f"out{i}.{'mcap' if args[0] == 'live' else 'parquet'}"
         res = CliRunner().invoke(main, [*args, "--out", str(out)])
@@ -106,7 +127,9 @@ def test_cli_refuses_bad_artifacts(model_dir: Path, tmp_path: Path, kitti_root: 
         assert not out.exists()
 
 
-def test_schedule_in_range_for_every_scan(model_dir: Path, tmp_path: Path, kitti_root: Path) -> None:
+def test_schedule_in_range_for_every_scan(
+    model_dir: Path, tmp_path: Path, kitti_root: Path
+) -> None:
     seq = tmp_path / "s.mcap"
     write_tiny_sequence(seq, kitti_root, "06", n=8, step=2)
     model = load_model(model_dir, "ndt")

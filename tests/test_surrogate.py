@@ -30,8 +30,13 @@ from schemas import read_text
 from stages.cli import main
 
 SEQS = ("01", "04", "06", "10")
-SELECTION = {"period_s": 1.0, "hysteresis": 0.0, "min_scan_points": 1000, "subset_rows": 512,
-             "refine_iters": 0}
+SELECTION = {
+    "period_s": 1.0,
+    "hysteresis": 0.0,
+    "min_scan_points": 1000,
+    "subset_rows": 512,
+    "refine_iters": 0,
+}
 
 
 def kitti_scan(kitti_root: Path, seq: str, frame: int) -> np.ndarray:
@@ -76,8 +81,14 @@ def synthetic_rows(kitti_root: Path, trials: int = 24, seed: int = 0) -> tuple[T
     return TrainingRows(E, U, y, np.array(S), np.array(F), np.array(T)), pca
 
 
-def build_model(out: Path, kitti_root: Path, algorithm: str = "ndt", selection: dict | None = None,
-                trials: int = 24, settings: SurrogateSettings | None = None) -> Path:
+def build_model(
+    out: Path,
+    kitti_root: Path,
+    algorithm: str = "ndt",
+    selection: dict | None = None,
+    trials: int = 24,
+    settings: SurrogateSettings | None = None,
+) -> Path:
     rows, pca = synthetic_rows(kitti_root, trials)
     space = get_adapter(algorithm).space.to_json()
     fitted = fit_surrogate(rows, space, settings or SurrogateSettings(n_sobol=256, cv_max_frames=5))
@@ -115,15 +126,20 @@ def test_artifact_round_trip(tmp_path: Path, kitti_root: Path) -> None:
     e_lib = pca.transform(describe(scan)[None])[0] * model.e_factor
     np.testing.assert_allclose(model.environment(scan), e_lib, rtol=1e-6, atol=1e-9)
     # the stored training environment of frame 04/3 is that same vector
-    g = int(np.flatnonzero((np.array(manifest["training"]["env_sequences"]) == "04")
-                           & (np.load(model_dir / "env_frames.npy") == 3))[0])
+    g = int(
+        np.flatnonzero(
+            (np.array(manifest["training"]["env_sequences"]) == "04")
+            & (np.load(model_dir / "env_frames.npy") == 3)
+        )[0]
+    )
     np.testing.assert_allclose(model.env[g], e_lib, rtol=1e-5, atol=1e-6)
 
 
 def test_cross_validation_is_leave_one_sequence_out(tmp_path: Path, kitti_root: Path) -> None:
     rows, _ = synthetic_rows(kitti_root)
-    fitted = fit_surrogate(rows, get_adapter("ndt").space.to_json(),
-                           SurrogateSettings(n_sobol=64, cv_max_frames=10))
+    fitted = fit_surrogate(
+        rows, get_adapter("ndt").space.to_json(), SurrogateSettings(n_sobol=64, cv_max_frames=10)
+    )
     cv = fitted.cv
     assert cv["folds"] == 4 and set(cv["per_sequence"]) == set(SEQS)
     assert 0 < cv["mae"] <= cv["rmse"]
@@ -135,8 +151,9 @@ def test_cross_validation_is_leave_one_sequence_out(tmp_path: Path, kitti_root: 
 def write_tiny_sequence(path: Path, kitti_root: Path, seq: str, n: int = 4, step: int = 3) -> None:
     with SequenceWriter(path, SequenceInfo(name=path.stem, sensor="hdl64", source="kitti")) as w:
         for f in range(n):
-            w.add(1_000_000_000 + f * 100_000_000, kitti_scan(kitti_root, seq, f)[::step],
-                  np.eye(4))
+            w.add(
+                1_000_000_000 + f * 100_000_000, kitti_scan(kitti_root, seq, f)[::step], np.eye(4)
+            )
 
 
 def test_descriptors_stage(tmp_path: Path, kitti_root: Path) -> None:
@@ -144,13 +161,28 @@ def test_descriptors_stage(tmp_path: Path, kitti_root: Path) -> None:
     seq_dir.mkdir()
     for s in ("04", "06", "10"):
         write_tiny_sequence(seq_dir / f"k{s}.mcap", kitti_root, s)
-    (seq_dir / "index.json").write_text(json.dumps({"train": ["k04", "k06"], "validation": ["k10"]}))
+    (seq_dir / "index.json").write_text(
+        json.dumps({"train": ["k04", "k06"], "validation": ["k10"]})
+    )
     params = tmp_path / "params.yaml"
     params.write_text("descriptors:\n  pca_dim: 4\n  workers: 1\n")
     out, env, pca_dir = tmp_path / "d.parquet", tmp_path / "e.parquet", tmp_path / "pca"
-    res = CliRunner().invoke(main, ["descriptors", "--params", str(params), "--sequences",
-                                    str(seq_dir), "--out", str(out), "--environment", str(env),
-                                    "--pca", str(pca_dir)])
+    res = CliRunner().invoke(
+        main,
+        [
+            "descriptors",
+            "--params",
+            str(params),
+            "--sequences",
+            str(seq_dir),
+            "--out",
+            str(out),
+            "--environment",
+            str(env),
+            "--pca",
+            str(pca_dir),
+        ],
+    )
     assert res.exit_code == 0, res.output
     con = duckdb.connect()
     d = con.execute(f"SELECT * FROM '{out}' ORDER BY sequence, frame").fetchnumpy()
@@ -170,10 +202,22 @@ def test_descriptors_stage_bad_index(tmp_path: Path) -> None:
     seq_dir.mkdir()
     (seq_dir / "index.json").write_text(json.dumps({"train": ["missing"]}))
     out = tmp_path / "d.parquet"
-    res = CliRunner().invoke(main, ["descriptors", "--params", str(tmp_path / "none.yaml"),
-                                    "--sequences", str(seq_dir), "--out", str(out),
-                                    "--environment", str(tmp_path / "e.parquet"),
-                                    "--pca", str(tmp_path / "pca")])
+    res = CliRunner().invoke(
+        main,
+        [
+            "descriptors",
+            "--params",
+            str(tmp_path / "none.yaml"),
+            "--sequences",
+            str(seq_dir),
+            "--out",
+            str(out),
+            "--environment",
+            str(tmp_path / "e.parquet"),
+            "--pca",
+            str(tmp_path / "pca"),
+        ],
+    )
     assert res.exit_code == 1
     assert "no such params file" in res.output or "missing" in res.output
     assert not out.exists()
@@ -185,10 +229,15 @@ def make_db(path: Path, rows: TrainingRows, algorithm: str = "ndt") -> None:
     space = get_adapter(algorithm).space
     X = np.stack([[space.from_unit(u)[n] for n in names] for u in rows.U])
     con = duckdb.connect(str(path))
-    cols = {"algorithm": np.full(len(rows.y), algorithm), "sequence": rows.sequences,
-            "trial": rows.trials, "frame": rows.frames,
-            **{f"e{i}": rows.E[:, i] for i in range(rows.E.shape[1])},
-            **{f"p_{n}": X[:, j] for j, n in enumerate(names)}, "y": rows.y}
+    cols = {
+        "algorithm": np.full(len(rows.y), algorithm),
+        "sequence": rows.sequences,
+        "trial": rows.trials,
+        "frame": rows.frames,
+        **{f"e{i}": rows.E[:, i] for i in range(rows.E.shape[1])},
+        **{f"p_{n}": X[:, j] for j, n in enumerate(names)},
+        "y": rows.y,
+    }
     con.from_arrow(pa.table(cols)).create("surrogate_rows")
     con.close()
 
@@ -201,15 +250,42 @@ def test_surrogate_stage(tmp_path: Path, kitti_root: Path) -> None:
     params = tmp_path / "params.yaml"
     params.write_text("surrogate:\n  n_sobol: 32\n  cv_max_frames: 3\n")
     out, metrics = tmp_path / "model", tmp_path / "metrics.json"
-    res = CliRunner().invoke(main, ["surrogate", "--params", str(params), "--db", str(db), "--pca",
-                                    str(tmp_path / "pca"), "--out", str(out), "--metrics", str(metrics)])
+    res = CliRunner().invoke(
+        main,
+        [
+            "surrogate",
+            "--params",
+            str(params),
+            "--db",
+            str(db),
+            "--pca",
+            str(tmp_path / "pca"),
+            "--out",
+            str(out),
+            "--metrics",
+            str(metrics),
+        ],
+    )
     assert res.exit_code == 0, res.output
     model = load_model(out, "ndt")
     assert model.manifest["training"]["rows"] == 40 * 8
     assert json.loads(metrics.read_text())["folds"] == 4
     # an algorithm the database does not have: one line, exit 1, no new artifact
-    res = CliRunner().invoke(main, ["surrogate", "--params", str(params), "--db", str(db), "--pca",
-                                    str(tmp_path / "pca"), "--out", str(tmp_path / "m2"),
-                                    "--algorithm", "gicp"])
+    res = CliRunner().invoke(
+        main,
+        [
+            "surrogate",
+            "--params",
+            str(params),
+            "--db",
+            str(db),
+            "--pca",
+            str(tmp_path / "pca"),
+            "--out",
+            str(tmp_path / "m2"),
+            "--algorithm",
+            "gicp",
+        ],
+    )
     assert res.exit_code == 1 and "no surrogate rows for algorithm 'gicp'" in res.output
     assert not (tmp_path / "m2").exists()
