@@ -77,8 +77,8 @@ def run() -> list[Row]:
     per_scan = [best_of(lambda s=s: describe(s), repeat=5) for s in scans]
     rows_out = [
         Row(
-            "descriptor of one KITTI scan (%d scans, ~%dk points), 1 core"
-            % (len(scans), int(np.mean([len(s) for s in scans]) / 1000)),
+            f"descriptor of one KITTI scan ({len(scans)} scans, "
+            f"~{int(np.mean([len(s) for s in scans]) / 1000)}k points), 1 core",
             1e3 * float(np.median(per_scan)),
             "ms",
             "paper 40 ms",

@@ -303,7 +303,7 @@ def fit_surrogate(
 def candidate_set(
     U: NDArray[np.float64], n_params: int, n_sobol: int, seed: int
 ) -> NDArray[np.float64]:
-    """(C, P) candidates in [0, 1]: every distinct trial parameter vector plus a scrambled Sobol set."""
+    """(C, P) candidates in [0, 1]: every distinct trial parameter vector plus a Sobol set."""
     from scipy.stats import qmc
 
     distinct = np.unique(np.round(U, 12), axis=0)

@@ -72,9 +72,9 @@ def grid_plane(
     return centre + uv[:, :1] * a + uv[:, 1:] * b + rng.normal(0, noise, (n, 1)) * normal
 
 
-def classes_of(points: np.ndarray, config: DescriptorConfig = DescriptorConfig()) -> np.ndarray:
+def classes_of(points: np.ndarray, config: DescriptorConfig | None = None) -> np.ndarray:
     """(3, 3) class x sub-class fractions of a point set."""
-    return describe(points.astype(np.float32), config).reshape(10, 3, 3).sum(0)
+    return describe(points.astype(np.float32), config or DescriptorConfig()).reshape(10, 3, 3).sum(0)
 
 
 @pytest.mark.parametrize(("normal", "sub"), [((0, 0, 1), 0), ((1, 0, 1), 1), ((1, 1, 0.1), 2)])
@@ -121,7 +121,7 @@ def test_moments_and_eigenvalues(rng: np.random.Generator) -> None:
     pts = rng.normal(0, 1, (5000, 3)).astype(np.float32) * np.float32(3.0)
     counts, mean, cov = voxel_moments(tuple(np.ascontiguousarray(pts.T)), 1.0, 5)
     keys = np.floor(pts).astype(int)
-    uniq, inv, cnt = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    _, inv, cnt = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
     big = np.flatnonzero(cnt >= 5)
     assert len(counts) == len(big) and counts.sum() == cnt[big].sum()
     g = big[int(np.argmax(cnt[big]))]

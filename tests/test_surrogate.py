@@ -121,7 +121,7 @@ def test_artifact_round_trip(tmp_path: Path, kitti_root: Path) -> None:
     model = load_model(model_dir, expected_algorithm="ndt")
     assert model.env.shape == (40, 10) and model.rows_x.shape == (40 * 24, 2)
     # the runtime's environment of a scan = the library's PCA of its descriptor, scaled
-    rows, pca = synthetic_rows(kitti_root)
+    _, pca = synthetic_rows(kitti_root)
     scan = kitti_scan(kitti_root, "04", 3)
     e_lib = pca.transform(describe(scan)[None])[0] * model.e_factor
     np.testing.assert_allclose(model.environment(scan), e_lib, rtol=1e-6, atol=1e-9)
