@@ -74,7 +74,8 @@ def grid_plane(
 
 def classes_of(points: np.ndarray, config: DescriptorConfig | None = None) -> np.ndarray:
     """(3, 3) class x sub-class fractions of a point set."""
-    return describe(points.astype(np.float32), config or DescriptorConfig()).reshape(10, 3, 3).sum(0)
+    h = describe(points.astype(np.float32), config or DescriptorConfig())
+    return h.reshape(10, 3, 3).sum(0)
 
 
 @pytest.mark.parametrize(("normal", "sub"), [((0, 0, 1), 0), ((1, 0, 1), 1), ((1, 1, 0.1), 2)])
