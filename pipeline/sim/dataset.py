@@ -1,0 +1,87 @@
+"""The toy data set of params.yaml: training worlds and composite validation sequences."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, field_validator
+
+from pipeline.config import Section
+from pipeline.io_utils import atomic_write_text
+from pipeline.sim.route import LABELS
+from pipeline.sim.simulate import SimSpec, SimSummary, derive_seed, simulate_sequence
+from pipeline.sim.worlds import WORLDS
+
+log = logging.getLogger(__name__)
+
+
+class SimulateSection(Section):
+    """params.yaml section ``simulate``. Seeds derive from ``base.seed`` and the sequence name
+    unless ``seed`` is given here."""
+
+    seed: int | None = None
+    sensor: Literal["hdl32", "hdl64", "vlp16"] = "hdl32"
+    range_noise_m: float = Field(0.02, ge=0.0, le=0.5)
+    dropout: float = Field(0.01, ge=0.0, lt=1.0)
+    train: dict[str, int] = Field(default_factory=lambda: {"cave": 4, "street": 4})
+    train_frames: int = Field(350, ge=10)
+    validation_count: int = Field(1, ge=0)
+    validation_frames: int = Field(1050, ge=30)
+    validation_segments: list[str] = Field(default_factory=lambda: list(LABELS), min_length=1)
+
+    @field_validator("train")
+    @classmethod
+    def _train_worlds(cls, v: dict[str, int]) -> dict[str, int]:
+        for world, count in v.items():
+            if world not in WORLDS:
+                raise ValueError(f"unknown world {world!r} (known: {', '.join(WORLDS)})")
+            if count < 0:
+                raise ValueError(f"count of {world} must be >= 0, got {count}")
+        if sum(v.values()) < 1:
+            raise ValueError("needs at least one training sequence")
+        return v
+
+    @field_validator("validation_segments")
+    @classmethod
+    def _segments(cls, v: list[str]) -> list[str]:
+        bad = [s for s in v if s not in LABELS]
+        if bad:
+            raise ValueError(f"unknown segment {bad[0]!r} (known: {', '.join(LABELS)})")
+        return v
+
+
+def dataset_specs(section: SimulateSection, base_seed: int) -> dict[str, tuple[str, SimSpec]]:
+    """name -> (split, SimSpec) of every sequence of the data set, in a stable order."""
+    seed0 = base_seed if section.seed is None else section.seed
+    common = dict(sensor=section.sensor, range_noise_m=section.range_noise_m, dropout=section.dropout)
+    out: dict[str, tuple[str, SimSpec]] = {}
+    for world, count in section.train.items():
+        for i in range(count):
+            name = f"{world}_{i}"
+            out[name] = ("train", SimSpec(world, derive_seed(seed0, name), section.train_frames,
+                                          **common))  # type: ignore[arg-type]
+    for i in range(section.validation_count):
+        name = f"composite_{i}"
+        out[name] = ("validation", SimSpec("composite", derive_seed(seed0, name),
+                                           section.validation_frames,
+                                           segments=tuple(section.validation_segments),
+                                           **common))  # type: ignore[arg-type]
+    return out
+
+
+def simulate_set(section: SimulateSection, base_seed: int, out_dir: str | Path,
+                 progress: bool = False) -> list[SimSummary]:
+    """Write ``out_dir``/<name>.mcap for every sequence and ``out_dir``/index.json
+    ({"train": [...], "validation": [...]}); returns what was written."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    index: dict[str, list[str]] = {"train": [], "validation": []}
+    done = []
+    for name, (split, spec) in dataset_specs(section, base_seed).items():
+        done.append(simulate_sequence(spec, out_dir / f"{name}.mcap", name=name, progress=progress))
+        index[split].append(name)
+    atomic_write_text(out_dir / "index.json", json.dumps(index, indent=2) + "\n")
+    return done
