@@ -15,26 +15,57 @@ SENSORS = ("hdl32", "hdl64", "vlp16")
 
 def _world_options(fn):  # type: ignore[no-untyped-def]
     options = [
-        click.option("--world", type=click.Choice(WORLDS), default="cave", show_default=True,
-                     help="World to generate (street with --kitti-trajectory)."),
-        click.option("--seed", type=int, default=0, show_default=True,
-                     help="Seed of world, route and sensor noise: same seed, same bytes."),
+        click.option(
+            "--world",
+            type=click.Choice(WORLDS),
+            default="cave",
+            show_default=True,
+            help="World to generate (street with --kitti-trajectory).",
+        ),
+        click.option(
+            "--seed",
+            type=int,
+            default=0,
+            show_default=True,
+            help="Seed of world, route and sensor noise: same seed, same bytes.",
+        ),
         click.option("--frames", type=int, default=300, show_default=True, help="Frames (10 Hz)."),
-        click.option("--sensor", type=click.Choice(SENSORS), default="hdl32", show_default=True,
-                     help="hdl32 = Velodyne HDL-32E, hdl64 = HDL-64E (KITTI), vlp16 = VLP-16."),
-        click.option("--segments", default="cave,open,street", show_default=True,
-                     help="Composite world: comma-separated segments in driving order."),
-        click.option("--kitti-trajectory", type=click.Path(dir_okay=False, path_type=Path),
-                     default=None, help="Drive along a KITTI ground-truth pose file "
-                     "(NN.txt, camera frame) through a street world generated along it."),
+        click.option(
+            "--sensor",
+            type=click.Choice(SENSORS),
+            default="hdl32",
+            show_default=True,
+            help="hdl32 = Velodyne HDL-32E, hdl64 = HDL-64E (KITTI), vlp16 = VLP-16.",
+        ),
+        click.option(
+            "--segments",
+            default="cave,open,street",
+            show_default=True,
+            help="Composite world: comma-separated segments in driving order.",
+        ),
+        click.option(
+            "--kitti-trajectory",
+            type=click.Path(dir_okay=False, path_type=Path),
+            default=None,
+            help="Drive along a KITTI ground-truth pose file "
+            "(NN.txt, camera frame) through a street world generated along it.",
+        ),
     ]
     for opt in reversed(options):
         fn = opt(fn)
     return fn
 
 
-def _spec(world: str, seed: int, frames: int, sensor: str, segments: str,
-          kitti_trajectory: Path | None, noise: float | None = None, dropout: float | None = None):  # type: ignore[no-untyped-def]
+def _spec(
+    world: str,
+    seed: int,
+    frames: int,
+    sensor: str,
+    segments: str,
+    kitti_trajectory: Path | None,
+    noise: float | None = None,
+    dropout: float | None = None,
+):  # type: ignore[no-untyped-def]
     from pipeline.sim.simulate import SimSpec
 
     if kitti_trajectory is not None and world == "cave":  # the default: switch to street
@@ -48,26 +79,47 @@ def _spec(world: str, seed: int, frames: int, sensor: str, segments: str,
 @click.command()
 @_world_options
 @click.option("--noise", type=float, default=None, help="Range noise std [m] (default 0.02).")
-@click.option("--dropout", type=float, default=None, help="Return dropout probability (default 0.01).")
+@click.option(
+    "--dropout", type=float, default=None, help="Return dropout probability (default 0.01)."
+)
 @click.option("--name", default=None, help="Sequence name (default: the file stem of --out).")
-@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="Sequence MCAP to write (atomically).")
-def simulate(world: str, seed: int, frames: int, sensor: str, segments: str,
-             kitti_trajectory: Path | None, noise: float | None, dropout: float | None,
-             name: str | None, out: Path) -> None:
+@click.option(
+    "--out",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Sequence MCAP to write (atomically).",
+)
+def simulate(
+    world: str,
+    seed: int,
+    frames: int,
+    sensor: str,
+    segments: str,
+    kitti_trajectory: Path | None,
+    noise: float | None,
+    dropout: float | None,
+    name: str | None,
+    out: Path,
+) -> None:
     """Ray-cast a simulated world into a sequence MCAP (points, ground truth, labels)."""
     from pipeline.sim.simulate import simulate_sequence
 
     spec = _spec(world, seed, frames, sensor, segments, kitti_trajectory, noise, dropout)
     s = simulate_sequence(spec, out, name=name, progress=sys.stderr.isatty())
     labels = ", ".join(f"{x.label} {x.start}-{x.end}" for x in s.labels)
-    click.echo(f"{s.path}: {s.frames} frames, {s.points} points, {s.length_m:.0f} m, labels: {labels}")
+    click.echo(
+        f"{s.path}: {s.frames} frames, {s.points} points, {s.length_m:.0f} m, labels: {labels}"
+    )
 
 
 @click.command("simulate-set")
 @params_option
-@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="Folder for <name>.mcap and index.json (data/sequences).")
+@click.option(
+    "--out",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for <name>.mcap and index.json (data/sequences).",
+)
 def simulate_set(params_path: Path, out: Path) -> None:
     """Simulate the toy data set of the params section ``simulate`` (dvc stage)."""
     from pipeline.config import BaseSection, load_section
@@ -84,12 +136,26 @@ def simulate_set(params_path: Path, out: Path) -> None:
 
 @click.command("plot-world")
 @_world_options
-@click.option("--frame", "scan_frame", type=int, default=None,
-              help="Frame whose scan is drawn (default: the middle one).")
-@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="PNG to write.")
-def plot_world(world: str, seed: int, frames: int, sensor: str, segments: str,
-               kitti_trajectory: Path | None, scan_frame: int | None, out: Path) -> None:
+@click.option(
+    "--frame",
+    "scan_frame",
+    type=int,
+    default=None,
+    help="Frame whose scan is drawn (default: the middle one).",
+)
+@click.option(
+    "--out", required=True, type=click.Path(dir_okay=False, path_type=Path), help="PNG to write."
+)
+def plot_world(
+    world: str,
+    seed: int,
+    frames: int,
+    sensor: str,
+    segments: str,
+    kitti_trajectory: Path | None,
+    scan_frame: int | None,
+    out: Path,
+) -> None:
     """Top-down PNG of a world with its trajectory and one scan."""
     from pipeline.sim.plot import plot_world as plot
 

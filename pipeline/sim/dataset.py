@@ -56,24 +56,35 @@ class SimulateSection(Section):
 def dataset_specs(section: SimulateSection, base_seed: int) -> dict[str, tuple[str, SimSpec]]:
     """name -> (split, SimSpec) of every sequence of the data set, in a stable order."""
     seed0 = base_seed if section.seed is None else section.seed
-    common = dict(sensor=section.sensor, range_noise_m=section.range_noise_m, dropout=section.dropout)
+
+    def spec(world: str, name: str, frames: int, segments: tuple[str, ...] = ()) -> SimSpec:
+        return SimSpec(
+            world,
+            derive_seed(seed0, name),
+            frames,
+            section.sensor,
+            segments or tuple(LABELS),
+            None,
+            section.range_noise_m,
+            section.dropout,
+        )
+
     out: dict[str, tuple[str, SimSpec]] = {}
     for world, count in section.train.items():
         for i in range(count):
-            name = f"{world}_{i}"
-            out[name] = ("train", SimSpec(world, derive_seed(seed0, name), section.train_frames,
-                                          **common))  # type: ignore[arg-type]
+            out[f"{world}_{i}"] = ("train", spec(world, f"{world}_{i}", section.train_frames))
     for i in range(section.validation_count):
         name = f"composite_{i}"
-        out[name] = ("validation", SimSpec("composite", derive_seed(seed0, name),
-                                           section.validation_frames,
-                                           segments=tuple(section.validation_segments),
-                                           **common))  # type: ignore[arg-type]
+        out[name] = (
+            "validation",
+            spec("composite", name, section.validation_frames, tuple(section.validation_segments)),
+        )
     return out
 
 
-def simulate_set(section: SimulateSection, base_seed: int, out_dir: str | Path,
-                 progress: bool = False) -> list[SimSummary]:
+def simulate_set(
+    section: SimulateSection, base_seed: int, out_dir: str | Path, progress: bool = False
+) -> list[SimSummary]:
     """Write ``out_dir``/<name>.mcap for every sequence and ``out_dir``/index.json
     ({"train": [...], "validation": [...]}); returns what was written."""
     out_dir = Path(out_dir)

@@ -45,8 +45,9 @@ def grid_triangles(rows: int, cols: int, wrap_cols: bool = False) -> I64:
     b = r * cols + (k + 1) % cols
     d = (r + 1) * cols + k
     e = (r + 1) * cols + (k + 1) % cols
-    return np.concatenate([np.stack([a, b, e], -1).reshape(-1, 3),
-                           np.stack([a, e, d], -1).reshape(-1, 3)])
+    return np.concatenate(
+        [np.stack([a, b, e], -1).reshape(-1, 3), np.stack([a, e, d], -1).reshape(-1, 3)]
+    )
 
 
 def box(center: F64, size: F64, yaw_rad: float) -> tuple[F64, I64]:
@@ -65,23 +66,60 @@ def cylinder(base: F64, radius: float, height: float, sides: int = 10) -> tuple[
     """A closed vertical cylinder standing on ``base`` (3,)."""
     th = np.linspace(0, 2 * np.pi, sides, endpoint=False)
     ring = np.stack([radius * np.cos(th), radius * np.sin(th), np.zeros(sides)], -1)
-    v = np.concatenate([ring, ring + [0, 0, height], [[0, 0, 0], [0, 0, height]]]) + base
+    v = np.concatenate([ring, [*ring, 0, 0, height], [[0, 0, 0], [0, 0, height]]]) + base
     tris = grid_triangles(2, sides, wrap_cols=True).tolist()
     k = np.arange(sides)
     tris += np.stack([k, (k + 1) % sides, np.full(sides, 2 * sides)], -1).tolist()
-    tris += np.stack([k + sides, (k + 1) % sides + sides, np.full(sides, 2 * sides + 1)], -1).tolist()
+    tris += np.stack(
+        [k + sides, (k + 1) % sides + sides, np.full(sides, 2 * sides + 1)], -1
+    ).tolist()
     return v, np.array(tris, np.int64)
 
 
 def icosphere(subdivisions: int = 2) -> tuple[F64, I64]:
     """Unit sphere (vertices on the unit sphere, triangles) by subdividing an icosahedron."""
-    p = (1 + 5 ** 0.5) / 2
-    v = np.array([[-1, p, 0], [1, p, 0], [-1, -p, 0], [1, -p, 0], [0, -1, p], [0, 1, p],
-                  [0, -1, -p], [0, 1, -p], [p, 0, -1], [p, 0, 1], [-p, 0, -1], [-p, 0, 1]], float)
-    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9],
-                  [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2],
-                  [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10],
-                  [8, 6, 7], [9, 8, 1]])
+    p = (1 + 5**0.5) / 2
+    v = np.array(
+        [
+            [-1, p, 0],
+            [1, p, 0],
+            [-1, -p, 0],
+            [1, -p, 0],
+            [0, -1, p],
+            [0, 1, p],
+            [0, -1, -p],
+            [0, 1, -p],
+            [p, 0, -1],
+            [p, 0, 1],
+            [-p, 0, -1],
+            [-p, 0, 1],
+        ],
+        float,
+    )
+    f = np.array(
+        [
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ]
+    )
     verts = list(v / np.linalg.norm(v, axis=1, keepdims=True))
     for _ in range(subdivisions):
         cache: dict[tuple[int, int], int] = {}
@@ -115,13 +153,23 @@ def tree(base: F64, rng: np.random.Generator) -> tuple[F64, I64]:
     mb = MeshBuilder()
     h = rng.uniform(2.5, 4.0)
     mb.add(*cylinder(base, rng.uniform(0.15, 0.3), h + 0.5))
-    mb.add(*rock(np.asarray(base) + [0, 0, h + 1.5], rng.uniform(1.5, 2.5), rng))
+    mb.add(
+        *rock(
+            np.asarray(base, np.float64) + np.array([0.0, 0.0, h + 1.5]), rng.uniform(1.5, 2.5), rng
+        )
+    )
     return mb.build()
 
 
-def height_field(x0: float, y0: float, nx: int, ny: int, cell_m: float,
-                 height: Callable[[F64, F64], F64], keep: Callable[[F64], NDArray[np.bool_]] | None = None,
-                 ) -> tuple[F64, I64]:
+def height_field(
+    x0: float,
+    y0: float,
+    nx: int,
+    ny: int,
+    cell_m: float,
+    height: Callable[[F64, F64], F64],
+    keep: Callable[[F64], NDArray[np.bool_]] | None = None,
+) -> tuple[F64, I64]:
     """A terrain grid of nx x ny vertices from (x0, y0), spacing ``cell_m``, z = height(x, y).
 
     ``keep(centroids_xy (T, 2)) -> (T,) bool`` drops triangles (holes, far cells).
@@ -142,8 +190,13 @@ def height_field(x0: float, y0: float, nx: int, ny: int, cell_m: float,
 class SmoothNoise2D:
     """Band-limited 2-D noise: a sum of random plane waves. Call with (x, y) -> z."""
 
-    def __init__(self, rng: np.random.Generator, wavelengths_m: tuple[float, float],
-                 amplitude_m: float, waves: int = 12) -> None:
+    def __init__(
+        self,
+        rng: np.random.Generator,
+        wavelengths_m: tuple[float, float],
+        amplitude_m: float,
+        waves: int = 12,
+    ) -> None:
         lam = np.exp(rng.uniform(np.log(wavelengths_m[0]), np.log(wavelengths_m[1]), waves))
         ang = rng.uniform(0, 2 * np.pi, waves)
         self.k = (2 * np.pi / lam)[:, None] * np.stack([np.cos(ang), np.sin(ang)], -1)

@@ -12,8 +12,9 @@ from pipeline.sim.simulate import SimSpec, iter_scans, make_world, world_points
 LABEL_COLOURS = {"cave": "tab:brown", "open": "tab:green", "street": "tab:blue"}
 
 
-def plot_world(spec: SimSpec, out_png: str | Path, scan_frame: int | None = None,
-               cell_m: float = 0.5) -> Path:
+def plot_world(
+    spec: SimSpec, out_png: str | Path, scan_frame: int | None = None, cell_m: float = 0.5
+) -> Path:
     """Write a top-down PNG of ``spec``'s world: mesh (height map seen from above, grey),
     trajectory coloured by environment label, and the scan of ``scan_frame`` (default: middle)."""
     import matplotlib
@@ -47,8 +48,9 @@ def plot_world(spec: SimSpec, out_png: str | Path, scan_frame: int | None = None
     return Path(out_png)
 
 
-def height_map(vertices: np.ndarray, triangles: np.ndarray, cell_m: float,
-               max_cells: int = 4_000_000) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+def height_map(
+    vertices: np.ndarray, triangles: np.ndarray, cell_m: float, max_cells: int = 4_000_000
+) -> tuple[np.ndarray, tuple[float, float, float, float]]:
     """Top surface of the mesh seen from above: (nx, ny) heights [m] (NaN where empty) and
     the imshow extent (x0, x1, y0, y1). Cast by vertical rays, one per cell."""
     import open3d as o3d
@@ -60,12 +62,18 @@ def height_map(vertices: np.ndarray, triangles: np.ndarray, cell_m: float,
     X, Y = np.meshgrid(xs, ys, indexing="ij")
     origin = np.array([lo[0], lo[1], 0.0])
     scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor((vertices - origin).astype(np.float32)),
-                        o3d.core.Tensor(triangles.astype(np.uint32)))
+    scene.add_triangles(
+        o3d.core.Tensor((vertices - origin).astype(np.float32)),  # type: ignore[call-overload]
+        o3d.core.Tensor(triangles.astype(np.uint32)),  # type: ignore[call-overload]
+    )
     rays = np.zeros((X.size, 6), np.float32)
     rays[:, 0], rays[:, 1], rays[:, 2] = (X - lo[0]).ravel(), (Y - lo[1]).ravel(), hi[2] + 1.0
     rays[:, 5] = -1.0
-    t = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+    t = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()  # type: ignore[call-overload]
     z = np.where(np.isfinite(t), hi[2] + 1.0 - t, np.nan).reshape(X.shape)
-    return z, (float(xs[0] - cell_m / 2), float(xs[-1] + cell_m / 2),
-               float(ys[0] - cell_m / 2), float(ys[-1] + cell_m / 2))
+    return z, (
+        float(xs[0] - cell_m / 2),
+        float(xs[-1] + cell_m / 2),
+        float(ys[0] - cell_m / 2),
+        float(ys[-1] + cell_m / 2),
+    )

@@ -29,8 +29,10 @@ class Raycaster:
         self.sensor = sensor
         self.origin = np.round(vertices.mean(axis=0)) if len(vertices) else np.zeros(3)
         self.scene = o3d.t.geometry.RaycastingScene()
-        self.scene.add_triangles(o3d.core.Tensor((vertices - self.origin).astype(np.float32)),
-                                 o3d.core.Tensor(triangles.astype(np.uint32)))
+        self.scene.add_triangles(
+            o3d.core.Tensor((vertices - self.origin).astype(np.float32)),  # type: ignore[call-overload]
+            o3d.core.Tensor(triangles.astype(np.uint32)),  # type: ignore[call-overload]
+        )
         self._dirs = sensor.ray_directions()
         self._o3d = o3d
 
@@ -58,5 +60,5 @@ class Raycaster:
 
     def distance_to_mesh(self, points_world: F64) -> F64:
         """(N,) unsigned distance [m] from world points (N, 3) to the mesh."""
-        q = self._o3d.core.Tensor((points_world - self.origin).astype(np.float32))
+        q = self._o3d.core.Tensor((points_world - self.origin).astype(np.float32))  # type: ignore[call-overload]
         return self.scene.compute_distance(q).numpy().astype(np.float64)

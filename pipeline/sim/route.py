@@ -21,7 +21,6 @@ DS_M = 0.25
 LABELS = ("cave", "open", "street")
 
 
-
 @dataclass(frozen=True)
 class Style:
     """How a label is travelled: speed range [m/s], sensor height above the floor [m], lateral
@@ -40,11 +39,17 @@ class Style:
 
 SWAY_DEG = 1.5
 STYLE = {
-    "cave": Style(speed=(1.2, 1.8), height=1.2, wander=0.25, hills=1.2, bumps=0.12,
-                  sway_deg=SWAY_DEG, bob_m=0.03),
+    "cave": Style(
+        speed=(1.2, 1.8),
+        height=1.2,
+        wander=0.25,
+        hills=1.2,
+        bumps=0.12,
+        sway_deg=SWAY_DEG,
+        bob_m=0.03,
+    ),
     "open": Style(speed=(2.5, 4.0), height=1.6, wander=0.8, hills=1.5, bumps=0.15),
-    "street": Style(speed=(6.0, 9.0), height=1.8, wander=0.3, hills=0.4, bumps=0.02,
-                    sway_deg=0.1),
+    "street": Style(speed=(6.0, 9.0), height=1.8, wander=0.3, hills=0.4, bumps=0.02, sway_deg=0.1),
 }
 
 START_MARGIN_M = 6.0
@@ -69,14 +74,16 @@ class Route:
 
     @property
     def s(self) -> F64:
-        return np.arange(len(self.xy)) * DS_M
+        return np.arange(len(self.xy), dtype=np.float64) * DS_M
 
     def runs(self, name: str) -> list[tuple[int, int]]:
         """Contiguous [start, end) sample ranges labelled ``name``."""
         k = self.labels.index(name)
         m = np.concatenate([[0], (self.label == k).astype(np.int8), [0]])
         d = np.diff(m)
-        return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
+        return list(
+            zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True)
+        )
 
     def style_profile(self, key: str, smooth_m: float) -> F64:
         """Per-sample value of a STYLE entry, smoothed along the route over ``smooth_m``."""
@@ -91,20 +98,32 @@ def smooth(x: F64, window_m: float) -> F64:
     return np.convolve(pad, np.ones(w) / w, mode="valid")
 
 
-def _pieces(label: str, length_m: float, heading0: float, rng: np.random.Generator,
-            heading_ref: float) -> list[tuple[float, float]]:
+def _pieces(
+    label: str, length_m: float, heading0: float, rng: np.random.Generator, heading_ref: float
+) -> list[tuple[float, float]]:
     """(length [m], curvature [1/m]) pieces of one label, ``length_m`` in total."""
     out: list[tuple[float, float]] = []
     total, heading = 0.0, heading0
     limit = {"cave": np.deg2rad(85), "open": np.deg2rad(70), "street": np.deg2rad(95)}[label]
     while total < length_m:
         if label == "cave":
-            straight, radius, angle = (rng.uniform(*CAVE_BENDS[0]), rng.uniform(*CAVE_BENDS[1]),
-                                       np.deg2rad(rng.uniform(*CAVE_BENDS[2])))
+            straight, radius, angle = (
+                rng.uniform(*CAVE_BENDS[0]),
+                rng.uniform(*CAVE_BENDS[1]),
+                np.deg2rad(rng.uniform(*CAVE_BENDS[2])),
+            )
         elif label == "open":
-            straight, radius, angle = rng.uniform(15, 35), rng.uniform(25, 50), np.deg2rad(rng.uniform(15, 45))
+            straight, radius, angle = (
+                rng.uniform(15, 35),
+                rng.uniform(25, 50),
+                np.deg2rad(rng.uniform(15, 45)),
+            )
         else:
-            straight, radius, angle = rng.uniform(45, 90), rng.uniform(9, 13), np.deg2rad(rng.uniform(75, 90))
+            straight, radius, angle = (
+                rng.uniform(45, 90),
+                rng.uniform(9, 13),
+                np.deg2rad(rng.uniform(75, 90)),
+            )
         sign = rng.choice([-1.0, 1.0])
         if abs(heading + sign * angle - heading_ref) > limit:
             sign = -sign
@@ -150,14 +169,18 @@ def route_from_positions(xyz: F64, label: str = "street", height_m: float = 1.73
     grid = np.arange(0.0, s[-1] + 1e-9, DS_M)
     x, y, z = (np.interp(grid, s, pts[:, i]) for i in range(3))
     dx, dy = np.gradient(x), np.gradient(y)
-    r = Route(np.stack([x, y], -1), np.unwrap(np.arctan2(dy, dx)),
-              np.full(len(grid), LABELS.index(label), np.int64))
+    r = Route(
+        np.stack([x, y], -1),
+        np.unwrap(np.arctan2(dy, dx)),
+        np.full(len(grid), LABELS.index(label), np.int64),
+    )
     r.floor_z = z - height_m
     return r
 
 
-def segment_lengths(labels: list[str], frames: int, rng: np.random.Generator,
-                    rate_hz: float) -> tuple[list[float], dict[str, float]]:
+def segment_lengths(
+    labels: list[str], frames: int, rng: np.random.Generator, rate_hz: float
+) -> tuple[list[float], dict[str, float]]:
     """Route length of every segment for ``frames`` frames split evenly, and the speed [m/s]
     drawn for every label."""
     speeds = {lab: float(rng.uniform(*STYLE[lab].speed)) for lab in dict.fromkeys(labels)}
@@ -177,12 +200,18 @@ class Poses:
     frame_labels: list[str]
 
 
-def sample_poses(route: Route, speeds: dict[str, float], frames: int, rate_hz: float,
-                 rng: np.random.Generator, start_ns: int = 1_000_000_000) -> Poses:
+def sample_poses(
+    route: Route,
+    speeds: dict[str, float],
+    frames: int,
+    rate_hz: float,
+    rng: np.random.Generator,
+    start_ns: int = 1_000_000_000,
+) -> Poses:
     """Drive the sensor along ``route`` (floor_z filled) at the label speeds, ``frames`` frames.
 
     Speed, sensor height and lateral wander change smoothly across label boundaries; in the
-    cave the sensor also sways and bobs (walking, Style.sway_deg / bob_m). Raises ValueError when the
+    cave the sensor also sways and bobs (walking: Style.sway_deg, bob_m). Raises ValueError when
     route is too short.
     """
     s = route.s
@@ -206,10 +235,22 @@ def sample_poses(route: Route, speeds: dict[str, float], frames: int, rate_hz: f
     d_off = np.interp(sk, s, np.gradient(wander, DS_M))
     x, y = x - np.sin(heading) * off, y + np.cos(heading) * off
     bob = np.interp(sk, s, route.style_profile("bob_m", 4.0))
-    z = np.interp(sk, s, route.floor_z + height) + bob * np.sin(2 * np.pi * 1.8 * tk + rng.uniform(0, 6.3))
+    z = np.interp(sk, s, route.floor_z + height) + bob * np.sin(
+        2 * np.pi * 1.8 * tk + rng.uniform(0, 6.3)
+    )
     slope = np.interp(sk, s, smooth(np.gradient(route.floor_z, DS_M), 3.0))
-    sway = np.interp(sk, s, route.style_profile("sway_deg", 4.0))[:, None] * np.deg2rad(1.0) * np.stack(
-        [_noise1d(rng, tk, (0.5, 2.5)), _noise1d(rng, tk, (0.5, 2.5)), _noise1d(rng, tk, (0.8, 3.0))], -1)
+    sway = (
+        np.interp(sk, s, route.style_profile("sway_deg", 4.0))[:, None]
+        * np.deg2rad(1.0)
+        * np.stack(
+            [
+                _noise1d(rng, tk, (0.5, 2.5)),
+                _noise1d(rng, tk, (0.5, 2.5)),
+                _noise1d(rng, tk, (0.8, 3.0)),
+            ],
+            -1,
+        )
+    )
     yaw = heading + np.arctan(d_off) + sway[:, 2]
     pitch = -np.arctan(slope) + sway[:, 1]
     roll = sway[:, 0]
@@ -222,7 +263,9 @@ def sample_poses(route: Route, speeds: dict[str, float], frames: int, rate_hz: f
     return Poses(T, stamps, [route.labels[i] for i in lab_idx])
 
 
-def _noise1d(rng: np.random.Generator, x: F64, wavelengths: tuple[float, float], waves: int = 6) -> F64:
+def _noise1d(
+    rng: np.random.Generator, x: F64, wavelengths: tuple[float, float], waves: int = 6
+) -> F64:
     """Smooth 1-D noise of unit-ish amplitude (sum of sines) at positions ``x``."""
     lam = rng.uniform(*wavelengths, waves)
     ph = rng.uniform(0, 2 * np.pi, waves)
@@ -231,7 +274,14 @@ def _noise1d(rng: np.random.Generator, x: F64, wavelengths: tuple[float, float],
 
 def _rpy_to_rot(roll: F64, pitch: F64, yaw: F64) -> F64:
     """(N, 3, 3) R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
+    cr, sr, cp, sp, cy, sy = (
+        np.cos(roll),
+        np.sin(roll),
+        np.cos(pitch),
+        np.sin(pitch),
+        np.cos(yaw),
+        np.sin(yaw),
+    )
     R = np.empty((len(roll), 3, 3))
     R[:, 0] = np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1)
     R[:, 1] = np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1)

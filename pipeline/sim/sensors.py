@@ -49,7 +49,9 @@ class SensorModel:
         """(lowest, highest) beam elevation [deg]."""
         return min(self.elevations_deg), max(self.elevations_deg)
 
-    def with_noise(self, range_noise_m: float | None = None, dropout: float | None = None) -> SensorModel:
+    def with_noise(
+        self, range_noise_m: float | None = None, dropout: float | None = None
+    ) -> SensorModel:
         """A copy with another range noise [m] and/or dropout probability."""
         out = self
         if range_noise_m is not None:
@@ -65,9 +67,17 @@ class SensorModel:
     def ray_directions(self, azimuth_phase_deg: float = 0.0) -> NDArray[np.float32]:
         """(B * A, 3) float32 unit directions in the lidar frame, beam-major order."""
         el = np.deg2rad(np.asarray(self.elevations_deg, np.float64))[:, None]
-        az = np.deg2rad(np.arange(self.azimuths) * self.azimuth_step_deg + azimuth_phase_deg)[None, :]
-        d = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az),
-                      np.broadcast_to(np.sin(el), (el.shape[0], az.shape[1]))], axis=-1)
+        az = np.deg2rad(np.arange(self.azimuths) * self.azimuth_step_deg + azimuth_phase_deg)[
+            None, :
+        ]
+        d = np.stack(
+            [
+                np.cos(el) * np.cos(az),
+                np.cos(el) * np.sin(az),
+                np.broadcast_to(np.sin(el), (el.shape[0], az.shape[1])),
+            ],
+            axis=-1,
+        )
         return d.reshape(-1, 3).astype(np.float32)
 
 
@@ -79,16 +89,33 @@ def _hdl64_elevations() -> tuple[float, ...]:
 
 
 SENSORS: dict[str, SensorModel] = {
-    "hdl32": SensorModel("hdl32", tuple(float(x) for x in np.linspace(-30.67, 10.67, 32)),
-                         azimuth_step_deg=0.2, max_range_m=100.0),
-    "hdl64": SensorModel("hdl64", _hdl64_elevations(), azimuth_step_deg=360.0 / 2083,
-                         max_range_m=120.0, min_range_m=2.5),
-    "vlp16": SensorModel("vlp16", tuple(float(x) for x in np.linspace(-15.0, 15.0, 16)),
-                         azimuth_step_deg=0.2, max_range_m=100.0),
+    "hdl32": SensorModel(
+        "hdl32",
+        tuple(float(x) for x in np.linspace(-30.67, 10.67, 32)),
+        azimuth_step_deg=0.2,
+        max_range_m=100.0,
+    ),
+    "hdl64": SensorModel(
+        "hdl64",
+        _hdl64_elevations(),
+        azimuth_step_deg=360.0 / 2083,
+        max_range_m=120.0,
+        min_range_m=2.5,
+    ),
+    "vlp16": SensorModel(
+        "vlp16",
+        tuple(float(x) for x in np.linspace(-15.0, 15.0, 16)),
+        azimuth_step_deg=0.2,
+        max_range_m=100.0,
+    ),
 }
 """HDL-32E (default), HDL-64E (KITTI's), VLP-16 at 10 Hz."""
 
-SENSOR_TITLES = {"hdl32": "Velodyne HDL-32E", "hdl64": "Velodyne HDL-64E", "vlp16": "Velodyne VLP-16"}
+SENSOR_TITLES = {
+    "hdl32": "Velodyne HDL-32E",
+    "hdl64": "Velodyne HDL-64E",
+    "vlp16": "Velodyne VLP-16",
+}
 
 
 def get_sensor(name: str) -> SensorModel:

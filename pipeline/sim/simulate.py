@@ -72,12 +72,19 @@ def label_ranges(frame_labels: list[str]) -> list[EnvLabel]:
 def make_world(spec: SimSpec) -> World:
     """The world and drive of ``spec`` (mesh built once)."""
     spec.check()
-    return build_world(spec.world, spec.seed, spec.frames, spec.sensor_model().rate_hz,
-                       tuple(spec.segments), spec.kitti_trajectory)
+    return build_world(
+        spec.world,
+        spec.seed,
+        spec.frames,
+        spec.sensor_model().rate_hz,
+        tuple(spec.segments),
+        spec.kitti_trajectory,
+    )
 
 
-def iter_scans(world: World, sensor: SensorModel, seed: int,
-               frames: range | None = None) -> Iterator[Scan]:
+def iter_scans(
+    world: World, sensor: SensorModel, seed: int, frames: range | None = None
+) -> Iterator[Scan]:
     """Ray-cast scans of ``world``; frame k's noise comes from the seed (seed, 1, k) alone,
     so any frame can be reproduced without the ones before it."""
     caster = Raycaster(world.vertices, world.triangles, sensor)
@@ -87,8 +94,9 @@ def iter_scans(world: World, sensor: SensorModel, seed: int,
         yield Scan(k, int(world.poses.stamps_ns[k]), pts, T)
 
 
-def simulate_sequence(spec: SimSpec, out_path: str | Path, name: str | None = None,
-                      progress: bool = False) -> SimSummary:
+def simulate_sequence(
+    spec: SimSpec, out_path: str | Path, name: str | None = None, progress: bool = False
+) -> SimSummary:
     """Simulate ``spec`` and write the sequence MCAP at ``out_path`` (atomically)."""
     from tqdm import tqdm
 
@@ -96,26 +104,42 @@ def simulate_sequence(spec: SimSpec, out_path: str | Path, name: str | None = No
     sensor = spec.sensor_model()
     name = name or Path(out_path).stem
     labels = label_ranges(world.poses.frame_labels)
-    source = "simulation:" + ("kitti-trajectory " + Path(spec.kitti_trajectory).name
-                              if spec.kitti_trajectory else spec.world)
-    info = SequenceInfo(name=name, sensor=SENSOR_TITLES[spec.sensor], source=source, labels=labels,
-                        extra=_extra(spec, world))
+    source = "simulation:" + (
+        "kitti-trajectory " + Path(spec.kitti_trajectory).name
+        if spec.kitti_trajectory
+        else spec.world
+    )
+    info = SequenceInfo(
+        name=name,
+        sensor=SENSOR_TITLES[spec.sensor],
+        source=source,
+        labels=labels,
+        extra=_extra(spec, world),
+    )
     points = 0
     with SequenceWriter(out_path, info) as w:
         scans = iter_scans(world, sensor, spec.seed)
         for scan in tqdm(scans, total=world.frames, desc=name, disable=not progress, leave=False):
             w.add(scan.stamp_ns, scan.points_lidar, scan.T_world_lidar)
             points += len(scan.points_lidar)
-    length = float(np.linalg.norm(np.diff(world.poses.T_world_lidar[:, :3, 3], axis=0), axis=1).sum())
+    length = float(
+        np.linalg.norm(np.diff(world.poses.T_world_lidar[:, :3, 3], axis=0), axis=1).sum()
+    )
     log.debug("%s: %d frames, %.0f m, %d points", name, world.frames, length, points)
     return SimSummary(Path(out_path), name, world.frames, points, length, labels)
 
 
 def _extra(spec: SimSpec, world: World) -> dict[str, str]:
-    return {"world": spec.world, "seed": str(spec.seed), "segments": ",".join(spec.segments),
-            "sensor_model": spec.sensor, "range_noise_m": str(spec.sensor_model().range_noise_m),
-            "dropout": str(spec.sensor_model().dropout), "mesh_triangles": str(len(world.triangles)),
-            "motion_distortion": "none (instantaneous scans)"}
+    return {
+        "world": spec.world,
+        "seed": str(spec.seed),
+        "segments": ",".join(spec.segments),
+        "sensor_model": spec.sensor,
+        "range_noise_m": str(spec.sensor_model().range_noise_m),
+        "dropout": str(spec.sensor_model().dropout),
+        "mesh_triangles": str(len(world.triangles)),
+        "motion_distortion": "none (instantaneous scans)",
+    }
 
 
 def world_points(scan: Scan) -> NDArray[np.float64]:

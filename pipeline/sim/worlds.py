@@ -63,9 +63,14 @@ class World:
         return len(self.poses.stamps_ns)
 
 
-def build_world(kind: str, seed: int, frames: int, rate_hz: float = 10.0,
-                segments: tuple[str, ...] = DEFAULT_SEGMENTS,
-                kitti_trajectory: Path | None = None) -> World:
+def build_world(
+    kind: str,
+    seed: int,
+    frames: int,
+    rate_hz: float = 10.0,
+    segments: tuple[str, ...] = DEFAULT_SEGMENTS,
+    kitti_trajectory: Path | None = None,
+) -> World:
     """The world ``kind`` for ``frames`` frames at ``rate_hz``, all randomness from ``seed``."""
     check_world_args(kind, frames, segments, kitti_trajectory)
     rng = np.random.default_rng([seed, 0])
@@ -75,13 +80,13 @@ def build_world(kind: str, seed: int, frames: int, rate_hz: float = 10.0,
         T, stamps = kitti_lidar_poses(kitti_trajectory, frames)
         route = route_from_positions(T[:, :3, 3])
         poses = Poses(T, stamps, ["street"] * len(T))
-        ground = _kitti_ground(route)
+        ground: _Terrain | _kitti_ground = _kitti_ground(route)
     else:
         labels = list(segments) if kind == "composite" else [kind]
         lengths, speeds = segment_lengths(labels, frames, rng, rate_hz)
         route = generate_route(labels, lengths, rng)
         ground = _Terrain(route, rng)
-        route.floor_z = _floor_profile(route, ground, rng)
+        route.floor_z = _floor_profile(route, ground, rng)  # type: ignore[arg-type]
         poses = sample_poses(route, speeds, frames, rate_hz, rng)
     mb = meshes.MeshBuilder()
     if "cave" in [route.labels[i] for i in np.unique(route.label)]:
@@ -95,8 +100,9 @@ def build_world(kind: str, seed: int, frames: int, rate_hz: float = 10.0,
     return World(kind, seed, vertices, triangles, poses, route)
 
 
-def check_world_args(kind: str, frames: int, segments: tuple[str, ...],
-                     kitti_trajectory: Path | None) -> None:
+def check_world_args(
+    kind: str, frames: int, segments: tuple[str, ...], kitti_trajectory: Path | None
+) -> None:
     """ConfigError unless the world, frame count and segments make sense."""
     if kind not in WORLDS:
         raise ConfigError(f"unknown world {kind!r} (known: {', '.join(WORLDS)})")
@@ -104,12 +110,15 @@ def check_world_args(kind: str, frames: int, segments: tuple[str, ...],
         raise ConfigError(f"frames must be >= 2, got {frames}")
     bad = [s for s in segments if s not in LABELS]
     if bad or not segments:
-        raise ConfigError(f"segments must be a non-empty list of {', '.join(LABELS)}, got {list(segments)}")
+        raise ConfigError(
+            f"segments must be a non-empty list of {', '.join(LABELS)}, got {list(segments)}"
+        )
     if kitti_trajectory is not None and kind != "street":
         raise ConfigError(f"--kitti-trajectory builds a street world, got --world {kind}")
 
 
 # --- ground -------------------------------------------------------------------------------
+
 
 class _Terrain:
     """Ground height h(x, y): hills and bumps whose amplitudes follow the nearby route labels."""
@@ -119,18 +128,20 @@ class _Terrain:
         self.bumps = meshes.SmoothNoise2D(rng, (2.0, 7.0), 1.0, waves=16)
         step = max(1, round(5.0 / DS_M))
         self.anchor_xy = route.xy[::step]
-        self.anchor_amp = np.stack([route.style_profile("hills", 40.0),
-                                    route.style_profile("bumps", 20.0)], -1)[::step]
+        self.anchor_amp = np.stack(
+            [route.style_profile("hills", 40.0), route.style_profile("bumps", 20.0)], -1
+        )[::step]
         self.offset = 0.0
 
     def amplitudes(self, x: F64, y: F64) -> F64:
         """(N, 2) hill and bump amplitude: Gaussian-weighted route anchors (sigma 25 m)."""
         out = np.empty((len(x), 2))
         for i in range(0, len(x), 20000):
-            d2 = ((x[i:i + 20000, None] - self.anchor_xy[None, :, 0]) ** 2
-                  + (y[i:i + 20000, None] - self.anchor_xy[None, :, 1]) ** 2)
-            w = np.exp(-(d2 - d2.min(axis=1, keepdims=True)) / (2 * 25.0 ** 2))
-            out[i:i + 20000] = (w @ self.anchor_amp) / w.sum(axis=1, keepdims=True)
+            d2 = (x[i : i + 20000, None] - self.anchor_xy[None, :, 0]) ** 2 + (
+                y[i : i + 20000, None] - self.anchor_xy[None, :, 1]
+            ) ** 2
+            w = np.exp(-(d2 - d2.min(axis=1, keepdims=True)) / (2 * 25.0**2))
+            out[i : i + 20000] = (w @ self.anchor_amp) / w.sum(axis=1, keepdims=True)
         return out
 
     def __call__(self, x: F64, y: F64) -> F64:
@@ -200,11 +211,14 @@ def _terrain_mesh(route: Route, ground: object, cell_m: float = 1.0) -> tuple[F6
 
 # --- cave ---------------------------------------------------------------------------------
 
-def _cave_tube(route: Route, a: int, b: int, rng: np.random.Generator, sides: int = 64) -> tuple[F64, I64]:
+
+def _cave_tube(
+    route: Route, a: int, b: int, rng: np.random.Generator, sides: int = 64
+) -> tuple[F64, I64]:
     """Tunnel rings along route samples [a, b): width 3-8 m with chambers, rough walls, flat
     rough floor ``route.floor_z``; closed where the route starts or ends inside the cave."""
     m = b - a
-    s = np.arange(m) * DS_M
+    s = np.arange(m, dtype=np.float64) * DS_M
     width = 4.0 + 0.7 * _noise_1d(rng, s, (15.0, 40.0))
     for _ in range(max(1, round(s[-1] / 35.0))):
         c, sig, amp = rng.uniform(0, s[-1]), rng.uniform(2.5, 5.0), rng.uniform(2.0, 3.5)
@@ -230,14 +244,19 @@ def _cave_tube(route: Route, a: int, b: int, rng: np.random.Generator, sides: in
             centre_v.append(np.concatenate([route.xy[a + ring], [z_c[ring]]]))
             cidx = len(v) + len(centre_v) - 1
             k = np.arange(sides)
-            tris.append(np.stack([ring * sides + k, ring * sides + (k + 1) % sides,
-                                  np.full(sides, cidx)], -1))
+            tris.append(
+                np.stack(
+                    [ring * sides + k, ring * sides + (k + 1) % sides, np.full(sides, cidx)], -1
+                )
+            )
     if centre_v:
         v = np.concatenate([v, np.array(centre_v)])
     return v, np.concatenate(tris)
 
 
-def _noise_1d(rng: np.random.Generator, x: F64, wavelengths: tuple[float, float], waves: int = 5) -> F64:
+def _noise_1d(
+    rng: np.random.Generator, x: F64, wavelengths: tuple[float, float], waves: int = 5
+) -> F64:
     lam = rng.uniform(*wavelengths, waves)
     ph = rng.uniform(0, 2 * np.pi, waves)
     return np.sin(np.outer(x, 2 * np.pi / lam) + ph).sum(axis=1) / np.sqrt(waves / 2)
@@ -251,18 +270,27 @@ def _wall_noise(rng: np.random.Generator, s: F64, th: F64) -> F64:
         mth = rng.integers(m_range[0], m_range[1] + 1, waves) * rng.choice([-1, 1], waves)
         ph = rng.uniform(0, 2 * np.pi, waves)
         for k in range(waves):
-            out += amp / np.sqrt(waves / 2) * np.sin(
-                2 * np.pi * s[:, None] / lam[k] + mth[k] * th[None, :] + ph[k])
+            out += (
+                amp
+                / np.sqrt(waves / 2)
+                * np.sin(2 * np.pi * s[:, None] / lam[k] + mth[k] * th[None, :] + ph[k])
+            )
     return out
 
 
 # --- open space and street dressing ---------------------------------------------------------
 
-def _dress_open(mb: meshes.MeshBuilder, route: Route, ground: object, rng: np.random.Generator) -> None:
+
+def _dress_open(
+    mb: meshes.MeshBuilder, route: Route, ground: object, rng: np.random.Generator
+) -> None:
     """A few rocks (about one per 25 m) and one or two trees beside every open segment."""
     for a, b in route.runs("open"):
         length = (b - a) * DS_M
-        for kind, count in (("rock", max(1, round(length / 25.0))), ("tree", int(rng.integers(1, 3)))):
+        for kind, count in (
+            ("rock", max(1, round(length / 25.0))),
+            ("tree", int(rng.integers(1, 3))),
+        ):
             for _ in range(count):
                 i = int(rng.integers(a, b))
                 side = rng.choice([-1.0, 1.0])
@@ -279,7 +307,9 @@ def _dress_open(mb: meshes.MeshBuilder, route: Route, ground: object, rng: np.ra
                     mb.add(*meshes.tree(np.array([p[0], p[1], z - 0.3]), rng))
 
 
-def _dress_street(mb: meshes.MeshBuilder, route: Route, ground: object, rng: np.random.Generator) -> None:
+def _dress_street(
+    mb: meshes.MeshBuilder, route: Route, ground: object, rng: np.random.Generator
+) -> None:
     """Box buildings, parked cars, poles and trees along both sides of every street segment."""
     for a, b in route.runs("street"):
         for side in (-1.0, 1.0):
@@ -293,8 +323,15 @@ def _frame_at(route: Route, s_m: float, a: int, b: int) -> tuple[F64, float, F64
     return route.xy[i], h, np.array([-np.sin(h), np.cos(h)])
 
 
-def _buildings(mb: meshes.MeshBuilder, route: Route, ground: object, rng: np.random.Generator,
-               a: int, b: int, side: float) -> None:
+def _buildings(
+    mb: meshes.MeshBuilder,
+    route: Route,
+    ground: object,
+    rng: np.random.Generator,
+    a: int,
+    b: int,
+    side: float,
+) -> None:
     cursor = a * DS_M + rng.uniform(0, 5)
     while cursor < b * DS_M:
         front = rng.uniform(8.0, 25.0)
@@ -302,16 +339,30 @@ def _buildings(mb: meshes.MeshBuilder, route: Route, ground: object, rng: np.ran
         setback = rng.uniform(7.5, 11.0)
         p, h, n_h = _frame_at(route, cursor + front / 2, a, b)
         c = p + side * (setback + depth / 2) * n_h
-        cursor += front + (rng.uniform(10.0, 16.0) if rng.random() < 0.15 else rng.uniform(0.5, 4.0))
+        cursor += front + (
+            rng.uniform(10.0, 16.0) if rng.random() < 0.15 else rng.uniform(0.5, 4.0)
+        )
         if _box_clearance(route, c, front, depth, h) < ROAD_CLEARANCE_M:
             continue
         z0 = float(ground(c[:1], c[1:]).item()) - 1.0  # type: ignore[operator]
-        mb.add(*meshes.box(np.array([c[0], c[1], z0 + (tall + 1.0) / 2]),
-                           np.array([front, depth, tall + 1.0]), h))
+        mb.add(
+            *meshes.box(
+                np.array([c[0], c[1], z0 + (tall + 1.0) / 2]),
+                np.array([front, depth, tall + 1.0]),
+                h,
+            )
+        )
 
 
-def _street_items(mb: meshes.MeshBuilder, route: Route, ground: object, rng: np.random.Generator,
-                  a: int, b: int, side: float) -> None:
+def _street_items(
+    mb: meshes.MeshBuilder,
+    route: Route,
+    ground: object,
+    rng: np.random.Generator,
+    a: int,
+    b: int,
+    side: float,
+) -> None:
     for kind, spacing in (("car", (6.0, 14.0)), ("pole", (15.0, 30.0)), ("tree", (15.0, 35.0))):
         cursor = a * DS_M + rng.uniform(*spacing)
         while cursor < b * DS_M:
@@ -351,4 +402,4 @@ def _box_clearance(route: Route, c: F64, length: float, width: float, yaw: float
     qx, qy = q[:, 0] * cy + q[:, 1] * sy, -q[:, 0] * sy + q[:, 1] * cy
     dx = np.maximum(np.abs(qx) - length / 2, 0)
     dy = np.maximum(np.abs(qy) - width / 2, 0)
-    return float(np.sqrt(dx ** 2 + dy ** 2).min())
+    return float(np.sqrt(dx**2 + dy**2).min())

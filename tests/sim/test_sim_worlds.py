@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -80,7 +81,7 @@ def test_composite_labels_cover_every_frame_in_order(tmp_path: Path) -> None:
         labels = r.info.labels
         assert [x.label for x in labels] == ["cave", "open", "street"]
         assert labels[0].start == 0 and labels[-1].end == len(r) - 1 == 149
-        assert all(b.start == a.end + 1 for a, b in zip(labels, labels[1:], strict=False))
+        assert all(b.start == a.end + 1 for a, b in itertools.pairwise(labels))
         assert all(r.info.label_of(k) is not None for k in range(len(r)))
         assert all(x.end - x.start + 1 >= 25 for x in labels)
     assert summary.labels == labels
@@ -112,7 +113,9 @@ def test_sensor_beams_and_vertical_field_of_view(name: str) -> None:
     assert np.allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-6)
     # in a cave every beam hits: the returns form exactly `beams` rings inside the fov
     w = make_world(SimSpec("cave", 1, 3, sensor=name))
-    pts = Raycaster(w.vertices, w.triangles, sensor).scan(w.poses.T_world_lidar[1], np.random.default_rng(0))
+    pts = Raycaster(w.vertices, w.triangles, sensor).scan(
+        w.poses.T_world_lidar[1], np.random.default_rng(0)
+    )
     el = np.degrees(np.arcsin(pts[:, 2] / np.linalg.norm(pts[:, :3], axis=1)))
     assert el.min() >= lo - 1e-3 and el.max() <= hi + 1e-3
     assert len(np.unique(np.round(el, 3))) == beams
@@ -124,9 +127,11 @@ def test_dropout_and_noise_settings() -> None:
     assert s.range_noise_m == 0.02
     w = make_world(SimSpec("cave", 1, 3))
     full = Raycaster(w.vertices, w.triangles, s.with_noise(dropout=0.0)).scan(
-        w.poses.T_world_lidar[1], np.random.default_rng(0))
+        w.poses.T_world_lidar[1], np.random.default_rng(0)
+    )
     half = Raycaster(w.vertices, w.triangles, s.with_noise(dropout=0.5)).scan(
-        w.poses.T_world_lidar[1], np.random.default_rng(0))
+        w.poses.T_world_lidar[1], np.random.default_rng(0)
+    )
     assert 0.45 < len(half) / len(full) < 0.55
     with pytest.raises(ConfigError, match="dropout"):
         s.with_noise(dropout=1.5)
@@ -150,7 +155,7 @@ def test_kitti_trajectory_drives_a_street(kitti_trajectories: Path, kitti_root: 
     assert w.poses.frame_labels == ["street"] * 30
     # Tr of sequence 04 matches the dataset's own calib.txt
     calib = (kitti_root / "sequences" / "04" / "calib.txt").read_text().splitlines()
-    tr = [line for line in calib if line.startswith("Tr:")][0].split()[1:]
+    tr = next(line for line in calib if line.startswith("Tr:")).split()[1:]
     np.testing.assert_allclose(Tr[:3, :4].ravel(), np.array(tr, float))
     scan = next(iter_scans(w, spec.sensor_model(), 1, range(10, 11)))
     d = Raycaster(w.vertices, w.triangles, spec.sensor_model()).distance_to_mesh(world_points(scan))
@@ -159,8 +164,22 @@ def test_kitti_trajectory_drives_a_street(kitti_trajectories: Path, kitti_root: 
 
 def test_cli_simulate_and_bad_input(tmp_path: Path) -> None:
     out = tmp_path / "o.mcap"
-    r = CliRunner().invoke(main, ["simulate", "--world", "open", "--seed", "2", "--frames", "3",
-                                  "--sensor", "vlp16", "--out", str(out)])
+    r = CliRunner().invoke(
+        main,
+        [
+            "simulate",
+            "--world",
+            "open",
+            "--seed",
+            "2",
+            "--frames",
+            "3",
+            "--sensor",
+            "vlp16",
+            "--out",
+            str(out),
+        ],
+    )
     assert r.exit_code == 0, r.output
     with SequenceReader(out) as seq:
         assert len(seq) == 3 and seq.info.sensor == "Velodyne VLP-16"
@@ -181,8 +200,10 @@ def test_cli_simulate_and_bad_input(tmp_path: Path) -> None:
 
 def test_cli_simulate_set_writes_sequences_and_index(tmp_path: Path) -> None:
     params = tmp_path / "params.yaml"
-    params.write_text("base:\n  seed: 3\nsimulate:\n  train: {cave: 1, street: 1}\n"
-                      "  train_frames: 12\n  validation_frames: 30\n")
+    params.write_text(
+        "base:\n  seed: 3\nsimulate:\n  train: {cave: 1, street: 1}\n"
+        "  train_frames: 12\n  validation_frames: 30\n"
+    )
     out = tmp_path / "seq"
     r = CliRunner().invoke(main, ["simulate-set", "--params", str(params), "--out", str(out)])
     assert r.exit_code == 0, r.output
@@ -191,13 +212,16 @@ def test_cli_simulate_set_writes_sequences_and_index(tmp_path: Path) -> None:
     with SequenceReader(out / "composite_0.mcap") as seq:
         assert len(seq) == 30 and {x.label for x in seq.info.labels} == {"cave", "open", "street"}
     params.write_text("simulate:\n  train: {lava: 2}\n")
-    r = CliRunner().invoke(main, ["simulate-set", "--params", str(params), "--out", str(tmp_path / "x")])
+    r = CliRunner().invoke(
+        main, ["simulate-set", "--params", str(params), "--out", str(tmp_path / "x")]
+    )
     assert r.exit_code == 1 and "unknown world 'lava'" in r.output
 
 
 def test_cli_plot_world(tmp_path: Path) -> None:
     out = tmp_path / "w.png"
-    r = CliRunner().invoke(main, ["plot-world", "--world", "composite", "--frames", "60",
-                                  "--out", str(out)])
+    r = CliRunner().invoke(
+        main, ["plot-world", "--world", "composite", "--frames", "60", "--out", str(out)]
+    )
     assert r.exit_code == 0, r.output
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
