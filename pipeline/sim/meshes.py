@@ -66,7 +66,8 @@ def cylinder(base: F64, radius: float, height: float, sides: int = 10) -> tuple[
     """A closed vertical cylinder standing on ``base`` (3,)."""
     th = np.linspace(0, 2 * np.pi, sides, endpoint=False)
     ring = np.stack([radius * np.cos(th), radius * np.sin(th), np.zeros(sides)], -1)
-    v = np.concatenate([ring, [*ring, 0, 0, height], [[0, 0, 0], [0, 0, height]]]) + base
+    top = ring + np.array([0.0, 0.0, height])
+    v = np.concatenate([ring, top, [[0.0, 0.0, 0.0], [0.0, 0.0, height]]]) + base
     tris = grid_triangles(2, sides, wrap_cols=True).tolist()
     k = np.arange(sides)
     tris += np.stack([k, (k + 1) % sides, np.full(sides, 2 * sides)], -1).tolist()
