@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from pipeline.errors import ConfigError
 
@@ -25,9 +25,11 @@ class Section(BaseModel):
 
 
 class BaseSection(Section):
-    """The shared ``base`` section."""
+    """The shared ``base`` section: the seed, and L, which the ``trials``, ``rte`` and
+    ``evaluate`` sections take by a YAML alias (``length_m: *length_m``) so that it is set once."""
 
     seed: int = 0
+    length_m: float = Field(25.0, gt=0)
 
 
 def format_validation_error(section: str, exc: ValidationError) -> str:

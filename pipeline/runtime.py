@@ -338,6 +338,7 @@ class Selector:
         self.current_u: NDArray[np.float64] | None = None
         self.last_stamp_ns: int | None = None
         self.last: dict[str, Any] = {}
+        self.selections = 0
 
     @property
     def current(self) -> Params:
@@ -360,6 +361,7 @@ class Selector:
         """argmin_x S(E_t, x) for this scan, with hysteresis; too few points keep the last."""
         if stamp_ns is not None:
             self.last_stamp_ns = int(stamp_ns)
+        self.selections += 1
         pts = np.asarray(points_lidar)
         if pts.ndim != 2 or len(pts) < self.min_scan_points:
             self.last = {"kept": "too_few_points", "points": len(pts)}

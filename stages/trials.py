@@ -3,7 +3,8 @@
 
 Sequences are given as MCAP paths, or (DVC form) as ``--sequences DIR`` with the split of
 ``DIR/index.json`` (``--split``, default params ``trials.split``). Options override the params
-section ``trials``; the seed defaults to ``base.seed``.
+section ``trials`` (with ``--joint``, the section ``fixed`` overrides it first); the seed
+defaults to ``base.seed``.
 """
 
 from __future__ import annotations
@@ -65,9 +66,13 @@ def trials(
     """SMBO trials: per sequence, or one joint study (--joint) into OUT."""
     from pipeline.config import BaseSection, load_section, validate_section
     from pipeline.errors import ConfigError
-    from pipeline.tuning.smbo import TrialsSection, run_trials, sequences_of_split
+    from pipeline.tuning.smbo import FixedSection, TrialsSection, run_trials, sequences_of_split
 
     section = load_section(params_path, "trials", TrialsSection)
+    if joint:  # the `fixed` section overrides `trials` for the joint study
+        fixed = load_section(params_path, "fixed", FixedSection)
+        section = validate_section(TrialsSection, "trials", {
+            **section.model_dump(), **fixed.model_dump(exclude_none=True)})
     overrides = dict(
         algorithm=algorithm,
         iterations=iterations,
@@ -87,7 +92,9 @@ def trials(
     if bool(sequence_paths) == (sequence_dir is not None):
         raise ConfigError("give either SEQ.mcap paths or --sequences DIR, not both or neither")
     paths = (
-        list(sequence_paths) if sequence_paths else sequences_of_split(sequence_dir, settings.split)
+        sequences_of_split(sequence_dir, settings.split)
+        if sequence_dir is not None
+        else list(sequence_paths)
     )
     for s in run_trials(paths, out_dir, settings, seed, joint=joint):
         log.info(

@@ -305,12 +305,35 @@ def load_frame_table(con: duckdb.DuckDBPyConnection, table: str, path: Path | No
         return
     if not Path(path).is_file():
         raise InputError(f"{path}: no such {table} file")
+    if table == "environment":
+        match_environment_columns(con, path)
     columns = [r[0] for r in con.execute(f"DESCRIBE {table}").fetchall()]
     try:
         con.execute(f"INSERT INTO {table} SELECT {', '.join(columns)} "
                     f"FROM read_parquet({sql_literal(str(path))})")
     except duckdb.Error as exc:
         raise InputError(f"{path}: not a valid {table} table ({first_line(exc)})") from None
+
+
+def match_environment_columns(con: duckdb.DuckDBPyConnection, path: Path) -> None:
+    """Give ``environment`` the e0..e<D-1> columns of the Parquet file (D = descriptors.pca_dim;
+    tables.sql declares the default D = 10)."""
+    import duckdb
+
+    try:
+        file_cols = [r[0] for r in con.execute(
+            f"DESCRIBE SELECT * FROM read_parquet({sql_literal(str(path))})").fetchall()]
+    except duckdb.Error as exc:
+        raise InputError(f"{path}: not a valid environment table ({first_line(exc)})") from None
+    is_e = lambda c: c[:1] == "e" and c[1:].isdigit()  # noqa: E731
+    have = [r[0] for r in con.execute("DESCRIBE environment").fetchall() if is_e(r[0])]
+    want = [c for c in file_cols if is_e(c)]
+    for c in have:
+        if c not in want:
+            con.execute(f"ALTER TABLE environment DROP COLUMN {c}")
+    for c in want:
+        if c not in have:
+            con.execute(f"ALTER TABLE environment ADD COLUMN {c} FLOAT")
 
 
 def count_rows(con: duckdb.DuckDBPyConnection, summary: DatabaseSummary) -> None:

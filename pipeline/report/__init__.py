@@ -1,0 +1,1 @@
+"""Evaluation of baseline, fixed and adaptive parameters, and the report (figures, markdown)."""

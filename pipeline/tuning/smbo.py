@@ -67,6 +67,14 @@ class TrialsSection(Section):
         return v
 
 
+class FixedSection(Section):
+    """params.yaml ``fixed``: what the joint study (the paper's "fixed" parameters) does
+    differently from ``trials``; null keeps the ``trials`` value."""
+
+    iterations: int | None = Field(None, ge=1)
+    workers: int | None = Field(None, ge=1)
+
+
 @dataclass
 class StudySummary:
     """What one study ended with."""

@@ -1,0 +1,249 @@
+"""Baseline vs fixed vs adaptive on the validation sequences (the paper's Table I).
+
+``evaluate`` runs the baseline (the adapter's defaults) and the fixed parameters (the best trial
+of the joint SMBO), reads the adaptive trajectory and schedule written by the ``adaptive``
+stage, and scores all three with the same per-start-frame RTE (``length_m``), overall and per
+environment label (a segment counts for the label of its start frame), plus the KITTI devkit
+metric with the devkit lengths that fit into the sequence. The overall figure of a setting is
+the mean over all segments of all validation sequences pooled.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import Field
+
+from pipeline.config import Section
+from pipeline.errors import InputError
+from pipeline.evaluation.kitti import LENGTHS_M
+from pipeline.evaluation.rte import per_frame_rte
+from pipeline.odometry.base import Schedule
+from pipeline.sequence import SequenceInfo, SequenceReader
+from pipeline.trajectory import Trajectory, read_trajectory, write_trajectory
+
+log = logging.getLogger(__name__)
+
+SETTINGS = ("baseline", "fixed", "adaptive")
+
+
+class EvaluateSection(Section):
+    """params.yaml ``evaluate`` (also read by the ``adaptive`` stage for its split).
+
+    split: the sequences of index.json to evaluate on; length_m: RTE segment length [m] (the
+    trials' L); kitti_lengths_m: devkit lengths to try (those longer than a sequence are left
+    out, as the devkit does).
+    """
+
+    split: str = "validation"
+    length_m: float = Field(25.0, gt=0)
+    kitti_lengths_m: tuple[float, ...] = LENGTHS_M
+
+
+@dataclass
+class SettingScore:
+    """One setting on one sequence: per-start-frame RTE (N,) [%] (NaN without a segment)."""
+
+    setting: str
+    sequence: str
+    t_err_pct: NDArray[np.float64]
+    labels: list[str | None]
+    wall_time_s: float
+    trajectory: Trajectory
+
+    @property
+    def rte_pct(self) -> float:
+        """Mean RTE [%] over the start frames that have a segment."""
+        return _mean(self.t_err_pct)
+
+    def per_label(self) -> dict[str, float]:
+        """Mean RTE [%] of the segments starting in each environment label."""
+        labels = np.array([lab or "" for lab in self.labels])
+        return {lab: _mean(self.t_err_pct[labels == lab])
+                for lab in dict.fromkeys(labels.tolist()) if lab}
+
+
+@dataclass
+class Evaluation:
+    """Scores of every setting on every validation sequence, plus what produced them."""
+
+    algorithm: str
+    length_m: float
+    fixed_params: dict[str, float]
+    baseline_params: dict[str, float]
+    scores: list[SettingScore] = field(default_factory=list)
+    schedules: dict[str, Schedule] = field(default_factory=dict)
+    infos: dict[str, SequenceInfo] = field(default_factory=dict)
+    ground_truth: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    kitti: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
+
+    @property
+    def sequences(self) -> list[str]:
+        return list(self.infos)
+
+    def score(self, setting: str, sequence: str) -> SettingScore:
+        return next(s for s in self.scores if s.setting == setting and s.sequence == sequence)
+
+    def pooled(self, setting: str) -> NDArray[np.float64]:
+        """Per-start-frame RTE [%] of ``setting`` over all sequences, concatenated."""
+        return np.concatenate([s.t_err_pct for s in self.scores if s.setting == setting])
+
+    def overall(self, setting: str) -> float:
+        """Mean RTE [%] of ``setting`` over the segments of all sequences pooled."""
+        return _mean(self.pooled(setting))
+
+    def overall_per_label(self, setting: str) -> dict[str, float]:
+        """Mean RTE [%] of ``setting`` per environment label, all sequences pooled."""
+        labels = np.concatenate([[lab or "" for lab in s.labels]
+                                 for s in self.scores if s.setting == setting])
+        errs = self.pooled(setting)
+        return {lab: _mean(errs[labels == lab]) for lab in dict.fromkeys(labels.tolist()) if lab}
+
+
+def _mean(values: NDArray[np.float64]) -> float:
+    v = values[np.isfinite(values)]
+    return float(v.mean()) if len(v) else math.nan
+
+
+def best_fixed_params(trials_dir: Path, algorithm: str | None = None) -> tuple[str, dict[str, float]]:
+    """(algorithm, parameters) of the best 'ok' trial of the joint SMBO under ``trials_dir``."""
+    from pipeline.evaluation.trials import JOINT_SEQUENCE, read_trials_tables
+
+    table = read_trials_tables(trials_dir)
+    rows = [r for r in table.to_pylist() if r["sequence"] == JOINT_SEQUENCE
+            and (algorithm is None or r["algorithm"] == algorithm)]
+    if not rows:
+        raise InputError(f"{trials_dir}: no joint trials table"
+                         f"{f' for {algorithm}' if algorithm else ''} (run the `fixed` stage)")
+    ok = [r for r in rows if r["status"] == "ok" and math.isfinite(r["objective"])]
+    if not ok:
+        raise InputError(f"{trials_dir}: no successful joint trial to take fixed parameters from")
+    best = min(ok, key=lambda r: (r["objective"], r["trial"]))
+    return best["algorithm"], {k: float(v) for k, v in json.loads(best["params_json"]).items()}
+
+
+def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, float],
+             adaptive_dir: Path, out_dir: Path, settings: EvaluateSection,
+             adapter_options: Mapping[str, object] | None = None) -> Evaluation:
+    """Run baseline and fixed, load adaptive, score all three on every sequence.
+
+    The baseline and fixed trajectories go to ``out_dir/<sequence>/<setting>.parquet``.
+    """
+    from pipeline.odometry import get_adapter
+
+    adapter = get_adapter(algorithm, **dict(adapter_options or {}))
+    result = Evaluation(algorithm, settings.length_m, adapter.space.validate(fixed_params),
+                        adapter.space.defaults())
+    for path in sequences:
+        name = path.stem
+        gt, info = _ground_truth(path)
+        result.infos[name], result.ground_truth[name] = info, gt
+        labels = [info.label_of(i) for i in range(len(gt))]
+        runs = {"baseline": _run_fixed(adapter, path, result.baseline_params, out_dir, "baseline"),
+                "fixed": _run_fixed(adapter, path, result.fixed_params, out_dir, "fixed"),
+                "adaptive": _read_adaptive(adaptive_dir / name, algorithm)}
+        for setting, (traj, wall) in runs.items():
+            t_err, _ = per_frame_rte(gt, traj.T_world_lidar, settings.length_m)
+            result.scores.append(SettingScore(setting, name, t_err, labels, wall, traj))
+            log.info("%s %s: %.3f %% RTE (%.1f s)", name, setting, result.scores[-1].rte_pct, wall)
+        result.schedules[name] = Schedule.read(adaptive_dir / name / "schedule.parquet")
+        result.kitti[name] = _kitti_scores(gt, {s: t for s, (t, _) in runs.items()},
+                                           settings.kitti_lengths_m)
+    return result
+
+
+def _ground_truth(path: Path) -> tuple[NDArray[np.float64], SequenceInfo]:
+    with SequenceReader(path) as reader:
+        gt, info = reader.ground_truth(), reader.info
+    if gt is None:
+        raise InputError(f"{path}: validation sequence has no ground truth")
+    return gt, info
+
+
+def _run_fixed(adapter: Any, path: Path, params: Mapping[str, float], out_dir: Path,
+               setting: str) -> tuple[Trajectory, float]:
+    """Run ``adapter`` with constant ``params``; write and return the trajectory, wall time."""
+    from pipeline.odometry import run_sequence
+
+    t0 = time.perf_counter()
+    traj = run_sequence(adapter, path, params)
+    wall = time.perf_counter() - t0
+    write_trajectory(out_dir / path.stem / f"{setting}.parquet", traj,
+                     {"setting": setting, "algorithm": adapter.name, "sequence": path.stem,
+                      "params_json": json.dumps(dict(params), sort_keys=True)})
+    return traj, wall
+
+
+def _read_adaptive(folder: Path, algorithm: str) -> tuple[Trajectory, float]:
+    """The adaptive stage's trajectory and wall time; InputError when it was another algorithm."""
+    meta_path = folder / "run.json"
+    if not meta_path.is_file():
+        raise InputError(f"{meta_path}: no adaptive run (run the `adaptive` stage)")
+    meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    if meta.get("algorithm") != algorithm:
+        raise InputError(f"{meta_path}: adaptive run of {meta.get('algorithm')!r}, "
+                         f"the fixed parameters are for {algorithm!r}")
+    return read_trajectory(folder / "trajectory.parquet"), float(meta["wall_time_s"])
+
+
+def _kitti_scores(gt: NDArray[np.float64], trajectories: Mapping[str, Trajectory],
+                  lengths_m: tuple[float, ...]) -> dict[str, dict[str, float]]:
+    """Devkit t_err [%], r_err [deg/100 m] and segment count per setting (lengths that fit)."""
+    from pipeline.evaluation.kitti import kitti_errors
+
+    out = {}
+    for setting, traj in trajectories.items():
+        seg = kitti_errors(gt, traj.T_world_lidar, lengths_m)
+        out[setting] = {"t_err_pct": seg.t_err_pct,
+                        "r_err_deg_per_100m": 100.0 * seg.r_err_deg_per_m,
+                        "segments": len(seg)}
+    return out
+
+
+# ------------------------------------------------------------------------------- metrics
+
+
+def trials_summary(studies: Mapping[str, Path]) -> dict[str, dict[str, float]]:
+    """Trial counts, failures and total wall time [s] of every SMBO output folder."""
+    from pipeline.evaluation.trials import read_trials_tables
+
+    out = {}
+    for study, folder in studies.items():
+        rows = read_trials_tables(folder).to_pylist()
+        out[study] = {"studies": len({(r["algorithm"], r["sequence"]) for r in rows}),
+                      "trials": len(rows),
+                      "failed": sum(r["status"] != "ok" for r in rows),
+                      "wall_time_s": float(sum(r["wall_time_s"] for r in rows))}
+    return out
+
+
+def metrics(ev: Evaluation, trials: Mapping[str, Mapping[str, float]]) -> dict[str, Any]:
+    """The JSON of ``dvc metrics show``: RTE per setting (overall, per label, per sequence),
+    ratios, KITTI metric, failed-trial counts and wall times."""
+    overall = {s: ev.overall(s) for s in SETTINGS}
+    return {
+        "algorithm": ev.algorithm,
+        "length_m": ev.length_m,
+        "rte_pct": overall,
+        "ratio": {"adaptive_vs_baseline": overall["adaptive"] / overall["baseline"],
+                  "adaptive_vs_fixed": overall["adaptive"] / overall["fixed"]},
+        "rte_pct_per_label": {s: ev.overall_per_label(s) for s in SETTINGS},
+        "sequences": {name: {
+            "rte_pct": {s: ev.score(s, name).rte_pct for s in SETTINGS},
+            "rte_pct_per_label": {s: ev.score(s, name).per_label() for s in SETTINGS},
+            "kitti": ev.kitti[name],
+            "wall_time_s": {s: ev.score(s, name).wall_time_s for s in SETTINGS},
+            "parameter_changes": len(ev.schedules[name].changes()) - 1,
+        } for name in ev.sequences},
+        "params": {"baseline": ev.baseline_params, "fixed": ev.fixed_params},
+        "trials": dict(trials),
+    }

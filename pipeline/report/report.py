@@ -1,0 +1,206 @@
+"""The ``evaluate`` stage's outputs: metrics JSON, plot data for ``dvc plots``, report.md + PNGs.
+
+``run_evaluation`` reads like the stage's table of contents: take the fixed parameters from the
+joint SMBO, run and score the three settings (``pipeline.report.evaluate``), then write the
+metrics, the plot data and the report.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.io_utils import atomic_write_text
+from pipeline.report import figures
+from pipeline.report.evaluate import (
+    SETTINGS,
+    EvaluateSection,
+    Evaluation,
+    best_fixed_params,
+    evaluate,
+    metrics,
+    trials_summary,
+)
+
+
+@dataclass(frozen=True)
+class EvaluationPaths:
+    """Inputs and outputs of the ``evaluate`` stage (all from dvc.yaml)."""
+
+    sequences: Path  # data/sequences (index.json + MCAPs)
+    trials: Path  # results/trials (per-sequence SMBO)
+    fixed: Path  # results/fixed (joint SMBO)
+    adaptive: Path  # results/adaptive
+    runs: Path  # results/evaluation: baseline and fixed trajectories
+    metrics: Path  # metrics/evaluation.json
+    plots: Path  # plots/ (CSV for dvc plots)
+    report: Path  # report/ (report.md + PNG)
+
+
+def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection,
+                   adapter_options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Evaluate baseline, fixed and adaptive on the ``settings.split`` sequences; write
+    everything; return the metrics."""
+    from pipeline.evaluation.trials import read_trials_tables
+    from pipeline.tuning.smbo import sequences_of_split
+
+    algorithm, fixed = best_fixed_params(paths.fixed)
+    sequences = sequences_of_split(paths.sequences, settings.split)
+    ev = evaluate(sequences, algorithm, fixed, paths.adaptive, paths.runs, settings,
+                  adapter_options)
+    result = metrics(ev, trials_summary({"trials": paths.trials, "fixed": paths.fixed}))
+    atomic_write_text(paths.metrics, json.dumps(json_safe(result), indent=2) + "\n")
+    write_plot_data(ev, paths.plots)
+    trial_rows = [r for r in read_trials_tables(paths.trials).to_pylist()
+                  if r["algorithm"] == algorithm]
+    pngs = write_figures(ev, trial_rows, paths.report)
+    atomic_write_text(paths.report / "report.md", report_markdown(ev, result, pngs))
+    return result
+
+
+# ----------------------------------------------------------------------------- plot data
+
+
+def _csv(rows: list[dict[str, Any]]) -> str:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]) if rows else ["frame"],
+                            lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return buf.getvalue()
+
+
+def _num(v: float) -> float | str:
+    return round(float(v), 6) if math.isfinite(v) else ""
+
+
+def write_plot_data(ev: Evaluation, plots_dir: Path) -> None:
+    """CSV files for ``dvc plots show`` (dvc.yaml ``plots``), all validation sequences:
+    schedule.csv (the adaptive parameters per frame), rte_frames.csv (per-start-frame RTE of
+    every setting), trajectory_<setting>.csv (x_m, y_m, started at the true first pose)."""
+    sched, rte = [], []
+    traj: dict[str, list[dict[str, Any]]] = {"ground_truth": [], **{s: [] for s in SETTINGS}}
+    for name in ev.sequences:
+        stamps = ev.score("adaptive", name).trajectory.stamps_ns
+        t_s = (stamps - stamps[0]) * 1e-9
+        labels = [ev.infos[name].label_of(i) or "" for i in range(len(stamps))]
+        s = ev.schedules[name]
+        gt = ev.ground_truth[name]
+        errs = {k: ev.score(k, name).t_err_pct for k in SETTINGS}
+        for i in range(len(stamps)):
+            base = {"sequence": name, "frame": i, "time_s": round(float(t_s[i]), 3),
+                    "label": labels[i]}
+            sched.append({**base, **{k: float(v[i]) for k, v in s.values.items()}})
+            rte.append({**base, **{k: _num(e[i]) for k, e in errs.items()}})
+        xy = {"ground_truth": gt[:, :3, 3],
+              **{k: figures.aligned_positions(gt, ev.score(k, name).trajectory.T_world_lidar)
+                 for k in SETTINGS}}
+        for k, pos in xy.items():
+            traj[k] += [{"sequence": name, "frame": i, "x_m": round(float(p[0]), 4),
+                         "y_m": round(float(p[1]), 4)} for i, p in enumerate(pos)]
+    atomic_write_text(plots_dir / "schedule.csv", _csv(sched))
+    atomic_write_text(plots_dir / "rte_frames.csv", _csv(rte))
+    for k, rows in traj.items():
+        atomic_write_text(plots_dir / f"trajectory_{k}.csv", _csv(rows))
+
+
+# -------------------------------------------------------------------------------- report
+
+
+def write_figures(ev: Evaluation, trial_rows: list[dict[str, Any]],
+                  report_dir: Path) -> dict[str, list[Path]]:
+    """Every PNG of the report: kind -> files (relative to ``report_dir``)."""
+    out: dict[str, list[Path]] = {"schedule": [], "rte": [], "trajectory": [], "trials": []}
+    for name in ev.sequences:
+        out["schedule"].append(figures.schedule_figure(ev, name, report_dir / f"schedule_{name}.png"))
+        out["rte"].append(figures.rte_figure(ev, name, report_dir / f"rte_{name}.png"))
+        out["trajectory"].append(
+            figures.trajectory_figure(ev, name, report_dir / f"trajectory_{name}.png"))
+    names = list(ev.baseline_params)
+    if trial_rows:
+        out["trials"].append(figures.trials_figure(trial_rows, names, report_dir / "trials.png"))
+    return {k: [p.relative_to(report_dir) for p in v] for k, v in out.items()}
+
+
+def _fmt(v: float | None, digits: int = 3) -> str:
+    return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}f}"
+
+
+def _params(p: Mapping[str, float]) -> str:
+    return ", ".join(f"{k} = {v:.3g}" for k, v in p.items())
+
+
+def report_markdown(ev: Evaluation, m: Mapping[str, Any], pngs: Mapping[str, list[Path]]) -> str:
+    """report.md: the paper-style table, the parameters, trial counts and the figures."""
+    labels = list(dict.fromkeys(lab for s in SETTINGS for lab in m["rte_pct_per_label"][s]))
+    head = ["method", *labels, "overall"]
+    lines = [
+        f"# adaptune: baseline vs fixed vs adaptive ({ev.algorithm})",
+        "",
+        f"Validation sequences: {', '.join(ev.sequences)}. Mean translational RTE [%] of "
+        f"{ev.length_m:g} m sub-trajectories, one starting at every frame; a segment counts "
+        "for the environment of its start frame; all sequences pooled.",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    for s in SETTINGS:
+        per = m["rte_pct_per_label"][s]
+        lines.append(f"| {s} | " + " | ".join(_fmt(per.get(lab)) for lab in labels)
+                     + f" | **{_fmt(m['rte_pct'][s])}** |")
+    r = m["ratio"]
+    lines += [
+        "",
+        f"adaptive / baseline = {_fmt(r['adaptive_vs_baseline'], 2)}, "
+        f"adaptive / fixed = {_fmt(r['adaptive_vs_fixed'], 2)} "
+        "(paper, toy world, NDT: 0.69 and 0.70).",
+        "",
+        f"- baseline parameters: {_params(m['params']['baseline'])}",
+        f"- fixed parameters (best of the joint SMBO): {_params(m['params']['fixed'])}",
+        "- adaptive: chosen online every period from the newest scan (figures below)",
+        "",
+        "## Per sequence",
+        "",
+        "| sequence | setting | RTE [%] | KITTI t_err [%] | KITTI r_err [deg/100 m] | segments "
+        "| wall time [s] |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, seq in m["sequences"].items():
+        for s in SETTINGS:
+            k = seq["kitti"][s]
+            lines.append(f"| {name} | {s} | {_fmt(seq['rte_pct'][s])} | {_fmt(k['t_err_pct'])} "
+                         f"| {_fmt(k['r_err_deg_per_100m'])} | {k['segments']} "
+                         f"| {_fmt(seq['wall_time_s'][s], 1)} |")
+    lines += ["", "## Trials", "", "| study | studies | trials | failed | wall time [s] |",
+              "|---|---|---|---|---|"]
+    for study, t in m["trials"].items():
+        lines.append(f"| {study} | {t['studies']} | {t['trials']} | {t['failed']} "
+                     f"| {t['wall_time_s']:.0f} |")
+    captions = {"schedule": "Parameters chosen online (environment shaded; cf. paper Fig. 5)",
+                "rte": "Per-start-frame RTE", "trajectory": "Trajectories (top view)",
+                "trials": "SMBO samples per training sequence (cf. paper Fig. 4 and 6)"}
+    lines += ["", "## Figures", ""]
+    for kind, files in pngs.items():
+        lines += [f"![{captions[kind]}]({f.as_posix()})\n" for f in files]
+    return "\n".join(lines) + "\n"
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with NaN and infinities as null and numpy scalars as Python numbers."""
+    if isinstance(value, Mapping):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

@@ -1,0 +1,40 @@
+"""``adaptune adaptive``: adaptive runs on the validation sequences (dvc stage ``adaptive``).
+
+The model picks the parameters of every period from the scans, the model's odometry runs with
+that schedule; ``pipeline.adaptive`` documents the outputs. Untuned adapter settings come from
+the params section ``trials`` (the runs must match the trials).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from stages.common import params_option
+
+
+@click.command()
+@params_option
+@click.option("--model", "model_dir", required=True,
+              type=click.Path(file_okay=False, path_type=Path), help="The artifact (model/).")
+@click.option("--sequences", "sequence_dir", required=True,
+              type=click.Path(file_okay=False, path_type=Path),
+              help="Sequence folder with index.json.")
+@click.option("--split", default=None, help="Split of index.json to run [evaluate.split].")
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Output folder: <sequence>/{schedule,trajectory}.parquet and run.json.")
+def adaptive(params_path: Path, model_dir: Path, sequence_dir: Path, split: str | None,
+             out_dir: Path) -> None:
+    """Schedule every validation sequence with the model and run its odometry."""
+    from pipeline.adaptive import run_adaptive
+    from pipeline.config import load_section
+    from pipeline.report.evaluate import EvaluateSection
+    from pipeline.tuning.smbo import TrialsSection, sequences_of_split
+
+    trials = load_section(params_path, "trials", TrialsSection)
+    section = load_section(params_path, "evaluate", EvaluateSection)
+    paths = sequences_of_split(sequence_dir, split or section.split)
+    for run in run_adaptive(model_dir, paths, out_dir, trials.adapter_options):
+        click.echo(f"{run.sequence}: {run.frames} frames, {run.selections} selections, "
+                   f"{run.changes} parameter changes, {run.wall_time_s:.1f} s", err=True)

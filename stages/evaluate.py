@@ -1,0 +1,50 @@
+"""``adaptune evaluate``: baseline vs fixed vs adaptive on the validation sequences (dvc stage).
+
+Writes metrics/*.json for ``dvc metrics show``, CSV files for ``dvc plots show`` and
+report/report.md with its PNG figures (``pipeline.report.report`` documents them).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from stages.common import params_option
+
+_dir = click.Path(file_okay=False, path_type=Path)
+
+
+@click.command()
+@params_option
+@click.option("--sequences", required=True, type=_dir, help="Sequence folder with index.json.")
+@click.option("--trials", "trials_dir", required=True, type=_dir, help="Per-sequence SMBO output.")
+@click.option("--fixed", "fixed_dir", required=True, type=_dir, help="Joint SMBO output.")
+@click.option("--adaptive", "adaptive_dir", required=True, type=_dir, help="Adaptive runs.")
+@click.option("--out", "runs_dir", required=True, type=_dir,
+              help="Folder for the baseline and fixed trajectories.")
+@click.option("--metrics", "metrics_path", required=True,
+              type=click.Path(dir_okay=False, path_type=Path), help="Metrics JSON to write.")
+@click.option("--plots", "plots_dir", required=True, type=_dir, help="Folder for plot CSVs.")
+@click.option("--report", "report_dir", required=True, type=_dir,
+              help="Folder for report.md and its figures.")
+def evaluate(params_path: Path, sequences: Path, trials_dir: Path, fixed_dir: Path,
+             adaptive_dir: Path, runs_dir: Path, metrics_path: Path, plots_dir: Path,
+             report_dir: Path) -> None:
+    """Score baseline, fixed and adaptive parameters; write metrics, plots and the report."""
+    from pipeline.config import load_section
+    from pipeline.report.evaluate import EvaluateSection
+    from pipeline.report.report import EvaluationPaths, run_evaluation
+    from pipeline.tuning.smbo import TrialsSection
+
+    settings = load_section(params_path, "evaluate", EvaluateSection)
+    trials = load_section(params_path, "trials", TrialsSection)
+    paths = EvaluationPaths(sequences, trials_dir, fixed_dir, adaptive_dir, runs_dir,
+                            metrics_path, plots_dir, report_dir)
+    m = run_evaluation(paths, settings, trials.adapter_options)
+    rte, ratio = m["rte_pct"], m["ratio"]
+    click.echo(f"{m['algorithm']}: RTE baseline {rte['baseline']:.3f} %, fixed "
+               f"{rte['fixed']:.3f} %, adaptive {rte['adaptive']:.3f} % "
+               f"(x{ratio['adaptive_vs_baseline']:.2f} of baseline, "
+               f"x{ratio['adaptive_vs_fixed']:.2f} of fixed) -> {report_dir / 'report.md'}",
+               err=True)
