@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -128,7 +129,9 @@ XYZI_FIELDS = (
 )
 
 
-def encode_pointcloud2(stamp_ns: int, points_xyzi: NDArray[np.float32], frame_id: str = "lidar") -> bytes:
+def encode_pointcloud2(
+    stamp_ns: int, points_xyzi: NDArray[np.float32], frame_id: str = "lidar"
+) -> bytes:
     """CDR bytes of an unorganised PointCloud2 with float32 x, y, z, intensity.
 
     ``points_xyzi``: (N, 4) float32 in the sensor frame [m] and intensity (any unit).
@@ -189,7 +192,7 @@ def pointcloud2_to_xyzi(
     if missing:
         raise InputError(f"{what}: PointCloud2 has no field {', '.join(missing)} "
                          f"(fields: {', '.join(by_name) or 'none'})")
-    order = ">" if is_bigendian else "<"
+    order: Literal[">", "<"] = ">" if is_bigendian else "<"
     n = int(height) * int(width)
     buf = np.frombuffer(bytes(data), dtype=np.uint8)
     needed = row_step * (height - 1) + width * point_step if n else 0
@@ -218,7 +221,9 @@ def pointcloud2_to_xyzi(
     return out
 
 
-def encode_pose_stamped(stamp_ns: int, T_world_x: NDArray[np.float64], frame_id: str = "world") -> bytes:
+def encode_pose_stamped(
+    stamp_ns: int, T_world_x: NDArray[np.float64], frame_id: str = "world"
+) -> bytes:
     """CDR bytes of a geometry_msgs/msg/PoseStamped from a (4, 4) pose."""
     from pipeline.geometry import rot_to_quat
 
@@ -230,7 +235,9 @@ def encode_pose_stamped(stamp_ns: int, T_world_x: NDArray[np.float64], frame_id:
     return w.bytes()
 
 
-def decode_pose_stamped(buf: bytes | memoryview, what: str = "PoseStamped") -> tuple[int, NDArray[np.float64]]:
+def decode_pose_stamped(
+    buf: bytes | memoryview, what: str = "PoseStamped"
+) -> tuple[int, NDArray[np.float64]]:
     """(stamp_ns, (4, 4) pose) from CDR bytes of a geometry_msgs/msg/PoseStamped."""
     from pipeline.geometry import pose_from_xyz_quat
 

@@ -142,7 +142,7 @@ class SequenceWriter:
 
         self._atomic = atomic_path(self.path)
         self._tmp = self._atomic.__enter__()
-        self._fh = open(self._tmp, "wb")  # noqa: SIM115 - closed in __exit__
+        self._fh = open(self._tmp, "wb")  # closed in __exit__
         self._w = Writer(self._fh, chunk_size=self.chunk_size, compression=CompressionType.ZSTD)
         self._w.start(profile="ros2", library="adaptune")
         self._schemas = {
@@ -185,7 +185,8 @@ class SequenceWriter:
 
     def add_pose(self, topic: str, stamp_ns: int, T_world_x: NDArray[np.float64]) -> None:
         """Queue a PoseStamped on ``topic`` (written after the scans, in its own chunks)."""
-        self._poses.setdefault(topic, []).append((int(stamp_ns), encode_pose_stamped(stamp_ns, T_world_x)))
+        msg = encode_pose_stamped(stamp_ns, T_world_x)
+        self._poses.setdefault(topic, []).append((int(stamp_ns), msg))
 
     def add_json(self, topic: str, stamp_ns: int, message: dict[str, Any],
                  json_schema: dict[str, Any]) -> None:
@@ -246,7 +247,9 @@ class SequenceReader:
             raise
         except Exception as exc:  # mcap raises many types for a damaged file
             self.close()
-            raise InputError(f"{self.path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})") from exc
+            raise InputError(
+                f"{self.path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})"
+            ) from exc
         if summary is None:
             self.close()
             raise InputError(f"{self.path}: corrupt or truncated MCAP (no summary section)")
@@ -259,9 +262,10 @@ class SequenceReader:
             self.close()
             raise SchemaError(f"{self.path}: schema version {self.info.schema_version}, "
                               f"this adaptune reads {SCHEMA_VERSION}")
-        self.stamps_ns = np.array([int(s) for s in meta[META_FRAMES]["stamps_ns"].split()], np.int64)
+        stamps = meta[META_FRAMES]["stamps_ns"].split()
+        self.stamps_ns = np.array([int(s) for s in stamps], np.int64)
         self.topics = {ch.topic for ch in summary.channels.values()}
-        self._gt: NDArray[np.float64] | None | bool = False
+        self._gt: NDArray[np.float64] | bool | None = False
 
     def __len__(self) -> int:
         return len(self.stamps_ns)
@@ -278,11 +282,15 @@ class SequenceReader:
 
     def _messages(self, topics: list[str], start: int | None = None, end: int | None = None):
         try:
-            yield from self._reader.iter_messages(topics=topics, starting_at=start, ending_before=end)
+            yield from self._reader.iter_messages(
+                topics=topics, starting_at=start, ending_before=end
+            )
         except InputError:
             raise
         except Exception as exc:
-            raise InputError(f"{self.path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})") from exc
+            raise InputError(
+                f"{self.path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})"
+            ) from exc
 
     def _decode_points(self, data: bytes, frame: int) -> NDArray[np.float32]:
         what = f"{self.path} frame {frame}"
@@ -301,10 +309,13 @@ class SequenceReader:
             if self.has_ground_truth:
                 poses = {}
                 for _, _, msg in self._messages([GT_TOPIC]):
-                    poses[msg.log_time] = decode_pose_stamped(msg.data, f"{self.path} {GT_TOPIC}")[1]
+                    what = f"{self.path} {GT_TOPIC}"
+                    poses[msg.log_time] = decode_pose_stamped(msg.data, what)[1]
                 missing = [int(s) for s in self.stamps_ns if int(s) not in poses]
                 if missing:
-                    raise InputError(f"{self.path}: {len(missing)} frames have no ground-truth pose")
+                    raise InputError(
+                        f"{self.path}: {len(missing)} frames have no ground-truth pose"
+                    )
                 self._gt = np.stack([poses[int(s)] for s in self.stamps_ns])
         return self._gt  # type: ignore[return-value]
 
@@ -327,7 +338,9 @@ class SequenceReader:
         for _, _, msg in self._messages([POINTS_TOPIC]):
             frame = index.get(msg.log_time)
             if frame is None:
-                raise InputError(f"{self.path}: point cloud at {msg.log_time} ns is not a listed frame")
+                raise InputError(
+                    f"{self.path}: point cloud at {msg.log_time} ns is not a listed frame"
+                )
             count += 1
             yield Scan(frame, msg.log_time, self._decode_points(msg.data, frame),
                        None if gt is None else gt[frame])

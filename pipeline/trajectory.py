@@ -59,7 +59,9 @@ class Trajectory:
         return cls(table.column("frame").to_numpy(), table.column("stamp_ns").to_numpy(), T)
 
 
-def write_trajectory(path: str | Path, traj: Trajectory, metadata: dict[str, str] | None = None) -> None:
+def write_trajectory(
+    path: str | Path, traj: Trajectory, metadata: dict[str, str] | None = None
+) -> None:
     """Write ``traj`` as one Parquet file, atomically; ``metadata`` goes into the file footer."""
     table = traj.to_table()
     if metadata:

@@ -16,7 +16,10 @@ import click
 
 COMMANDS: dict[str, tuple[str, str]] = {
     # name: (module, short help)
-    "ingest": ("stages.ingest:ingest", "Convert KITTI, ROS bags, MCAP or scan folders into a sequence MCAP."),
+    "ingest": (
+        "stages.ingest:ingest",
+        "Convert KITTI, ROS bags, MCAP or scan folders into a sequence MCAP.",
+    ),
     "info": ("stages.info:info", "Summarise a sequence MCAP."),
     "simulate": ("stages.simulate:simulate", "Ray-cast a simulated world into a sequence MCAP."),
     "metric": ("stages.metric:metric", "Trajectory error metrics (KITTI devkit)."),
@@ -26,13 +29,31 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "trials": ("stages.trials:trials", "SMBO (hyperopt TPE) trials of an odometry algorithm."),
     "rte": ("stages.rte:rte", "Score trials into the DuckDB results database."),
     "descriptors": ("stages.descriptors:descriptors", "Environment descriptors of every frame."),
-    "surrogate": ("stages.surrogate:surrogate", "Fit the kNN surrogate and write the model artifact."),
+    "surrogate": (
+        "stages.surrogate:surrogate",
+        "Fit the kNN surrogate and write the model artifact.",
+    ),
     "select": ("stages.select:select", "Parameter schedule of a recorded sequence from a model."),
-    "live": ("stages.live:live", "Stream a sequence through odometry with online parameter selection."),
-    "adaptive": ("stages.adaptive:adaptive", "Adaptive runs on the validation sequences (dvc stage)."),
-    "evaluate": ("stages.evaluate:evaluate", "Baseline vs fixed vs adaptive: metrics, plots, report."),
-    "simulate-set": ("stages.simulate:simulate_set", "Simulate the toy data set of params.yaml (dvc stage)."),
-    "plot-world": ("stages.simulate:plot_world", "Top-down PNG of a world, its trajectory and one scan."),
+    "live": (
+        "stages.live:live",
+        "Stream a sequence through odometry with online parameter selection.",
+    ),
+    "adaptive": (
+        "stages.adaptive:adaptive",
+        "Adaptive runs on the validation sequences (dvc stage).",
+    ),
+    "evaluate": (
+        "stages.evaluate:evaluate",
+        "Baseline vs fixed vs adaptive: metrics, plots, report.",
+    ),
+    "simulate-set": (
+        "stages.simulate:simulate_set",
+        "Simulate the toy data set of params.yaml (dvc stage).",
+    ),
+    "plot-world": (
+        "stages.simulate:plot_world",
+        "Top-down PNG of a world, its trajectory and one scan.",
+    ),
 }
 
 
@@ -79,7 +100,9 @@ def _module_exists(target: str) -> bool:
 def main(verbose: int) -> None:
     """adaptune: adaptive hyperparameter tuning for black-box LiDAR odometry."""
     level = logging.WARNING - 10 * min(verbose, 2) if verbose else logging.INFO
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+    logging.basicConfig(
+        level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr
+    )
 
 
 if __name__ == "__main__":

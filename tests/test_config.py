@@ -28,7 +28,10 @@ class RangeSection(Section):
 def test_rule_error_names_values(tmp_path: Path) -> None:
     p = tmp_path / "params.yaml"
     p.write_text("r:\n  min_range: 5.0\n  max_range: 2.0\n")
-    with pytest.raises(ConfigError, match=r"max_range must be > min_range, got \(min_range=5.0, max_range=2.0\)"):
+    with pytest.raises(
+        ConfigError,
+        match=r"max_range must be > min_range, got \(min_range=5.0, max_range=2.0\)",
+    ):
         load_section(p, "r", RangeSection)
 
 

@@ -10,7 +10,7 @@ into ``run``. Out-of-process adapters (``command``) implement ``run`` directly.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal, Protocol, runtime_checkable
@@ -40,12 +40,15 @@ class ParamSpec:
 
     def __post_init__(self) -> None:
         if not self.low <= self.default <= self.high:
-            raise ConfigError(f"{self.name}: default {self.default} outside [{self.low}, {self.high}]")
+            raise ConfigError(
+                f"{self.name}: default {self.default} outside [{self.low}, {self.high}]"
+            )
         if self.log and self.low <= 0:
             raise ConfigError(f"{self.name}: log scale needs low > 0, got low={self.low}")
 
     def check(self, value: float) -> float:
-        """``value`` as a float if it is finite, in range (and integral for ints); else ConfigError."""
+        """``value`` as a float if it is finite, in range (and integral for ints);
+        else ConfigError."""
         v = float(value)
         if not math.isfinite(v) or not self.low <= v <= self.high:
             raise ConfigError(f"{self.name} must be in [{self.low}, {self.high}], got {value}")
@@ -78,7 +81,9 @@ class ParameterSpace:
         """Checked copy of ``params``; missing names take defaults unless ``partial``."""
         unknown = set(params) - set(self.names)
         if unknown:
-            raise ConfigError(f"unknown parameter {sorted(unknown)[0]!r} (known: {', '.join(self.names)})")
+            raise ConfigError(
+                f"unknown parameter {sorted(unknown)[0]!r} (known: {', '.join(self.names)})"
+            )
         out = {} if partial else self.defaults()
         out.update({k: self[k].check(v) for k, v in params.items()})
         return out
@@ -198,7 +203,8 @@ class Odometry(Protocol):
         ...
 
     def set_params(self, params: Params) -> None:
-        """Apply new parameters from the next scan on (in place, or rebuilt with state handed over)."""
+        """Apply new parameters from the next scan on (in place, or rebuilt with state
+        handed over)."""
         ...
 
 
@@ -214,7 +220,9 @@ class Adapter(Protocol):
         ...
 
 
-def run_streaming(make: type[Odometry] | object, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
+def run_streaming(
+    make: Callable[[Params], Odometry], scans: Iterable[Scan], schedule: Schedule
+) -> Trajectory:
     """``run`` for in-process adapters: ``make(params)`` -> Odometry, then step every scan,
     calling ``set_params`` only where the schedule changes."""
     changes = set(schedule.changes())
@@ -222,7 +230,7 @@ def run_streaming(make: type[Odometry] | object, scans: Iterable[Scan], schedule
     frames, stamps, poses = [], [], []
     for i, scan in enumerate(scans):
         if odom is None:
-            odom = make(schedule.at(i))  # type: ignore[operator]
+            odom = make(schedule.at(i))
         elif i in changes:
             odom.set_params(schedule.at(i))
         poses.append(odom.step(scan.xyz, scan.stamp_ns))

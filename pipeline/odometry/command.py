@@ -91,6 +91,7 @@ def load_space(spec: list[dict[str, Any]] | str) -> ParameterSpace:
     import yaml
 
     what = "command option space"
+    items: object = spec
     if isinstance(spec, str):
         path = Path(spec)
         try:
@@ -100,11 +101,11 @@ def load_space(spec: list[dict[str, Any]] | str) -> ParameterSpace:
         except yaml.YAMLError as exc:
             raise ConfigError(f"{path}: not valid YAML/JSON ({exc})") from None
         what = str(path)
-        spec = data.get("params") if isinstance(data, dict) else data
-    if not isinstance(spec, list) or not spec:
+        items = data.get("params") if isinstance(data, dict) else data
+    if not isinstance(items, list) or not items:
         raise ConfigError(f"{what}: must be a non-empty list of parameters")
     specs = []
-    for i, item in enumerate(spec):
+    for i, item in enumerate(items):
         try:
             specs.append(ParamSpec(**item))
         except TypeError as exc:
@@ -144,7 +145,7 @@ class CommandAdapter:
             run_process(argv, self.options.cwd, limit)
             T = read_poses(work / "trajectory.txt", self.options.format, stamps_ns,
                            self.options.stamp_tolerance_s)
-            return Trajectory(np.arange(len(stamps_ns)), stamps_ns, T)
+            return Trajectory(np.arange(len(stamps_ns), dtype=np.int32), stamps_ns, T)
         finally:
             if self.options.keep_workdir:
                 log.info("command: work directory kept at %s", work)

@@ -46,9 +46,9 @@ SPACE = ParameterSpace((
 class GicpOptions(Section):
     """Settings of ``gicp`` that are not tuned."""
 
-    num_threads: int = Field(1, ge=1, le=64)
-    num_neighbors: int = Field(10, ge=5, le=50)
-    max_iterations: int = Field(20, ge=1, le=200)
+    num_threads: int = Field(default=1, ge=1, le=64)
+    num_neighbors: int = Field(default=10, ge=5, le=50)
+    max_iterations: int = Field(default=20, ge=1, le=200)
 
 
 class GicpOdometry:

@@ -51,9 +51,9 @@ class KissOptions(Section):
     """Settings of ``kiss_icp`` that are not tuned."""
 
     deskew: bool = False
-    max_num_threads: int = Field(1, ge=0, le=64)
-    max_num_iterations: int = Field(500, ge=1)
-    convergence_criterion: float = Field(1e-4, gt=0)
+    max_num_threads: int = Field(default=1, ge=0, le=64)
+    max_num_iterations: int = Field(default=500, ge=1)
+    convergence_criterion: float = Field(default=1e-4, gt=0)
 
 
 def kiss_config(params: Params, options: KissOptions) -> Any:

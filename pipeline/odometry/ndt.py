@@ -74,12 +74,12 @@ _OFFSETS = {
 class NdtOptions(Section):
     """Settings of ``ndt`` that are not tuned."""
 
-    source_voxel_m: float = Field(1.0, gt=0, le=10)
-    min_points: int = Field(5, ge=3)
-    neighbors: int = Field(1, description="1 (own voxel) or 7 (and face neighbours)")
-    max_iterations: int = Field(15, ge=1, le=100)
-    convergence: float = Field(1e-3, gt=0, description="stop when |step| < this [rad, m]")
-    outlier_ratio: float = Field(0.55, gt=0, lt=1)
+    source_voxel_m: float = Field(default=1.0, gt=0, le=10)
+    min_points: int = Field(default=5, ge=3)
+    neighbors: int = Field(default=1, description="1 (own voxel) or 7 (and face neighbours)")
+    max_iterations: int = Field(default=15, ge=1, le=100)
+    convergence: float = Field(default=1e-3, gt=0, description="stop when |step| < this [rad, m]")
+    outlier_ratio: float = Field(default=0.55, gt=0, lt=1)
 
     def model_post_init(self, __context: object) -> None:
         if self.neighbors not in _OFFSETS:
@@ -241,7 +241,7 @@ class NdtOdometry:
         for _ in range(self.options.max_iterations):
             D = np.diag(np.maximum(np.diag(H), 1e-9))
             try:
-                xi = -np.linalg.solve(H + lam * D, g)
+                xi = np.asarray(-np.linalg.solve(H + lam * D, g), np.float64)
             except np.linalg.LinAlgError:
                 break
             cand = T @ se3_exp(xi)

@@ -204,7 +204,9 @@ def warm_scan_cache(job: TrialJob) -> None:
 _PRELOADED: set[str] = set()
 
 
-def _context(job: TrialJob) -> multiprocessing.context.BaseContext:
+def _context(
+    job: TrialJob,
+) -> multiprocessing.context.ForkContext | multiprocessing.context.ForkServerContext:
     """How trial children start.
 
     From a single-threaded worker (process pool): ``fork``, after decoding the scans once
