@@ -5,6 +5,11 @@ each parameter's default) and runs over scans with fixed parameters or a per-fra
 ``Schedule``. In-process adapters implement ``start`` (a streaming ``Odometry`` that takes
 one scan at a time and accepts new parameters between scans); ``run_streaming`` turns that
 into ``run``. Out-of-process adapters (``command``) implement ``run`` directly.
+
+An adapter may also offer ``warm(scans: list[Scan]) -> None``: precompute what depends only on
+the scans and its untuned options (``ndt``: the downsampled source clouds). The tuner calls it
+once per worker and set of sequences, before the trials; results must be bitwise the same with
+and without it.
 """
 
 from __future__ import annotations

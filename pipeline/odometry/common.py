@@ -14,6 +14,8 @@ OptionsT = TypeVar("OptionsT", bound=Section)
 
 KEY_OFFSET = 1 << 20
 """Voxel coordinates are packed as 21-bit unsigned fields: |index| < 2**20 voxels per axis."""
+KEY_MAX = (1 << 21) - 1
+"""Largest field value of a packed voxel coordinate (indices are clipped to [0, KEY_MAX])."""
 
 
 def parse_options(model: type[OptionsT], adapter: str, options: dict[str, Any]) -> OptionsT:
@@ -29,7 +31,7 @@ def voxel_indices(points: F64, voxel_m: float) -> NDArray[np.int64]:
 def pack_keys(ijk: NDArray[np.int64]) -> NDArray[np.int64]:
     """(N,) int64 keys of integer voxel coordinates (N, 3) (21 bits an axis, clipped)."""
     ijk = ijk + KEY_OFFSET
-    np.clip(ijk, 0, (1 << 21) - 1, out=ijk)
+    np.clip(ijk, 0, KEY_MAX, out=ijk)
     return (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
 
 
@@ -51,6 +53,42 @@ def voxel_downsample(points: NDArray[np.floating], voxel_m: float) -> F64:
     sums = np.add.reduceat(pts[order], starts, axis=0)
     counts = np.diff(np.append(starts, len(pts)))
     return sums / counts[:, None]
+
+
+class DownsampleCache:
+    """Voxel-downsampled scans computed ahead of time (``fill``) and looked up by array.
+
+    A tuning run gives the same scans to hundreds of trials; what depends only on a scan and
+    untuned options (the ``ndt`` source cloud) is computed once per worker process
+    (``Adapter.warm``) and inherited by the trial processes forked from it. Keys are the
+    array's memory (address, shape, strides) and the voxel size; the cache keeps a reference
+    to every keyed array, so an address cannot be reused while its entry lives. Scans must not
+    be modified (the adapter contract). A lookup that misses computes the result without
+    storing it, so runs outside a tuning loop never grow the cache.
+    """
+
+    def __init__(self) -> None:
+        self._entries: dict[tuple[int, tuple[int, ...], tuple[int, ...], float],
+                            tuple[NDArray[Any], F64]] = {}
+
+    @staticmethod
+    def _key(points: NDArray[Any], voxel_m: float) -> tuple[int, tuple[int, ...],
+                                                            tuple[int, ...], float]:
+        return (points.__array_interface__["data"][0], points.shape, points.strides,
+                float(voxel_m))
+
+    def fill(self, clouds: list[NDArray[Any]], voxel_m: float) -> None:
+        """Replace the cache by the downsampled ``clouds`` ((N, 3) arrays [m])."""
+        self._entries = {self._key(c, voxel_m): (c, voxel_downsample(c, voxel_m))
+                         for c in clouds}
+
+    def get(self, points: NDArray[Any], voxel_m: float) -> F64:
+        """``voxel_downsample(points, voxel_m)``, from the cache when it was filled with it."""
+        hit = self._entries.get(self._key(points, voxel_m))
+        return hit[1] if hit is not None else voxel_downsample(points, voxel_m)
+
+    def __len__(self) -> int:
+        return len(self._entries)
 
 
 def hat(v: F64) -> F64:

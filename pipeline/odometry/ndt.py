@@ -1,4 +1,5 @@
-"""``ndt``: keyframe NDT scan matching (point-to-distribution, Magnusson 2009), numpy only.
+"""``ndt``: keyframe NDT scan matching (point-to-distribution, Magnusson 2009), numpy and a
+numba kernel (``ndt_terms``, the per-point score, gradient and Hessian sums).
 
 Algorithm, per scan:
 1. Source: the scan downsampled to the centroids of a voxel grid of ``source_voxel_m``
@@ -7,7 +8,7 @@ Algorithm, per scan:
    ``resolution``; per voxel with >= ``min_points`` points the mean and the covariance,
    regularised by clamping its eigenvalues to >= 1 % of the largest (Magnusson's rule),
    and its inverse. Voxel keys are packed integer coordinates, kept sorted; a source point
-   finds its voxel with ``np.searchsorted`` (and, with ``neighbors=7``, the 6 face neighbours).
+   finds its voxel by binary search (and, with ``neighbors=7``, the 6 face neighbours).
 3. Pose: Gauss-Newton on the NDT score sum_k -d1 exp(-d2/2 e_k^T S_k^-1 e_k) (the outlier
    ratio 0.55 gives d1, d2 as in Magnusson's thesis), i.e. iteratively reweighted least
    squares with weights -d1 d2/2 exp(...), Levenberg damping (a step is kept only when the
@@ -30,6 +31,7 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
@@ -45,13 +47,13 @@ from pipeline.odometry.base import (
 )
 from pipeline.odometry.common import (
     F64,
+    KEY_MAX,
+    KEY_OFFSET,
+    DownsampleCache,
     constant_velocity_guess,
     orthonormalize,
-    pack_keys,
     parse_options,
     se3_exp,
-    voxel_downsample,
-    voxel_indices,
     voxel_keys,
 )
 from pipeline.sequence import Scan
@@ -63,6 +65,9 @@ SPACE = ParameterSpace((
     ParamSpec("resolution", 1.0, 10.0, 4.0, unit="m"),
     ParamSpec("keyframe_interval", 0.0, 10.0, 4.0, unit="m"),
 ))
+
+SOURCES = DownsampleCache()
+"""The source clouds of the scans of a tuning run (``NdtAdapter.warm``)."""
 
 # neighbours searched around a source point's own voxel
 _OFFSETS = {
@@ -124,21 +129,75 @@ class VoxelMap:
     def __len__(self) -> int:
         return len(self.keys)
 
-    def lookup(self, points_world: F64,
-               offsets: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-        """Pairs (point index, voxel index) of the voxels near ``points_world`` (N, 3)."""
-        ijk = voxel_indices(points_world, self.resolution)
-        pts, vox = [], []
-        for off in offsets:
-            k = pack_keys(ijk + off)
-            idx = np.searchsorted(self.keys, k)
-            idx[idx >= len(self.keys)] = 0
-            hit = np.flatnonzero(self.keys[idx] == k)
-            pts.append(hit)
-            vox.append(idx[hit])
-        if len(offsets) == 1:
-            return pts[0], vox[0]
-        return np.concatenate(pts), np.concatenate(vox)
+
+@numba.njit(cache=True, nogil=True)
+def ndt_terms(source: F64, R: F64, t: F64, keys: NDArray[np.int64], means: F64, inv_covs: F64,
+              inv_res: float, offsets: NDArray[np.int64], d1: float,
+              d2: float) -> tuple[float, F64, F64, int]:  # pragma: no cover - compiled
+    """Score, Hessian (6, 6) and gradient (6,) of the NDT objective, and the pair count.
+
+    source (N, 3) points [m] in the sensor frame; R (3, 3), t (3,) the pose; keys (K,) the
+    sorted packed voxel keys (``pack_keys``) of the map, means (K, 3), inv_covs (K, 3, 3);
+    inv_res = 1 / resolution [1/m]; offsets (O, 3) voxel offsets searched around a point.
+    Every point q = R p + t is paired with each map voxel of its own (and offset) voxel;
+    a pair with e = q - mean, m = e^T C e contributes score -d1 exp(-d2 m / 2) and, with the
+    weight w = -d1 d2 exp(-d2 m / 2) and J = dq/dxi = [-R [p]x | R] (right perturbation
+    T exp(xi)), w J^T C J to the Hessian and w J^T C e to the gradient. Summation runs in
+    point order, so the result is deterministic.
+    """
+    H = np.zeros((6, 6))
+    g = np.zeros(6)
+    score = 0.0
+    pairs = 0
+    J = np.empty((3, 6))
+    CJ = np.empty((3, 6))
+    q = np.empty(3)
+    e = np.empty(3)
+    Ce = np.empty(3)
+    for a in range(3):
+        for b in range(3):
+            J[a, 3 + b] = R[a, b]
+    n_keys = keys.shape[0]
+    for i in range(source.shape[0]):
+        px, py, pz = source[i, 0], source[i, 1], source[i, 2]
+        for a in range(3):
+            q[a] = R[a, 0] * px + R[a, 1] * py + R[a, 2] * pz + t[a]
+        for o in range(offsets.shape[0]):
+            key = np.int64(0)
+            for a in range(3):
+                idx = np.int64(np.floor(q[a] * inv_res)) + offsets[o, a] + KEY_OFFSET
+                idx = min(max(idx, np.int64(0)), np.int64(KEY_MAX))
+                key = (key << np.int64(21)) | idx
+            v = np.searchsorted(keys, key)
+            if v >= n_keys or keys[v] != key:
+                continue
+            pairs += 1
+            m = 0.0
+            for a in range(3):
+                e[a] = q[a] - means[v, a]
+            for a in range(3):
+                Ce[a] = (inv_covs[v, a, 0] * e[0] + inv_covs[v, a, 1] * e[1]
+                         + inv_covs[v, a, 2] * e[2])
+                m += e[a] * Ce[a]
+            ex = np.exp(-0.5 * d2 * m)
+            score -= d1 * ex
+            w = -d1 * d2 * ex
+            for a in range(3):  # column j of -R [p]x is R (e_j x p)
+                J[a, 0] = py * R[a, 2] - pz * R[a, 1]
+                J[a, 1] = pz * R[a, 0] - px * R[a, 2]
+                J[a, 2] = px * R[a, 1] - py * R[a, 0]
+            for a in range(3):
+                for c in range(6):
+                    CJ[a, c] = (inv_covs[v, a, 0] * J[0, c] + inv_covs[v, a, 1] * J[1, c]
+                                + inv_covs[v, a, 2] * J[2, c])
+            for c in range(6):
+                g[c] += w * (Ce[0] * J[0, c] + Ce[1] * J[1, c] + Ce[2] * J[2, c])
+                for d in range(c, 6):
+                    H[c, d] += w * (J[0, c] * CJ[0, d] + J[1, c] * CJ[1, d] + J[2, c] * CJ[2, d])
+    for c in range(6):
+        for d in range(c):
+            H[c, d] = H[d, c]
+    return score, H, g, pairs
 
 
 def score_constants(resolution: float, outlier_ratio: float) -> tuple[float, float]:
@@ -189,7 +248,7 @@ class NdtOdometry:
             T = np.eye(4)
         else:
             guess = constant_velocity_guess(self.poses)
-            source = voxel_downsample(pts, self.options.source_voxel_m)
+            source = SOURCES.get(points_lidar[:, :3], self.options.source_voxel_m)
             T = self._align(source, guess)
             self.travelled_m += float(np.linalg.norm(T[:3, 3] - self.poses[-1][:3, 3]))
         self.poses.append(T)
@@ -200,35 +259,13 @@ class NdtOdometry:
         return T.copy()
 
     def _evaluate(self, source: F64, T: F64) -> tuple[float, F64, F64, int]:
-        """NDT score of ``source`` at pose ``T``, Gauss-Newton Hessian (6, 6), gradient (6,)."""
+        """NDT score of ``source`` at pose ``T``, Gauss-Newton Hessian (6, 6), gradient (6,)
+        and the number of point-voxel pairs (``ndt_terms``)."""
         assert self.voxels is not None
-        R = T[:3, :3]
-        q = source @ R.T + T[:3, 3]
-        ip, iv = self.voxels.lookup(q, self._offsets)
-        n = len(ip)
-        if n == 0:
-            return 0.0, np.zeros((6, 6)), np.zeros(6), 0
-        e = q[ip] - self.voxels.means[iv]
-        Ci = self.voxels.inv_covs[iv]
-        Ce = np.einsum("nij,nj->ni", Ci, e)
-        m = np.einsum("ni,ni->n", e, Ce)
-        ex = np.exp(-0.5 * self.d2 * m)
-        score = float(-self.d1 * ex.sum())
-        w = (-self.d1 * self.d2) * ex
-        # right perturbation T exp(xi): dq/dw = -R [p]x, dq/dv = R
-        p = source[ip]
-        J = np.empty((n, 3, 6))
-        # column j of -R [p]x is R (e_j x p)
-        Rx, Ry, Rz = R[:, 0], R[:, 1], R[:, 2]
-        px, py, pz = p[:, 0:1], p[:, 1:2], p[:, 2:3]
-        J[:, :, 0] = py * Rz - pz * Ry  # R (e_x x p) = R (0, -pz, py)
-        J[:, :, 1] = pz * Rx - px * Rz  # R (e_y x p) = R (pz, 0, -px)
-        J[:, :, 2] = px * Ry - py * Rx  # R (e_z x p) = R (-py, px, 0)
-        J[:, :, 3:] = R
-        CJ = np.matmul(Ci, J)  # (n, 3, 6)
-        H = (J * w[:, None, None]).reshape(-1, 6).T @ CJ.reshape(-1, 6)
-        g = (Ce * w[:, None]).reshape(-1) @ J.reshape(-1, 6)
-        return score, H, g, n
+        v = self.voxels
+        return ndt_terms(source, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
+                         v.keys, v.means, v.inv_covs, 1.0 / v.resolution, self._offsets,
+                         self.d1, self.d2)
 
     def _align(self, source: F64, guess: F64) -> F64:
         """Levenberg-damped Gauss-Newton from ``guess``; the best pose found."""
@@ -274,6 +311,11 @@ class NdtAdapter:
     def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
         """Run over ``scans`` with the per-frame ``schedule``."""
         return run_streaming(self.start, scans, schedule)
+
+    def warm(self, scans: list[Scan]) -> None:
+        """Downsample the source cloud of every scan once (it depends on no tuned parameter);
+        later runs over these Scan objects take it from the cache."""
+        SOURCES.fill([scan.xyz for scan in scans], self.options.source_voxel_m)
 
 
 _: type[Adapter] = NdtAdapter

@@ -114,7 +114,8 @@ def _mean(values: NDArray[np.float64]) -> float:
     return float(v.mean()) if len(v) else math.nan
 
 
-def best_fixed_params(trials_dir: Path, algorithm: str | None = None) -> tuple[str, dict[str, float]]:
+def best_fixed_params(trials_dir: Path,
+                      algorithm: str | None = None) -> tuple[str, dict[str, float]]:
     """(algorithm, parameters) of the best 'ok' trial of the joint SMBO under ``trials_dir``."""
     from pipeline.evaluation.trials import JOINT_SEQUENCE, read_trials_tables
 

@@ -70,7 +70,8 @@ def schedule_figure(ev: Evaluation, sequence: str, out_png: Path) -> Path:
         for ax, name in zip(axes[:, 0], names, strict=True):
             _shade(ax, ev.infos[sequence].labels, frame_s)
             ax.step(t, sched.values[name], where="post", color="tab:red", label="adaptive")
-            ax.axhline(ev.fixed_params[name], color=SETTING_COLOURS["fixed"], ls="--", label="fixed")
+            ax.axhline(ev.fixed_params[name], color=SETTING_COLOURS["fixed"], ls="--",
+                       label="fixed")
             ax.axhline(ev.baseline_params[name], color=SETTING_COLOURS["baseline"], ls=":",
                        label="baseline")
             ax.set_ylabel(name)
@@ -83,7 +84,7 @@ def schedule_figure(ev: Evaluation, sequence: str, out_png: Path) -> Path:
 def rte_figure(ev: Evaluation, sequence: str, out_png: Path) -> Path:
     """Per-start-frame RTE [%] of every setting over ``sequence``."""
     frame_s = _frame_s(ev.score("adaptive", sequence).trajectory.stamps_ns)
-    with _figure(out_png) as (fig, axes):
+    with _figure(out_png) as (_, axes):
         ax = axes[0, 0]
         _shade(ax, ev.infos[sequence].labels, frame_s)
         for setting in SETTINGS:

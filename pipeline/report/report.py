@@ -120,7 +120,8 @@ def write_figures(ev: Evaluation, trial_rows: list[dict[str, Any]],
     """Every PNG of the report: kind -> files (relative to ``report_dir``)."""
     out: dict[str, list[Path]] = {"schedule": [], "rte": [], "trajectory": [], "trials": []}
     for name in ev.sequences:
-        out["schedule"].append(figures.schedule_figure(ev, name, report_dir / f"schedule_{name}.png"))
+        out["schedule"].append(
+            figures.schedule_figure(ev, name, report_dir / f"schedule_{name}.png"))
         out["rte"].append(figures.rte_figure(ev, name, report_dir / f"rte_{name}.png"))
         out["trajectory"].append(
             figures.trajectory_figure(ev, name, report_dir / f"trajectory_{name}.png"))

@@ -182,7 +182,8 @@ def warm_scan_cache(job: TrialJob) -> None:
 
     Every trial of a study reads the same MCAP; a trial child forked from this process inherits
     the decoded scans (copy-on-write), so reading the MCAP is paid once, not once per trial.
-    Skipped when the sequences are too large (then each trial reads its MCAP).
+    Skipped when the sequences are too large (then each trial reads its MCAP). Then the
+    adapter's optional ``warm(scans)`` precomputes what depends on the scans alone.
     Adapters must not modify the scans they are given (in-process runs share the cache).
     """
     from pipeline.sequence import SequenceReader
@@ -197,6 +198,26 @@ def warm_scan_cache(job: TrialJob) -> None:
         if p not in _SCANS:
             with SequenceReader(p) as reader:
                 _SCANS[p] = list(reader)
+    _warm_adapter(job, paths)
+
+
+_WARMED: list[Any] = []
+"""What the adapter was last warmed for: [(adapter, options, paths, scan lists)]."""
+
+
+def _warm_adapter(job: TrialJob, paths: list[str]) -> None:
+    """Let the adapter precompute what depends only on the cached scans (``Adapter.warm``,
+    optional), once per adapter, options and set of scans."""
+    scans = [_SCANS[p] for p in paths]
+    state = (job.adapter, job.adapter_options, paths, scans)
+    if _WARMED and _WARMED[0][:3] == state[:3] and all(
+            a is b for a, b in zip(_WARMED[0][3], scans, strict=True)):
+        return
+    adapter = resolve_adapter(job.adapter, job.adapter_options)
+    warm = getattr(adapter, "warm", None)
+    if warm is not None:
+        warm([scan for seq in scans for scan in seq])
+    _WARMED[:] = [state]
 
 
 # -- the child process ---------------------------------------------------------------------

@@ -1,0 +1,143 @@
+"""The whole pipeline through DVC itself, on a tiny params file, in a temporary copy.
+
+Every stage of dvc.yaml runs (`dvc repro`), every output exists and follows its schema, and a
+second `dvc repro` does nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+
+pytestmark = pytest.mark.slow
+
+TINY_L_M = 4.0
+
+
+def tiny_params() -> dict[str, Any]:
+    """The repository's params.yaml with a few frames, a few trials and a short L."""
+    p = yaml.safe_load((REPO / "params.yaml").read_text())
+    p["base"]["length_m"] = TINY_L_M
+    p["simulate"].update(train={"cave": 1, "street": 1}, train_frames=50, validation_frames=60)
+    p["descriptors"].update(workers=1, pca_dim=4)
+    p["trials"].update(iterations=3, workers=1, length_m=TINY_L_M, startup_trials=2)
+    p["fixed"].update(iterations=2)
+    p["rte"].update(length_m=TINY_L_M)
+    p["surrogate"].update(n_sobol=16, cv_max_frames=20)
+    p["evaluate"].update(length_m=TINY_L_M)
+    return p
+
+
+def dvc(cwd: Path, *args: str) -> str:
+    env = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ.get('PATH', '')}"}
+    done = subprocess.run([str(BIN / "dvc"), *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, f"dvc {' '.join(args)} failed:\n{done.stdout}\n{done.stderr}"
+    return done.stdout + done.stderr
+
+
+@pytest.fixture(scope="module")
+def repro(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """A temporary DVC project with the repository's dvc.yaml, reproduced once."""
+    root = tmp_path_factory.mktemp("project")
+    shutil.copy(REPO / "dvc.yaml", root / "dvc.yaml")
+    (root / "params.yaml").write_text(yaml.safe_dump(tiny_params(), sort_keys=False))
+    dvc(root, "init", "--no-scm", "-q")
+    return root, dvc(root, "repro")
+
+
+def test_every_stage_ran(repro: tuple[Path, str]) -> None:
+    root, log = repro
+    stages = yaml.safe_load((root / "dvc.yaml").read_text())["stages"]
+    for name in stages:
+        assert f"Running stage '{name}'" in log
+    lock = yaml.safe_load((root / "dvc.lock").read_text())["stages"]
+    assert set(lock) == set(stages)
+
+
+def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
+    import duckdb
+
+    from pipeline.evaluation.trials import read_trials_tables
+    from pipeline.odometry.base import Schedule
+    from pipeline.report.evaluate import SETTINGS
+    from pipeline.runtime import load_model
+    from pipeline.sequence import SequenceReader
+    from pipeline.surrogate import Pca
+    from pipeline.trajectory import read_trajectory
+    from schemas.arrow import DESCRIPTORS, check_schema_version
+
+    root, _ = repro
+    index = json.loads((root / "data/sequences/index.json").read_text())
+    assert index == {"train": ["cave_0", "street_0"], "validation": ["composite_0"]}
+    for name in index["train"] + index["validation"]:
+        with SequenceReader(root / f"data/sequences/{name}.mcap") as reader:
+            assert reader.ground_truth() is not None
+    import pyarrow.parquet as pq
+
+    desc = pq.read_table(root / "data/descriptors.parquet")
+    check_schema_version(desc.schema, "descriptors")
+    assert desc.schema.names == DESCRIPTORS.names and desc.num_rows == 160
+    assert Pca.load(root / "data/pca").dim == 4
+    trials = read_trials_tables(root / "results/trials")
+    assert trials.num_rows == 6
+    assert set(trials.column("sequence").to_pylist()) == set(index["train"])
+    assert read_trials_tables(root / "results/fixed").num_rows == 2
+    con = duckdb.connect(str(root / "results/adaptune.duckdb"), read_only=True)
+    try:
+        counts = {t: con.execute(f"SELECT count(*) FROM {t}").fetchone()[0]  # type: ignore[index]
+                  for t in ("sequences", "trials", "rte_frames", "environment", "surrogate_rows")}
+    finally:
+        con.close()
+    assert counts["sequences"] == 3 and counts["trials"] == 8
+    assert counts["rte_frames"] > 0 and counts["surrogate_rows"] > 0
+    model = load_model(root / "model", expected_algorithm="ndt")
+    assert len(model.rows_t) == counts["surrogate_rows"]
+    run = root / "results/adaptive/composite_0"
+    schedule = Schedule.read(run / "schedule.parquet")
+    assert len(schedule) == 60 and set(schedule.values) == set(model.names)
+    assert len(read_trajectory(run / "trajectory.parquet")) == 60
+    for setting in ("baseline", "fixed"):
+        path = root / f"results/evaluation/composite_0/{setting}.parquet"
+        assert len(read_trajectory(path)) == 60
+    metrics = json.loads((root / "metrics/evaluation.json").read_text())
+    assert set(metrics["rte_pct"]) == set(SETTINGS)
+    assert all(v > 0 for v in metrics["rte_pct"].values())
+    assert metrics["trials"]["trials"]["trials"] == 6
+    assert "cross_validation" not in metrics and "mae" in json.loads(
+        (root / "metrics/surrogate.json").read_text())
+    report = (root / "report/report.md").read_text()
+    for png in ("schedule_composite_0.png", "rte_composite_0.png", "trajectory_composite_0.png",
+                "trials.png"):
+        assert f"({png})" in report
+        assert (root / "report" / png).read_bytes()[:4] == b"\x89PNG"
+    for csv in ("schedule", "rte_frames", "trajectory_ground_truth", "trajectory_adaptive"):
+        lines = (root / f"plots/{csv}.csv").read_text().splitlines()
+        assert len(lines) == 61  # header + 60 frames
+
+
+def test_second_repro_is_a_no_op(repro: tuple[Path, str]) -> None:
+    root, _ = repro
+    log = dvc(root, "repro")
+    assert "Running stage" not in log
+    assert "up to date" in dvc(root, "status")
+
+
+def test_metrics_and_plots_commands_read_the_outputs(repro: tuple[Path, str]) -> None:
+    root, _ = repro
+    shown = json.loads(dvc(root, "metrics", "show", "--json"))
+    metrics = next(iter(shown.values()))["data"]
+    assert "rte_pct" in metrics["metrics/evaluation.json"]["data"]
+    out = dvc(root, "plots", "show", "-o", "dvc_plots")
+    assert "dvc_plots" in out and (root / "dvc_plots" / "index.html").is_file()
