@@ -8,7 +8,7 @@ reads params.yaml and validates; errors name the value and the rule it breaks, e
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -25,11 +25,13 @@ class Section(BaseModel):
 
 
 class BaseSection(Section):
-    """The shared ``base`` section: the seed, and L, which the ``trials``, ``rte`` and
-    ``evaluate`` sections take by a YAML alias (``length_m: *length_m``) so that it is set once."""
+    """The shared ``base`` section: the seed; L, which the ``trials``, ``rte`` and ``evaluate``
+    sections take by a YAML alias (``length_m: *length_m``) so that it is set once; and the
+    sequence folder every stage after ``simulate`` / ``ingest`` reads (dvc.yaml ``${...}``)."""
 
     seed: int = 0
     length_m: float = Field(25.0, gt=0)
+    sequences: Literal["data/sequences", "data/kitti"] = "data/sequences"
 
 
 def format_validation_error(section: str, exc: ValidationError) -> str:

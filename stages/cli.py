@@ -46,6 +46,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "stages.evaluate:evaluate",
         "Baseline vs fixed vs adaptive: metrics, plots, report.",
     ),
+    "ingest-set": (
+        "stages.ingest:ingest_set",
+        "Ingest the KITTI data set of params.yaml (dvc stage).",
+    ),
     "simulate-set": (
         "stages.simulate:simulate_set",
         "Simulate the toy data set of params.yaml (dvc stage).",

@@ -7,6 +7,8 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from stages.common import params_option
+
 if TYPE_CHECKING:
     from pipeline.sources.poses import PoseFormat
 
@@ -203,3 +205,19 @@ def mcap(
             name=name,
         )
     )
+
+
+@click.command("ingest-set")
+@params_option
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Folder for <NN>.mcap and index.json (data/kitti).")
+def ingest_set(params_path: Path, out_dir: Path) -> None:
+    """Ingest the KITTI sequences of the params section ``ingest`` (dvc stage)."""
+    from pipeline.config import load_section
+    from pipeline.sources.dataset import IngestSection, ingest_kitti_set
+
+    section = load_section(params_path, "ingest", IngestSection)
+    for report in ingest_kitti_set(section, out_dir):
+        _done(report)
+    click.echo(f"{out_dir / 'index.json'}: {len(section.train)} train, "
+               f"{len(section.validation)} validation sequences")

@@ -47,14 +47,18 @@ def dvc(cwd: Path, *args: str) -> str:
     return done.stdout + done.stderr
 
 
-@pytest.fixture(scope="module")
-def repro(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
-    """A temporary DVC project with the repository's dvc.yaml, reproduced once."""
-    root = tmp_path_factory.mktemp("project")
+def reproduce(root: Path, params: dict[str, Any]) -> tuple[Path, str]:
+    """A DVC project in ``root`` with the repository's dvc.yaml and ``params``, reproduced."""
     shutil.copy(REPO / "dvc.yaml", root / "dvc.yaml")
-    (root / "params.yaml").write_text(yaml.safe_dump(tiny_params(), sort_keys=False))
+    (root / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     dvc(root, "init", "--no-scm", "-q")
     return root, dvc(root, "repro")
+
+
+@pytest.fixture(scope="module")
+def repro(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """The toy pipeline (simulated worlds), reproduced once."""
+    return reproduce(tmp_path_factory.mktemp("project"), tiny_params())
 
 
 def test_every_stage_ran(repro: tuple[Path, str]) -> None:
@@ -141,3 +145,24 @@ def test_metrics_and_plots_commands_read_the_outputs(repro: tuple[Path, str]) ->
     assert "rte_pct" in metrics["metrics/evaluation.json"]["data"]
     out = dvc(root, "plots", "show", "-o", "dvc_plots")
     assert "dvc_plots" in out and (root / "dvc_plots" / "index.html").is_file()
+
+
+def test_pipeline_runs_on_a_kitti_root(kitti_root: Path,
+                                       tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Pointing the ingest params at a KITTI root runs the same stages on real scans."""
+    from pipeline.sequence import SequenceReader
+
+    p = tiny_params()
+    p["base"]["sequences"] = "data/kitti"
+    p["simulate"].update(train={"cave": 1}, train_frames=10, validation_count=0)
+    p["ingest"].update(kitti_root=str(kitti_root), train=["01", "06"], validation=["04"])
+    root, log = reproduce(tmp_path_factory.mktemp("kitti"), p)
+    assert "Running stage 'ingest'" in log
+    for seq in ("01", "06", "04"):
+        with SequenceReader(root / f"data/kitti/{seq}.mcap") as reader:
+            assert len(reader) == 10 and reader.info.sensor != "unknown"
+    metrics = json.loads((root / "metrics/evaluation.json").read_text())
+    assert list(metrics["sequences"]) == ["04"]
+    assert all(0 < v < 50 for v in metrics["rte_pct"].values())
+    lock = yaml.safe_load((root / "dvc.lock").read_text())["stages"]
+    assert any(d["path"] == "data/kitti" for d in lock["trials"]["deps"])

@@ -1,0 +1,148 @@
+"""The `ingest-set`, `adaptive` and `evaluate` stages: params sections and bad input.
+
+The happy path of all three runs through DVC in tests/test_pipeline_dvc.py.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from pipeline.config import BaseSection, load_section
+from pipeline.sim.dataset import SimulateSection
+from pipeline.sources.dataset import IngestSection
+from pipeline.tuning.job import TrialResult
+from pipeline.tuning.smbo import FixedSection, TrialsSection
+from stages.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_every_section_of_the_repository_params_validates() -> None:
+    from pipeline.evaluation.store import RteSection
+    from pipeline.report.evaluate import EvaluateSection
+    from stages.descriptors import DescriptorsSection
+    from stages.surrogate import SurrogateSection
+
+    models = {"base": BaseSection, "simulate": SimulateSection, "ingest": IngestSection,
+              "descriptors": DescriptorsSection, "trials": TrialsSection, "fixed": FixedSection,
+              "rte": RteSection, "surrogate": SurrogateSection, "evaluate": EvaluateSection}
+    params = yaml.safe_load((REPO / "params.yaml").read_text())
+    assert set(params) == set(models)
+    for name, model in models.items():
+        load_section(REPO / "params.yaml", name, model)
+    # one L for trials, rte and evaluate (YAML aliases of base.length_m)
+    assert {params[s]["length_m"] for s in ("base", "trials", "rte", "evaluate")} == {25.0}
+
+
+def _params(tmp_path: Path, **sections: dict) -> Path:
+    path = tmp_path / "params.yaml"
+    path.write_text(yaml.safe_dump(sections))
+    return path
+
+
+def _invoke(*args: str) -> tuple[int, str]:
+    result = CliRunner().invoke(main, list(args))
+    return result.exit_code, result.output
+
+
+def test_ingest_set_refuses_a_root_without_train_sequences(tmp_path: Path) -> None:
+    params = _params(tmp_path, ingest={"kitti_root": str(tmp_path), "train": []})
+    code, out = _invoke("ingest-set", "--params", str(params), "--out", str(tmp_path / "k"))
+    assert code == 1
+    assert out.strip().splitlines() == [
+        f"adaptune: error: ingest: train must name KITTI sequences when kitti_root is set, got "
+        f"(kitti_root={str(tmp_path)!r}, train=[])"]
+    assert not (tmp_path / "k" / "index.json").exists()
+
+
+def test_ingest_set_without_a_root_writes_an_empty_index(tmp_path: Path) -> None:
+    params = _params(tmp_path, ingest={})
+    code, _ = _invoke("ingest-set", "--params", str(params), "--out", str(tmp_path / "k"))
+    assert code == 0
+    assert json.loads((tmp_path / "k" / "index.json").read_text()) == {
+        "train": [], "validation": []}
+
+
+def test_fixed_section_overrides_trials_for_the_joint_study(tmp_path: Path) -> None:
+    with pytest.raises(Exception, match="fixed.iterations"):
+        load_section(_params(tmp_path, fixed={"iterations": 0}), "fixed", FixedSection)
+
+
+@pytest.fixture(scope="module")
+def validation_set(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """data/sequences with one short composite validation sequence."""
+    from pipeline.sim.simulate import SimSpec, simulate_sequence
+
+    folder = tmp_path_factory.mktemp("sequences")
+    simulate_sequence(SimSpec("composite", 3, 40), folder / "composite_0.mcap", name="composite_0")
+    (folder / "index.json").write_text(json.dumps({"train": [], "validation": ["composite_0"]}))
+    return folder
+
+
+def _joint_table(out: Path, algorithm: str = "ndt", status: str = "ok") -> Path:
+    from pipeline.odometry import get_adapter
+    from pipeline.tuning.table import JOINT, trials_path, write_trials
+
+    space = get_adapter(algorithm).space
+    result = TrialResult(0, status, "" if status == "ok" else "boom", 1.5, 1.0, 7,
+                         space.defaults())
+    write_trials(trials_path(out, algorithm, JOINT), space, [result])
+    return out
+
+
+def _evaluate(tmp_path: Path, sequences: Path, fixed: Path, adaptive: Path) -> tuple[int, str]:
+    return _invoke("evaluate", "--params", str(REPO / "params.yaml"), "--sequences",
+                   str(sequences), "--trials", str(tmp_path / "trials"), "--fixed", str(fixed),
+                   "--adaptive", str(adaptive), "--out", str(tmp_path / "ev"), "--metrics",
+                   str(tmp_path / "m.json"), "--plots", str(tmp_path / "plots"), "--report",
+                   str(tmp_path / "report"))
+
+
+def test_evaluate_without_the_fixed_stage_is_one_line(tmp_path: Path,
+                                                      validation_set: Path) -> None:
+    code, out = _evaluate(tmp_path, validation_set, tmp_path / "nofixed", tmp_path / "a")
+    assert code == 1 and out.count("\n") == 1
+    assert "nofixed: no such trials directory" in out
+    assert not (tmp_path / "m.json").exists()
+
+
+def test_evaluate_without_a_successful_joint_trial(tmp_path: Path, validation_set: Path) -> None:
+    fixed = _joint_table(tmp_path / "fixed", status="failed")
+    code, out = _evaluate(tmp_path, validation_set, fixed, tmp_path / "a")
+    assert code == 1 and "no successful joint trial" in out
+
+
+def test_evaluate_refuses_an_adaptive_run_of_another_algorithm(tmp_path: Path,
+                                                               validation_set: Path) -> None:
+    fixed = _joint_table(tmp_path / "fixed")
+    run = tmp_path / "adaptive" / "composite_0"
+    run.mkdir(parents=True)
+    (run / "run.json").write_text(json.dumps({"algorithm": "gicp", "wall_time_s": 1.0}))
+    code, out = _evaluate(tmp_path, validation_set, fixed, tmp_path / "adaptive")
+    assert code == 1
+    assert "adaptive run of 'gicp', the fixed parameters are for 'ndt'" in out
+    assert not (tmp_path / "m.json").exists()
+
+
+def test_evaluate_without_the_adaptive_stage(tmp_path: Path, validation_set: Path) -> None:
+    fixed = _joint_table(tmp_path / "fixed")
+    code, out = _evaluate(tmp_path, validation_set, fixed, tmp_path / "adaptive")
+    assert code == 1 and "no adaptive run (run the `adaptive` stage)" in out
+
+
+def test_adaptive_refuses_a_missing_or_tampered_model(tmp_path: Path,
+                                                      validation_set: Path) -> None:
+    args = ["adaptive", "--params", str(REPO / "params.yaml"), "--sequences",
+            str(validation_set), "--out", str(tmp_path / "out")]
+    code, out = _invoke(*args, "--model", str(tmp_path / "model"))
+    assert code == 1 and "not a model artifact (no manifest.json)" in out
+    (tmp_path / "model").mkdir()
+    (tmp_path / "model" / "manifest.json").write_text("{not json")
+    code, out = _invoke(*args, "--model", str(tmp_path / "model"))
+    assert code == 1 and "damaged manifest" in out
+    assert not (tmp_path / "out").exists()
