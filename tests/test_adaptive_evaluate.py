@@ -13,6 +13,7 @@ import yaml
 from click.testing import CliRunner
 
 from pipeline.config import BaseSection, load_section
+from pipeline.errors import ConfigError
 from pipeline.sim.dataset import SimulateSection
 from pipeline.sources.dataset import IngestSection
 from pipeline.tuning.job import TrialResult
@@ -68,8 +69,10 @@ def test_ingest_set_without_a_root_writes_an_empty_index(tmp_path: Path) -> None
         "train": [], "validation": []}
 
 
-def test_fixed_section_overrides_trials_for_the_joint_study(tmp_path: Path) -> None:
-    with pytest.raises(Exception, match="fixed.iterations"):
+def test_fixed_section_is_validated(tmp_path: Path) -> None:
+    """(That --joint takes fixed.iterations over trials.iterations: tests/test_pipeline_dvc.py.)"""
+    rule = r"fixed\.iterations: Input should be greater than or equal to 1, got 0"
+    with pytest.raises(ConfigError, match=rule):
         load_section(_params(tmp_path, fixed={"iterations": 0}), "fixed", FixedSection)
 
 
