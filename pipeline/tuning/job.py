@@ -20,6 +20,7 @@ import contextlib
 import json
 import logging
 import multiprocessing
+import os
 import threading
 import time
 from collections.abc import Mapping
@@ -171,8 +172,17 @@ def check_jump(traj: Trajectory, jump_limit_m: float) -> None:
 
 # -- scan cache ----------------------------------------------------------------------------
 
-SCAN_CACHE_LIMIT_BYTES = 1 << 30
-"""Decoded sequences a worker keeps in memory (estimated from the MCAP size) at most."""
+def _scan_cache_limit_bytes() -> int:
+    """A quarter of the machine's memory, at most 8 GiB (1 GiB where it cannot be read)."""
+    try:
+        physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 1 << 30
+    return int(min(physical // 4, 8 << 30))
+
+
+SCAN_CACHE_LIMIT_BYTES = _scan_cache_limit_bytes()
+"""Decoded sequences a worker keeps in memory at most (the MCAP chunks' uncompressed size)."""
 
 _SCANS: dict[str, list[Any]] = {}
 
@@ -191,7 +201,8 @@ def warm_scan_cache(job: TrialJob) -> None:
     paths = [p for _, p in job.sequences]
     for stale in set(_SCANS) - set(paths):
         del _SCANS[stale]
-    if sum(Path(p).stat().st_size for p in paths) * 3 > SCAN_CACHE_LIMIT_BYTES:
+    if sum(decoded_bytes(p) for p in paths) > SCAN_CACHE_LIMIT_BYTES:
+        log.info("scan cache: %s too large to keep decoded; every trial reads them", paths)
         _SCANS.clear()
         return
     for p in paths:
@@ -199,6 +210,20 @@ def warm_scan_cache(job: TrialJob) -> None:
             with SequenceReader(p) as reader:
                 _SCANS[p] = list(reader)
     _warm_adapter(job, paths)
+
+
+def decoded_bytes(path: str | Path) -> int:
+    """Uncompressed size [bytes] of a sequence MCAP's chunks: about its decoded size."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as fh:
+            summary = make_reader(fh).get_summary()
+    except Exception:  # unreadable: the trial itself reports it
+        return 0
+    if summary is None:
+        return 0
+    return sum(ci.uncompressed_size for ci in summary.chunk_indexes)
 
 
 _WARMED: list[Any] = []
