@@ -23,6 +23,11 @@ Selection (x_t = argmin_x S(E_t, x), S = the kNN mean of k training targets):
    about 5 % relative).
 6. A scan with fewer than ``min_scan_points`` points keeps the last parameters (the defaults
    before the first selection).
+7. Novelty guard (not in the paper): when E_t is farther from every training environment than
+   ``novelty_distance`` (a quantile of the training frames' distances to the nearest frame of
+   another training sequence, computed when the model is fitted), the surrogate would be
+   extrapolating; the selector then falls back to the adapter's defaults (the hand-tuned
+   baseline) until the scans look familiar again. ``null`` in the manifest disables it.
 """
 
 from __future__ import annotations
@@ -280,6 +285,7 @@ class Neighbourhood:
 
     def __init__(self, model: Model, e_s: NDArray[np.float64], subset_rows: int) -> None:
         d2 = np.einsum("ij,ij->i", model.env - e_s, model.env - e_s)
+        self.nearest = float(np.sqrt(d2.min()))  # E-distance to the closest training frame
         counts = np.diff(model.env_offsets)
         n_env = len(d2)
         order = np.argsort(d2)
@@ -333,6 +339,8 @@ class Selector:
         )
         self.subset_rows = int(sel["subset_rows"] if subset_rows is None else subset_rows)
         self.refine_iters = int(sel["refine_iters"] if refine_iters is None else refine_iters)
+        novelty = sel.get("novelty_distance")
+        self.novelty_distance = math.inf if novelty is None else float(novelty)
         self.n_starts = n_starts
         self.candidates = np.unique(model.snap(model.candidates_u), axis=0)
         self.current_u: NDArray[np.float64] | None = None
@@ -371,6 +379,12 @@ class Selector:
     def select_environment(self, e_s: NDArray[np.float64]) -> Params:
         """The selection for a scaled environment E_s (D,)."""
         nb = Neighbourhood(self.model, e_s, self.subset_rows)
+        if nb.nearest > self.novelty_distance:  # an unfamiliar scan: the baseline (step 7)
+            defaults = self.model.defaults()
+            self.current_u = self.model.to_unit(
+                np.array([[defaults[n] for n in self.model.names]]))[0]
+            self.last = {"kept": "novel", "nearest_environment": nb.nearest}
+            return defaults
         u_best, t_best, exact_frac = self._search(nb)
         kept = False
         if self.current_u is not None and not np.array_equal(u_best, self.current_u):
@@ -383,6 +397,7 @@ class Selector:
             "predicted_t": t_best,
             "exact_fraction": exact_frac,
             "subset_rows": len(nb.rows),
+            "nearest_environment": nb.nearest,
         }
         return self.model.params_of(u_best)
 

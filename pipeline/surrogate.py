@@ -182,6 +182,7 @@ class SurrogateSettings:
     n_sobol: int = 1024
     seed: int = 0
     cv_max_frames: int = 200
+    novelty_quantile: float | None = 0.99
 
 
 @dataclass
@@ -234,6 +235,7 @@ class FittedSurrogate:
     candidates_u: NDArray[np.float64]
     summary: dict[str, Any]
     cv: dict[str, Any]
+    novelty_distance: float | None = None
 
     def joint_features(self) -> NDArray[np.float64]:
         """(M, D + P) scaled features [E_s, X_s] of every row."""
@@ -284,20 +286,42 @@ def fit_surrogate(
         "candidates": len(cands),
     }
     cv = cross_validate(rows, settings, e_scale, x_scale)
+    env_sequences = [str(seq_names[u // span]) for u in uniq]
+    novelty = novelty_distance(env, np.array(env_sequences), settings.novelty_quantile)
+    summary["novelty_distance"] = novelty
     return FittedSurrogate(
         settings,
         e_scale,
         x_scale,
         env,
         offsets,
-        [str(seq_names[u // span]) for u in uniq],
+        env_sequences,
         (uniq % span).astype(np.int64),
         rows_x,
         rows_t,
         cands,
         summary,
         cv,
+        novelty,
     )
+
+
+def novelty_distance(env: NDArray[np.float64], sequences: NDArray[np.str_],
+                     quantile: float | None) -> float | None:
+    """The ``quantile`` of every training frame's distance to the nearest frame of another
+    training sequence (env (n_env, D) scaled environments, sequences (n_env,)): a scan farther
+    than this from every training frame is unlike the training data (pipeline.runtime, step 7).
+    None when disabled or with a single training sequence."""
+    from scipy.spatial import cKDTree
+
+    names = np.unique(sequences)
+    if quantile is None or len(names) < 2:
+        return None
+    nearest = np.empty(len(env))
+    for name in names:
+        mine = sequences == name
+        nearest[mine] = cKDTree(env[~mine]).query(env[mine])[0]
+    return float(np.quantile(nearest, quantile))
 
 
 def candidate_set(
@@ -452,7 +476,7 @@ def write_artifact(
                 },
                 "target": fitted.settings.target,
             },
-            "selection": dict(info.selection),
+            "selection": {**info.selection, "novelty_distance": fitted.novelty_distance},
             "training": {**fitted.summary, "env_sequences": fitted.env_sequences},
             "cross_validation": fitted.cv,
             "files": files,

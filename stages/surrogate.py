@@ -28,6 +28,7 @@ class SurrogateSection(Section):
     min_scan_points: int = Field(1000, ge=0)
     subset_rows: int = Field(4096, ge=1)
     refine_iters: int = Field(4, ge=0)
+    novelty_quantile: float | None = Field(0.99, gt=0, le=1)
 
 
 @click.command()
@@ -86,7 +87,8 @@ def surrogate(
     d = load_section(params_path, "descriptors", DescriptorsSection)
     pca = Pca.load(pca_dir)
     algo, space, rows = read_training_rows(db_path, algorithm, lambda a: get_adapter(a).space)
-    settings = SurrogateSettings(p.k, p.w_e, p.w_x, p.target, p.n_sobol, p.seed, p.cv_max_frames)
+    settings = SurrogateSettings(p.k, p.w_e, p.w_x, p.target, p.n_sobol, p.seed, p.cv_max_frames,
+                                 p.novelty_quantile)
     fitted = fit_surrogate(rows, space, settings)
     selection = {
         "period_s": p.period_s,

@@ -18,6 +18,7 @@ from pipeline.odometry.base import Schedule
 from pipeline.odometry.registry import get_adapter
 from pipeline.runtime import Neighbourhood, Selector, canonical_manifest_hash, load_model
 from pipeline.sequence import SequenceReader
+from pipeline.surrogate import SurrogateSettings
 from stages.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -200,3 +201,29 @@ def test_refinement_and_hysteresis(model_dir: Path, kitti_root: Path) -> None:
     p0 = sticky.select_environment(model.environment(kitti_scan(kitti_root, "01", 0)))
     assert sticky.select_environment(model.environment(kitti_scan(kitti_root, "10", 9))) == p0
     assert sticky.last["kept"] == "hysteresis"
+
+
+def test_unfamiliar_scans_fall_back_to_the_defaults(tmp_path: Path, kitti_root: Path) -> None:
+    """Novelty guard: an environment farther than novelty_distance from every training frame
+    gets the baseline; a familiar one gets the surrogate's choice again."""
+    model = load_model(build_model(tmp_path / "model", kitti_root))
+    limit = model.selection["novelty_distance"]
+    assert limit > 0
+    sel = Selector(model, hysteresis=0.0)
+    familiar = model.env[3]
+    far = familiar + 3.0 * limit / np.sqrt(len(familiar))  # 3 limits from that frame
+    assert np.sqrt(((model.env - far) ** 2).sum(1)).min() > limit
+    first = sel.select_environment(familiar)
+    assert sel.last["kept"] == "" and sel.last["nearest_environment"] == 0.0
+    assert sel.select_environment(far) == model.defaults()
+    assert sel.last["kept"] == "novel" and sel.current == model.defaults()
+    assert sel.select_environment(familiar) == first
+    assert first != model.defaults()
+    # without a novelty distance (null in the manifest) the surrogate always decides
+    off = load_model(build_model(tmp_path / "off", kitti_root,
+                                 settings=SurrogateSettings(n_sobol=256, cv_max_frames=5,
+                                                            novelty_quantile=None)))
+    assert off.selection["novelty_distance"] is None
+    unguarded = Selector(off, hysteresis=0.0)
+    unguarded.select_environment(far)
+    assert unguarded.last["kept"] != "novel"

@@ -11,6 +11,7 @@ import duckdb
 import jsonschema
 import numpy as np
 import pyarrow as pa
+import pytest
 from click.testing import CliRunner
 
 from pipeline.descriptor import DescriptorConfig, describe
@@ -146,6 +147,21 @@ def test_cross_validation_is_leave_one_sequence_out(tmp_path: Path, kitti_root: 
     assert cv["regret_mean"] >= 0 and cv["y_chosen_mean"] >= cv["y_oracle_mean"]
     # the surrogate beats picking trials at random in the held-out sequences
     assert cv["y_chosen_mean"] < rows.y.mean()
+
+
+def test_novelty_distance_is_the_leave_one_sequence_out_quantile(kitti_root: Path) -> None:
+    rows, _ = synthetic_rows(kitti_root)
+    space = get_adapter("ndt").space.to_json()
+    fitted = fit_surrogate(rows, space, SurrogateSettings(n_sobol=0, cv_max_frames=2))
+    seqs = np.array(fitted.env_sequences)
+    d = np.linalg.norm(fitted.env[:, None] - fitted.env[None], axis=2)
+    d[seqs[:, None] == seqs[None]] = np.inf  # only frames of other sequences
+    expected = np.quantile(d.min(axis=1), 0.99)
+    assert fitted.novelty_distance == pytest.approx(expected, rel=1e-12)
+    assert fitted.novelty_distance > 0
+    off = fit_surrogate(rows, space, SurrogateSettings(n_sobol=0, cv_max_frames=2,
+                                                       novelty_quantile=None))
+    assert off.novelty_distance is None
 
 
 def write_tiny_sequence(path: Path, kitti_root: Path, seq: str, n: int = 4, step: int = 3) -> None:
