@@ -50,6 +50,9 @@ def dvc(cwd: Path, *args: str) -> str:
 def reproduce(root: Path, params: dict[str, Any]) -> tuple[Path, str]:
     """A DVC project in ``root`` with the repository's dvc.yaml and ``params``, reproduced."""
     shutil.copy(REPO / "dvc.yaml", root / "dvc.yaml")
+    shutil.copy(REPO / ".dvcignore", root / ".dvcignore")
+    for code in ("pipeline", "schemas"):  # the stages' code dependencies
+        (root / code).symlink_to(REPO / code, target_is_directory=True)
     (root / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     dvc(root, "init", "--no-scm", "-q")
     return root, dvc(root, "repro")
@@ -68,6 +71,10 @@ def test_every_stage_ran(repro: tuple[Path, str]) -> None:
         assert f"Running stage '{name}'" in log
     lock = yaml.safe_load((root / "dvc.lock").read_text())["stages"]
     assert set(lock) == set(stages)
+    # the library code a stage runs is one of its dependencies, hashed without __pycache__
+    code = {d["path"]: d for d in lock["trials"]["deps"]}["pipeline/odometry"]
+    assert code["md5"].endswith(".dir") and code["nfiles"] == len(
+        list((REPO / "pipeline/odometry").glob("*.py")))
 
 
 def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
