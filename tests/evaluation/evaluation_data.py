@@ -111,3 +111,19 @@ def write_study(out_dir: Path, algorithm: str, gts: dict[str, tuple[np.ndarray, 
     if joint:
         write_trials_table(out_dir, algorithm, "__joint__", rows, param_names)
     return estimates
+
+
+def cli_fails(args: list[str], *needles: str) -> str:
+    """Run ``adaptune ARGS``: exit code 1 and one line ``adaptune: error: ...`` holding every
+    needle; returns that line."""
+    from click.testing import CliRunner
+
+    from stages.cli import main
+
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 1, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("adaptune: error:"), result.output
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    return lines[0]

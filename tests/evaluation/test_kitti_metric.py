@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from evaluation_data import drifting
+from evaluation_data import cli_fails, drifting
 
 from pipeline.evaluation.kitti import LENGTHS_M, kitti_errors, kitti_sequence_error
 from pipeline.evaluation.posefile import read_kitti_poses, write_kitti_poses
@@ -121,26 +121,18 @@ def test_metric_cli_json(tmp_path: Path, kitti_trajectories: Path) -> None:
     assert set(got["per_length"]) <= {f"{x:g}" for x in LENGTHS_M}
 
 
-def _fails(args: list[str], *needles: str) -> None:
-    result = CliRunner().invoke(main, args)
-    assert result.exit_code == 1, result.output
-    lines = result.output.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("adaptune: error:"), result.output
-    for needle in needles:
-        assert needle in lines[0], lines[0]
-
-
 def test_metric_cli_bad_inputs(tmp_path: Path, kitti_trajectories: Path) -> None:
     gt_path = kitti_trajectories / "04.txt"
     gt = read_kitti_poses(gt_path)
     write_kitti_poses(tmp_path / "short.txt", gt[:-5])
-    _fails(["metric", "kitti", str(gt_path), str(tmp_path / "short.txt")],
+    cli_fails(["metric", "kitti", str(gt_path), str(tmp_path / "short.txt")],
            "short.txt", f"{len(gt) - 5} poses", f"has {len(gt)}")
     nan = gt.copy()
     nan[100, 0, 3] = np.nan
     write_kitti_poses(tmp_path / "nan.txt", nan)
-    _fails(["metric", "kitti", str(gt_path), str(tmp_path / "nan.txt")], "nan.txt:101",
-           "non-finite")
+    cli_fails(["metric", "kitti", str(gt_path), str(tmp_path / "nan.txt")], "nan.txt:101",
+              "non-finite")
     (tmp_path / "bad.txt").write_text("1 2 3\n")
-    _fails(["metric", "kitti", str(gt_path), str(tmp_path / "bad.txt")], "bad.txt:1", "expected 12")
-    _fails(["metric", "kitti", str(gt_path), str(tmp_path / "missing.txt")], "missing.txt")
+    cli_fails(["metric", "kitti", str(gt_path), str(tmp_path / "bad.txt")], "bad.txt:1",
+              "expected 12")
+    cli_fails(["metric", "kitti", str(gt_path), str(tmp_path / "missing.txt")], "missing.txt")

@@ -13,7 +13,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
-from evaluation_data import gt_path, write_sequence, write_study
+from evaluation_data import cli_fails, gt_path, write_sequence, write_study
 
 from pipeline.evaluation.kitti import kitti_errors
 from pipeline.evaluation.posefile import read_kitti_poses, read_tum
@@ -192,25 +192,15 @@ def test_read_trials_tables_unions_parameters(world: World) -> None:
     assert table.num_rows == 4 * 2 + 2
 
 
-def _fails(args: list[str], *needles: str) -> str:
-    result = CliRunner().invoke(main, args)
-    assert result.exit_code == 1, result.output
-    lines = result.output.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("adaptune: error:"), result.output
-    for needle in needles:
-        assert needle in lines[0], lines[0]
-    return lines[0]
-
-
 def test_rte_stage_bad_inputs_leave_no_database(world: World, tmp_path: Path) -> None:
     db = tmp_path / "out.duckdb"
-    _fails(world.args(db, "--descriptors", str(tmp_path / "missing.parquet")), "missing.parquet")
+    cli_fails(world.args(db, "--descriptors", str(tmp_path / "missing.parquet")), "missing.parquet")
     assert not db.exists()
     bad_params = tmp_path / "params.yaml"
     bad_params.write_text("rte:\n  length_m: -1\n")
     args = world.args(db)
     args[args.index("--params") + 1] = str(bad_params)
-    _fails(args, "rte.length_m", "greater than 0")
+    cli_fails(args, "rte.length_m", "greater than 0")
     assert not db.exists()
     assert not list(tmp_path.glob(".out.duckdb*"))
 
@@ -228,10 +218,10 @@ def test_rte_stage_rejects_nan_and_short_trajectories(world: World, tmp_path: Pa
     db = tmp_path / "out.duckdb"
     args = ["rte", "--params", str(world.params), "--sequences", str(world.root / "seq"),
             "--trials", str(trials), "--db", str(db)]
-    _fails(args, "trial=2", "non-finite")
+    cli_fails(args, "trial=2", "non-finite")
     write_trajectory(path, Trajectory(traj.frames[:-3], traj.stamps_ns[:-3],
                                       traj.T_world_lidar[:-3]))
-    _fails(args, "trial=2", "57 poses", "60 frames")
+    cli_fails(args, "trial=2", "57 poses", "60 frames")
     assert not db.exists()
 
 
@@ -254,13 +244,13 @@ def test_query_cli(world: World, tmp_path: Path) -> None:
 
 def test_query_cli_errors(world: World, tmp_path: Path) -> None:
     db = str(world.root / "adaptune.duckdb")
-    _fails(["query", "--db", db, "SELEC 1"], "syntax error")
-    _fails(["query", "--db", db, "SELECT nope FROM trials"], "nope")
-    _fails(["query", "--db", db, "DROP TABLE trials"], "read-only")
-    _fails(["query", "--db", str(tmp_path / "none.duckdb"), "SELECT 1"], "none.duckdb",
-           "no such database")
+    cli_fails(["query", "--db", db, "SELEC 1"], "syntax error")
+    cli_fails(["query", "--db", db, "SELECT nope FROM trials"], "nope")
+    cli_fails(["query", "--db", db, "DROP TABLE trials"], "read-only")
+    cli_fails(["query", "--db", str(tmp_path / "none.duckdb"), "SELECT 1"], "none.duckdb",
+              "no such database")
     out = tmp_path / "x.csv"
-    _fails(["query", "--db", db, "SELEC 1", "--format", "csv", "--out", str(out)], "syntax")
+    cli_fails(["query", "--db", db, "SELEC 1", "--format", "csv", "--out", str(out)], "syntax")
     assert not out.exists()
 
 
@@ -276,6 +266,6 @@ def test_export_cli_round_trip(world: World, tmp_path: Path) -> None:
     stamps, poses = read_tum(tmp_path / "t.tum")
     np.testing.assert_allclose(poses, traj.T_world_lidar, atol=1e-10)
     np.testing.assert_allclose(stamps, traj.stamps_ns / 1e9, rtol=0, atol=1e-9)
-    _fails(["export", str(tmp_path / "none.parquet"), "--format", "tum", "--out",
-            str(tmp_path / "n.tum")], "none.parquet")
+    cli_fails(["export", str(tmp_path / "none.parquet"), "--format", "tum", "--out",
+              str(tmp_path / "n.tum")], "none.parquet")
     assert not (tmp_path / "n.tum").exists()
