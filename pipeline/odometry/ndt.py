@@ -131,12 +131,12 @@ class VoxelMap:
 
 
 @numba.njit(cache=True, nogil=True)
-def ndt_terms(source: F64, R: F64, t: F64, keys: NDArray[np.int64], means: F64, inv_covs: F64,
+def ndt_terms(source: F64, T: F64, keys: NDArray[np.int64], means: F64, inv_covs: F64,
               inv_res: float, offsets: NDArray[np.int64], d1: float,
               d2: float) -> tuple[float, F64, F64, int]:  # pragma: no cover - compiled
     """Score, Hessian (6, 6) and gradient (6,) of the NDT objective, and the pair count.
 
-    source (N, 3) points [m] in the sensor frame; R (3, 3), t (3,) the pose; keys (K,) the
+    source (N, 3) points [m] in the sensor frame; T (4, 4) the pose (R, t); keys (K,) the
     sorted packed voxel keys (``pack_keys``) of the map, means (K, 3), inv_covs (K, 3, 3);
     inv_res = 1 / resolution [1/m]; offsets (O, 3) voxel offsets searched around a point.
     Every point q = R p + t is paired with each map voxel of its own (and offset) voxel;
@@ -145,6 +145,8 @@ def ndt_terms(source: F64, R: F64, t: F64, keys: NDArray[np.int64], means: F64, 
     T exp(xi)), w J^T C J to the Hessian and w J^T C e to the gradient. Summation runs in
     point order, so the result is deterministic.
     """
+    R = T[:3, :3]
+    t = T[:3, 3]
     H = np.zeros((6, 6))
     g = np.zeros(6)
     score = 0.0
@@ -263,9 +265,8 @@ class NdtOdometry:
         and the number of point-voxel pairs (``ndt_terms``)."""
         assert self.voxels is not None
         v = self.voxels
-        return ndt_terms(source, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
-                         v.keys, v.means, v.inv_covs, 1.0 / v.resolution, self._offsets,
-                         self.d1, self.d2)
+        return ndt_terms(source, T, v.keys, v.means, v.inv_covs, 1.0 / v.resolution,
+                         self._offsets, self.d1, self.d2)
 
     def _align(self, source: F64, guess: F64) -> F64:
         """Levenberg-damped Gauss-Newton from ``guess``; the best pose found."""
