@@ -5,7 +5,9 @@ sequence (``joint=False``) or one study whose objective is the mean over all seq
 (``joint=True``, sequence ``__joint__``). Each study:
 1. reads its trials table (finished trials of an earlier, killed run) into the TPE history;
 2. keeps up to ``workers`` trials in flight: trial 0 is the baseline (the space's defaults),
-   every other trial is ``TpeSearch.ask`` over finished + pending trials;
+   every other trial t is ``TpeSearch.ask`` over the finished trials 0..t-lag and the pending
+   rest (``told_lag``): the same history whatever order the trials finish in, so runs with
+   the same seed and workers propose the same parameters;
 3. after every finished trial rewrites the trials table atomically, so a kill loses at most the
    trials in flight, and a restart runs exactly the missing trial ids 0..iterations-1.
 """
@@ -165,13 +167,19 @@ def run_study(study: Study, adapter: Adapter, executor: Executor, out_dir: Path,
     if done:
         log.info("%s %s: resuming, %d of %d trials finished", adapter.name, study.name,
                  len(done), settings.iterations)
+    lag = told_lag(settings.workers)
+    untold: dict[int, TrialResult] = {}  # finished in this run, not yet told to the search
     with _progress_bar(settings.iterations, len(done), f"{adapter.name} {study.name}",
                        progress) as bar:
         _show_best(bar, done)
         in_flight: dict[Future[TrialResult], int] = {}
         while todo or in_flight:
-            while todo and len(in_flight) < settings.workers:
+            while (todo and len(in_flight) < settings.workers
+                   and all(t in done for t in range(todo[0] - lag + 1))):
                 tid = todo.pop(0)
+                for t in sorted(t for t in untold if t <= tid - lag):
+                    r = untold.pop(t)
+                    search.tell(t, r.params, r.objective)
                 params = propose(search, tid)
                 job = make_job(study, adapter, tid, trial_seed(seed, tid), params, out_dir,
                                settings)
@@ -180,7 +188,7 @@ def run_study(study: Study, adapter: Adapter, executor: Executor, out_dir: Path,
             for fut in sorted(finished, key=in_flight.__getitem__):
                 tid = in_flight.pop(fut)
                 result = _result_of(fut, tid)
-                search.tell(tid, result.params, result.objective)
+                untold[tid] = result
                 done[tid] = result
                 write_trials(table, space, done.values())
                 ran += 1
@@ -188,6 +196,15 @@ def run_study(study: Study, adapter: Adapter, executor: Executor, out_dir: Path,
                 if on_trial is not None:
                     on_trial(study, result)
     return summarize(adapter.name, study.name, done, ran, table)
+
+
+def told_lag(workers: int) -> int:
+    """How far behind the proposal the search's history is: trial t is proposed from the
+    finished trials 0..t-lag (the rest pending), whatever order the executor finishes them in,
+    so that a run with W workers is as deterministic as a serial one. 1 for a serial run (the
+    previous trial is always finished); 2W - 1 otherwise, so a worker idles only when one trial
+    is slower than the 2W - 2 trials after it."""
+    return 1 if workers == 1 else 2 * workers - 1
 
 
 def propose(search: TpeSearch, tid: int) -> Params:

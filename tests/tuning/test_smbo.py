@@ -49,6 +49,25 @@ def test_serial_runs_with_one_seed_are_identical(
         assert trajectory_path(tmp_path / "r0", "drift", "seq_a", tid).is_file()
 
 
+def test_parallel_runs_with_one_seed_are_identical(
+    sequences: list[Path], pool: Executor, tmp_path: Path
+) -> None:
+    """Two trials in flight finish in varying order; the proposals do not depend on it."""
+    s = settings(algorithm="tuning_adapters:sleepy", workers=2, iterations=12, startup_trials=3)
+    for i in range(3):
+        run_trials(sequences[:1], tmp_path / f"p{i}", s, seed=5, progress=False, executor=pool)
+    a, b, c = (table(tmp_path / f"p{i}", "sleepy", "seq_a") for i in range(3))
+    assert a["trial"] == list(range(12)) and set(a["status"]) == {"ok"}
+    assert without_time(a) == without_time(b) == without_time(c)
+    assert len(set(a["p_bias"])) == 12
+
+
+def test_told_lag_keeps_serial_runs_serial() -> None:
+    from pipeline.tuning.smbo import told_lag
+
+    assert told_lag(1) == 1 and told_lag(2) == 3 and told_lag(8) == 15
+
+
 @pytest.mark.parametrize(
     "mode, message",
     [

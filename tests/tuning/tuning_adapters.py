@@ -92,6 +92,22 @@ class FailingAdapter(DriftAdapter):
         return traj
 
 
+class SleepyDriftAdapter(DriftAdapter):
+    """DriftAdapter that first sleeps 0-0.3 s, a different time for every parameter set, so
+    that parallel trials finish out of order."""
+
+    name = "sleepy"
+
+    def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
+        p = schedule.at(0)
+        time.sleep(0.3 * ((p["bias"] * 7919 + p["gain"] * 104729 + p["window"]) % 1.0))
+        return super().run(scans, schedule)
+
+
+def sleepy() -> SleepyDriftAdapter:
+    return SleepyDriftAdapter()
+
+
 def drift() -> DriftAdapter:
     return DriftAdapter()
 
