@@ -26,8 +26,9 @@ lint: setup
 bench: setup
 	$(PY) bench/run.py
 
+# dvc runs the stages' `adaptune ...` commands: the venv's bin must be on PATH
 repro: setup
-	$(BIN)/dvc repro
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro
 
 clean:
 	rm -rf $(VENV) .pytest_cache
