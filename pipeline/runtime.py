@@ -24,10 +24,11 @@ Selection (x_t = argmin_x S(E_t, x), S = the kNN mean of k training targets):
 6. A scan with fewer than ``min_scan_points`` points keeps the last parameters (the defaults
    before the first selection).
 7. Novelty guard (not in the paper): when E_t is farther from every training environment than
-   ``novelty_distance`` (a quantile of the training frames' distances to the nearest frame of
-   another training sequence, computed when the model is fitted), the surrogate would be
-   extrapolating; the selector then falls back to the adapter's defaults (the hand-tuned
-   baseline) until the scans look familiar again. ``null`` in the manifest disables it.
+   ``novelty_distance`` (a quantile, by default the largest, of the training frames' distances
+   to the nearest frame of another training sequence, computed when the model is fitted), the
+   surrogate would be extrapolating; the selector then falls back to the adapter's defaults
+   (the hand-tuned baseline) until the scans look familiar again. ``null`` in the manifest
+   disables it.
 """
 
 from __future__ import annotations

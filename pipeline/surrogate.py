@@ -182,7 +182,7 @@ class SurrogateSettings:
     n_sobol: int = 1024
     seed: int = 0
     cv_max_frames: int = 200
-    novelty_quantile: float | None = 0.99
+    novelty_quantile: float | None = 1.0
 
 
 @dataclass

@@ -28,7 +28,7 @@ class SurrogateSection(Section):
     min_scan_points: int = Field(1000, ge=0)
     subset_rows: int = Field(4096, ge=1)
     refine_iters: int = Field(4, ge=0)
-    novelty_quantile: float | None = Field(0.99, gt=0, le=1)
+    novelty_quantile: float | None = Field(1.0, gt=0, le=1)
 
 
 @click.command()

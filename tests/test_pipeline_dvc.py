@@ -131,9 +131,10 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
     report = (root / "report/report.md").read_text()
     for png in ("schedule_composite_0.png", "rte_composite_0.png", "trajectory_composite_0.png",
                 "trials.png"):
-        assert f"({png})" in report
-        assert (root / "report" / png).read_bytes()[:4] == b"\x89PNG"
-    for csv in ("schedule", "rte_frames", "trajectory_ground_truth", "trajectory_adaptive"):
+        assert f"(figures/{png})" in report
+        assert (root / "report" / "figures" / png).read_bytes()[:4] == b"\x89PNG"
+    for csv in ("schedule/resolution", "schedule/keyframe_interval", "rte_frames",
+                "trajectory_ground_truth", "trajectory_adaptive"):
         lines = (root / f"plots/{csv}.csv").read_text().splitlines()
         assert len(lines) == 61  # header + 60 frames
 
@@ -151,7 +152,12 @@ def test_metrics_and_plots_commands_read_the_outputs(repro: tuple[Path, str]) ->
     metrics = next(iter(shown.values()))["data"]
     assert "rte_pct" in metrics["metrics/evaluation.json"]["data"]
     out = dvc(root, "plots", "show", "-o", "dvc_plots")
-    assert "dvc_plots" in out and (root / "dvc_plots" / "index.html").is_file()
+    assert "dvc_plots" in out
+    html = (root / "dvc_plots" / "index.html").read_text()
+    for shown in ("plots/schedule/resolution.csv", "plots/schedule/keyframe_interval.csv",
+                  "Per-start-frame RTE [%]", "Trajectories (top view)"):
+        assert shown in html, shown
+    assert len(list((root / "dvc_plots" / "static").glob("*.png"))) == 4
 
 
 def test_pipeline_runs_on_a_kitti_root(kitti_root: Path,

@@ -156,9 +156,12 @@ def test_novelty_distance_is_the_leave_one_sequence_out_quantile(kitti_root: Pat
     seqs = np.array(fitted.env_sequences)
     d = np.linalg.norm(fitted.env[:, None] - fitted.env[None], axis=2)
     d[seqs[:, None] == seqs[None]] = np.inf  # only frames of other sequences
-    expected = np.quantile(d.min(axis=1), 0.99)
-    assert fitted.novelty_distance == pytest.approx(expected, rel=1e-12)
-    assert fitted.novelty_distance > 0
+    nearest = d.min(axis=1)
+    assert fitted.novelty_distance == pytest.approx(nearest.max(), rel=1e-12)  # default q = 1
+    q90 = fit_surrogate(rows, space, SurrogateSettings(n_sobol=0, cv_max_frames=2,
+                                                       novelty_quantile=0.9))
+    assert q90.novelty_distance == pytest.approx(np.quantile(nearest, 0.9), rel=1e-12)
+    assert 0 < q90.novelty_distance < fitted.novelty_distance
     off = fit_surrogate(rows, space, SurrogateSettings(n_sobol=0, cv_max_frames=2,
                                                        novelty_quantile=None))
     assert off.novelty_distance is None

@@ -84,9 +84,12 @@ def _num(v: float) -> float | str:
 
 def write_plot_data(ev: Evaluation, plots_dir: Path) -> None:
     """CSV files for ``dvc plots show`` (dvc.yaml ``plots``), all validation sequences:
-    schedule.csv (the adaptive parameters per frame), rte_frames.csv (per-start-frame RTE of
-    every setting), trajectory_<setting>.csv (x_m, y_m, started at the true first pose)."""
-    sched, rte = [], []
+    schedule/<parameter>.csv (per frame: the adaptive value, the fixed and the baseline one;
+    one file a parameter, so the plot definition fits every algorithm), rte_frames.csv
+    (per-start-frame RTE of every setting), trajectory_<setting>.csv (x_m, y_m, started at the
+    true first pose)."""
+    sched: dict[str, list[dict[str, Any]]] = {n: [] for n in ev.baseline_params}
+    rte = []
     traj: dict[str, list[dict[str, Any]]] = {"ground_truth": [], **{s: [] for s in SETTINGS}}
     for name in ev.sequences:
         stamps = ev.score("adaptive", name).trajectory.stamps_ns
@@ -98,7 +101,9 @@ def write_plot_data(ev: Evaluation, plots_dir: Path) -> None:
         for i in range(len(stamps)):
             base = {"sequence": name, "frame": i, "time_s": round(float(t_s[i]), 3),
                     "label": labels[i]}
-            sched.append({**base, **{k: float(v[i]) for k, v in s.values.items()}})
+            for n, v in s.values.items():
+                sched[n].append({**base, "adaptive": float(v[i]), "fixed": ev.fixed_params[n],
+                                 "baseline": ev.baseline_params[n]})
             rte.append({**base, **{k: _num(e[i]) for k, e in errs.items()}})
         xy = {"ground_truth": gt[:, :3, 3],
               **{k: figures.aligned_positions(gt, ev.score(k, name).trajectory.T_world_lidar)
@@ -106,7 +111,8 @@ def write_plot_data(ev: Evaluation, plots_dir: Path) -> None:
         for k, pos in xy.items():
             traj[k] += [{"sequence": name, "frame": i, "x_m": round(float(p[0]), 4),
                          "y_m": round(float(p[1]), 4)} for i, p in enumerate(pos)]
-    atomic_write_text(plots_dir / "schedule.csv", _csv(sched))
+    for n, rows in sched.items():
+        atomic_write_text(plots_dir / "schedule" / f"{n}.csv", _csv(rows))
     atomic_write_text(plots_dir / "rte_frames.csv", _csv(rte))
     for k, rows in traj.items():
         atomic_write_text(plots_dir / f"trajectory_{k}.csv", _csv(rows))
@@ -117,17 +123,18 @@ def write_plot_data(ev: Evaluation, plots_dir: Path) -> None:
 
 def write_figures(ev: Evaluation, trial_rows: list[dict[str, Any]],
                   report_dir: Path) -> dict[str, list[Path]]:
-    """Every PNG of the report: kind -> files (relative to ``report_dir``)."""
+    """Every PNG of the report, in ``report_dir``/figures: kind -> files (relative to
+    ``report_dir``)."""
     out: dict[str, list[Path]] = {"schedule": [], "rte": [], "trajectory": [], "trials": []}
+    fig_dir = report_dir / "figures"
     for name in ev.sequences:
-        out["schedule"].append(
-            figures.schedule_figure(ev, name, report_dir / f"schedule_{name}.png"))
-        out["rte"].append(figures.rte_figure(ev, name, report_dir / f"rte_{name}.png"))
+        out["schedule"].append(figures.schedule_figure(ev, name, fig_dir / f"schedule_{name}.png"))
+        out["rte"].append(figures.rte_figure(ev, name, fig_dir / f"rte_{name}.png"))
         out["trajectory"].append(
-            figures.trajectory_figure(ev, name, report_dir / f"trajectory_{name}.png"))
+            figures.trajectory_figure(ev, name, fig_dir / f"trajectory_{name}.png"))
     names = list(ev.baseline_params)
     if trial_rows:
-        out["trials"].append(figures.trials_figure(trial_rows, names, report_dir / "trials.png"))
+        out["trials"].append(figures.trials_figure(trial_rows, names, fig_dir / "trials.png"))
     return {k: [p.relative_to(report_dir) for p in v] for k, v in out.items()}
 
 
