@@ -18,7 +18,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests" / "odometry"))
 
-from common import Row, data_root  # noqa: E402
+from common import Row, best_of, data_root  # noqa: E402
 
 ADAPTERS = ("ndt", "gicp", "kiss_icp")
 
@@ -40,12 +40,8 @@ def _overhead_pct(adapter, path: Path, scans) -> float:
     from pipeline.odometry.base import Schedule
 
     sched = Schedule.constant(adapter.space.defaults(), len(scans))
-    t0 = time.perf_counter()
-    adapter.run(scans, sched)
-    bare = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    run_sequence(adapter, path, adapter.space.defaults())
-    full = time.perf_counter() - t0
+    bare = best_of(lambda: adapter.run(scans, sched), repeat=3)
+    full = best_of(lambda: run_sequence(adapter, path, adapter.space.defaults()), repeat=3)
     return 100.0 * (full - bare) / bare
 
 

@@ -1,40 +1,37 @@
 """SMBO tuner figures: trials/s with 1 and 2 workers, and the pipeline's overhead around a trial.
 
-Sequence: 60 ray-cast HDL-32E frames (~50k points each, 0.8 m a frame) of the test yard
-(tests/odometry/odometry_data.py), adapter ``ndt`` at its baseline.
+Sequence: a simulated street world (``pipeline.sim``), 300 HDL-32E frames of ~54k points, the
+length of a toy training sequence; adapter ``ndt`` at its baseline.
 - bare odometry: ``adapter.run`` over scans already in memory, after ``adapter.warm`` (which a
   worker runs once per study; its cost is its own row) (best of 3);
-- one trial: ``run_trial`` as the executor runs it (forkserver child with the time limit,
-  read MCAP + run + check + RTE + write Parquet, result back through a pipe; best of 3, warm);
+- one trial: ``run_trial`` as a process-pool worker runs it (scans decoded once, trial forked
+  with the time limit: run + check + RTE + write Parquet, result back through a pipe; best of
+  3, warm);
   overhead = (trial - bare) / bare;
 - trials/s: ``run_trials`` of 8 trials on an already started process pool of W workers.
 """
 
 from __future__ import annotations
 
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 from common import Row, best_of
 
-ROOT = Path(__file__).resolve().parents[1]
-N_FRAMES = 60
+N_FRAMES = 300
 
 
 def run() -> list[Row]:
-    sys.path.insert(0, str(ROOT / "tests" / "odometry"))
-    from odometry_data import write_synthetic_sequence
-
     from pipeline.odometry.base import Schedule
     from pipeline.odometry.registry import get_adapter
     from pipeline.sequence import SequenceReader
+    from pipeline.sim.simulate import SimSpec, simulate_sequence
     from pipeline.tuning.job import TrialJob, run_trial
     from pipeline.tuning.smbo import TrialsSection, open_executor, run_trials
 
     with tempfile.TemporaryDirectory() as tmp:
-        seq = write_synthetic_sequence(Path(tmp) / "yard.mcap", n_frames=N_FRAMES, step_m=0.8)
+        seq = simulate_sequence(SimSpec("street", 1, N_FRAMES), Path(tmp) / "street.mcap").path
         adapter = get_adapter("ndt")
         params = adapter.space.defaults()
         with SequenceReader(seq) as r:
@@ -50,7 +47,7 @@ def run() -> list[Row]:
             return TrialJob(
                 adapter="ndt",
                 algorithm="ndt",
-                sequences=(("yard", str(seq)),),
+                sequences=(("street", str(seq)),),
                 trial=0,
                 seed=0,
                 params=params,
@@ -80,7 +77,7 @@ def run() -> list[Row]:
 
     fps = N_FRAMES / bare_s
     return [
-        Row("ndt bare odometry, 60 HDL-32E frames", bare_s, "s", f"{fps:.0f} frames/s"),
+        Row(f"ndt bare odometry, {N_FRAMES} HDL-32E frames", bare_s, "s", f"{fps:.0f} frames/s"),
         Row("ndt warm-up (source clouds), once per worker and study", warm_s, "s",
             f"{100 * warm_s / bare_s:.0f} % of one bare run"),
         Row(
@@ -97,9 +94,9 @@ def run() -> list[Row]:
             f"trial {inproc_s:.3f} s",
             "<= 5 %",
         ),
-        Row("ndt trials/s, 1 worker (60 frames a trial)", rates[1], "trials/s"),
+        Row(f"ndt trials/s, 1 worker ({N_FRAMES} frames a trial)", rates[1], "trials/s"),
         Row(
-            "ndt trials/s, 2 workers (60 frames a trial)",
+            f"ndt trials/s, 2 workers ({N_FRAMES} frames a trial)",
             rates[2],
             "trials/s",
             f"{rates[2] / rates[1]:.2f}x of 1 worker (2 shared cores)",

@@ -1,12 +1,17 @@
-"""Atomic writes: a failure never leaves a half-written file behind."""
+"""Atomic writes (a failure never leaves a half-written file behind) and read-ahead."""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import queue
 import tempfile
-from collections.abc import Iterator
+import threading
+from collections.abc import Generator, Iterable, Iterator
 from pathlib import Path
+from typing import Any, TypeVar
+
+T = TypeVar("T")
 
 
 @contextlib.contextmanager
@@ -38,3 +43,45 @@ def atomic_write_bytes(final: str | os.PathLike[str], data: bytes) -> None:
     """Write ``data`` to ``final`` atomically."""
     with atomic_path(final) as tmp:
         tmp.write_bytes(data)
+
+
+def prefetch(items: Iterable[T], depth: int = 4) -> Generator[T, None, None]:
+    """``items``, produced by a background thread up to ``depth`` ahead of the consumer.
+
+    Reading and decoding a sequence (file reads, zstd, copies: all release the GIL) then
+    overlap the odometry that consumes it. An exception in the producer is raised in the
+    consumer at the same point; a consumer that stops early stops the producer.
+    """
+    buffer: queue.Queue[tuple[str, Any]] = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def put(message: tuple[str, Any]) -> bool:
+        """Queue ``message`` unless the consumer has stopped; False when it has."""
+        while not stop.is_set():
+            with contextlib.suppress(queue.Full):
+                buffer.put(message, timeout=0.05)
+                return True
+        return False
+
+    def produce() -> None:
+        try:
+            for item in items:
+                if not put(("item", item)):
+                    return
+            put(("end", None))
+        except BaseException as exc:  # handed to the consumer
+            put(("error", exc))
+
+    thread = threading.Thread(target=produce, name="prefetch", daemon=True)
+    thread.start()
+    try:
+        while True:
+            kind, value = buffer.get()
+            if kind == "end":
+                return
+            if kind == "error":
+                raise value
+            yield value
+    finally:
+        stop.set()
+        thread.join()

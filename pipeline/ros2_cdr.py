@@ -199,9 +199,11 @@ def pointcloud2_to_xyzi(
     if point_step <= 0 or row_step < width * point_step or buf.size < needed:
         raise InputError(f"{what}: PointCloud2 data is {buf.size} bytes, expected {needed} "
                          f"({height}x{width} points, point_step {point_step}, row_step {row_step})")
+    inten = next((k for k in ("intensity", "reflectance", "i") if k in by_name), None)
+    if _packed_xyzi_float32(by_name, inten, is_bigendian, point_step, row_step, width):
+        return np.frombuffer(buf, "<f4", count=4 * n).reshape(n, 4).copy()  # the common case
     out = np.zeros((n, 4), dtype=np.float32)
     names = [("x", 0), ("y", 1), ("z", 2)]
-    inten = next((k for k in ("intensity", "reflectance", "i") if k in by_name), None)
     if inten is not None:
         names.append((inten, 3))
     padded = np.zeros(row_step * height, dtype=np.uint8)
@@ -219,6 +221,16 @@ def pointcloud2_to_xyzi(
         raw = rows[:, f.offset : f.offset + dt.itemsize].copy().view(dt.newbyteorder(order))
         out[:, col] = raw[:, 0].astype(np.float32)
     return out
+
+
+def _packed_xyzi_float32(by_name: dict[str, PointField], inten: str | None, is_bigendian: bool,
+                         point_step: int, row_step: int, width: int) -> bool:
+    """True for the layout adaptune writes (and most drivers): little-endian float32 x, y, z,
+    intensity at offsets 0, 4, 8, 12, 16 bytes a point, rows without padding."""
+    if is_bigendian or inten is None or point_step != 16 or row_step != 16 * width:
+        return False
+    return all(by_name[name].offset == 4 * k and by_name[name].datatype == 7
+               and by_name[name].count == 1 for k, name in enumerate(("x", "y", "z", inten)))
 
 
 def encode_pose_stamped(

@@ -164,3 +164,48 @@ def test_not_an_mcap(tmp_path: Path) -> None:
     (tmp_path / "x.mcap").write_text("hello")
     with pytest.raises(InputError, match=r"x.mcap"):
         SequenceReader(tmp_path / "x.mcap")
+
+
+def test_packed_float32_fast_path_equals_the_general_decoder(rng: np.random.Generator) -> None:
+    """The packed x, y, z, intensity float32 layout (what adaptune writes) is read in one copy;
+    the same points with a padded point (general path) or a float64 intensity decode equal."""
+    from pipeline.ros2_cdr import PointField, pointcloud2_to_xyzi
+
+    pts = rng.normal(0, 10, (300, 4)).astype(np.float32)
+    fields = [PointField(n, 4 * k, 7) for k, n in enumerate(("x", "y", "z", "intensity"))]
+    packed = pointcloud2_to_xyzi(1, 300, fields, False, 16, 16 * 300, pts.tobytes(), "packed")
+    assert packed.flags.writeable and packed.flags.c_contiguous
+    np.testing.assert_array_equal(packed, pts)
+    padded = np.zeros((300, 20), np.uint8)
+    padded[:, :16] = pts.view(np.uint8).reshape(300, 16)
+    general = pointcloud2_to_xyzi(1, 300, fields, False, 20, 20 * 300, padded.tobytes(), "pad")
+    np.testing.assert_array_equal(general, pts)
+    wide = np.zeros((300, 20), np.uint8)
+    wide[:, :12] = pts[:, :3].copy().view(np.uint8).reshape(300, 12)
+    wide[:, 12:] = pts[:, 3].astype(np.float64).view(np.uint8).reshape(300, 8)
+    f64 = [*fields[:3], PointField("intensity", 12, 8)]
+    np.testing.assert_array_equal(
+        pointcloud2_to_xyzi(1, 300, f64, False, 20, 20 * 300, wide.tobytes(), "f64"), pts)
+
+
+def test_prefetch_yields_in_order_and_hands_over_errors() -> None:
+    import threading
+
+    from pipeline.io_utils import prefetch
+
+    assert list(prefetch(range(100), depth=1)) == list(range(100))
+    producer = threading.current_thread()
+
+    def failing():
+        yield threading.current_thread() is not producer  # produced in another thread
+        raise InputError("frame 1: broken")
+
+    it = prefetch(failing(), depth=1)
+    assert next(it) is True
+    with pytest.raises(InputError, match="frame 1: broken"):
+        next(it)
+    before = threading.active_count()
+    early = prefetch(iter(range(10**9)), depth=1)  # the consumer stops: the producer stops too
+    assert next(early) == 0
+    early.close()
+    assert threading.active_count() == before

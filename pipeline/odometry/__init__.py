@@ -9,6 +9,7 @@ errors (RTE) or after aligning the first pose.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
@@ -16,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import OdometryError, TrialTimeout
+from pipeline.io_utils import prefetch
 from pipeline.odometry.base import Adapter, Schedule
 from pipeline.odometry.registry import adapter_names, get_adapter
 from pipeline.sequence import Scan, SequenceReader
@@ -41,16 +43,17 @@ def run_sequence(adapter: Adapter, sequence_path: str | Path,
         if getattr(adapter, "accepts_time_limit", False):
             traj = adapter.run(reader, schedule, time_limit_s=time_limit_s)  # type: ignore[call-arg]
         else:
-            scans: Iterable[Scan] = reader
-            if time_limit_s is not None:
-                scans = _with_deadline(reader, time_limit_s, adapter.name)
-            try:
-                traj = adapter.run(scans, schedule)
-            except (OdometryError, TrialTimeout):
-                raise
-            except (ArithmeticError, ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
-                raise OdometryError(f"{adapter.name} on {path}: failed "
-                                    f"({type(exc).__name__}: {exc})") from exc
+            with contextlib.closing(prefetch(reader)) as ahead:  # decoding overlaps odometry
+                scans: Iterable[Scan] = ahead
+                if time_limit_s is not None:
+                    scans = _with_deadline(ahead, time_limit_s, adapter.name)
+                try:
+                    traj = adapter.run(scans, schedule)
+                except (OdometryError, TrialTimeout):
+                    raise
+                except (ArithmeticError, ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
+                    raise OdometryError(f"{adapter.name} on {path}: failed "
+                                        f"({type(exc).__name__}: {exc})") from exc
         check_trajectory(traj, reader.stamps_ns, f"{adapter.name} on {path}")
     return traj
 

@@ -315,8 +315,11 @@ class NdtAdapter:
 
     def warm(self, scans: list[Scan]) -> None:
         """Downsample the source cloud of every scan once (it depends on no tuned parameter);
-        later runs over these Scan objects take it from the cache."""
+        later runs over these Scan objects take it from the cache. A two-frame run loads the
+        compiled kernel into this process, so that trial processes forked from it start ready."""
         SOURCES.fill([scan.xyz for scan in scans], self.options.source_voxel_m)
+        if len(scans) >= 2:
+            self.run(scans[:2], Schedule.constant(SPACE.defaults(), 2))
 
 
 _: type[Adapter] = NdtAdapter

@@ -8,8 +8,9 @@ sees the same history) and whose ``error`` is one line of text.
 
 Time limit: with ``time_limit_s`` set (per sequence; a joint trial gets the sum), the trial runs
 in a child process and is SIGKILLed when it outlives the limit, so even a hang inside C code
-ends. The child is forked from the worker, which has decoded the sequence once (the scan
-cache), or from a ``forkserver`` in threaded (Dask) workers; see ``_context``.
+ends. The child is a ``TrialServer`` forked from the worker once it has decoded the sequences
+(the scan cache), running the study's trials one after another, or a ``forkserver`` process per
+trial in Dask workers; see ``_run_in_child``.
 With ``time_limit_s=None`` the trial runs in the calling process (with the scan cache).
 The child writes the trajectory Parquet files (atomically) and sends back a small result.
 """
@@ -21,7 +22,7 @@ import json
 import logging
 import multiprocessing
 import os
-import threading
+import sys
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -248,23 +249,118 @@ def _warm_adapter(job: TrialJob, paths: list[str]) -> None:
 # -- the child process ---------------------------------------------------------------------
 
 _PRELOADED: set[str] = set()
+_SERVER: list[TrialServer] = []
+"""This worker's trial server (at most one), for the scans cached now."""
 
 
-def _context(
-    job: TrialJob,
-) -> multiprocessing.context.ForkContext | multiprocessing.context.ForkServerContext:
-    """How trial children start.
+def _run_in_child(job: TrialJob, limit_s: float) -> dict[str, Any]:
+    """``evaluate_trial(job)`` in a child process, killed after ``limit_s`` seconds.
 
-    From a single-threaded worker (process pool): ``fork``, after decoding the scans once
-    (``warm_scan_cache``); the worker never runs odometry itself, so no OpenMP or other thread
-    pool state is forked. From a threaded worker (Dask): ``forkserver`` (preloaded modules;
-    each trial reads its MCAP).
+    A process-pool worker (any process that is not a Dask worker) decodes the scans once
+    (``warm_scan_cache``) and forks a ``TrialServer`` that runs the study's trials one after
+    another. A Dask worker, whose task threads run beside the one that would fork, starts every
+    trial from a ``forkserver`` instead (preloaded modules; each trial reads its MCAP).
+    (A helper thread such as tqdm's monitor does not make a process a Dask worker.)
     """
-    if threading.active_count() == 1:
+    if multiprocessing.current_process().daemon:
+        raise OdometryError("cannot enforce the time limit in a daemonic worker process; "
+                            "start Dask workers with DASK_DISTRIBUTED__WORKER__DAEMON=False")
+    if _in_dask_worker():
+        kind, payload = _run_in_forkserver(job, limit_s)
+    else:
         with contextlib.suppress(Exception):  # unreadable input: the child reports it
             warm_scan_cache(job)
-        return multiprocessing.get_context("fork")
-    _SCANS.clear()
+        kind, payload = _trial_server(job).run(job, limit_s)
+    if kind != "ok":
+        raise OdometryError(payload)
+    return payload  # type: ignore[no-any-return]
+
+
+class TrialServer:
+    """A child forked from this worker after the scan cache is filled: it runs trials one after
+    another, so fork, page faults and module state are paid once per study, not per trial.
+    A trial that outlives its limit or kills the process takes the server down with it; the
+    next trial forks a new one. The worker itself never runs odometry, so no OpenMP or other
+    thread-pool state is forked."""
+
+    def __init__(self, key: tuple[Any, ...]) -> None:
+        ctx = multiprocessing.get_context("fork")
+        self.key = key
+        self.conn, child_end = ctx.Pipe(duplex=True)
+        self.proc = ctx.Process(target=_serve, args=(child_end, self.conn), name="trials",
+                                daemon=True)
+        self.proc.start()
+        child_end.close()
+
+    def run(self, job: TrialJob, limit_s: float) -> tuple[str, Any]:
+        """("ok", result) or ("error", text) of ``job``; TrialTimeout or OdometryError when the
+        process had to be killed or died."""
+        self.conn.send(job)
+        if not self.conn.poll(limit_s):
+            self.stop()
+            raise TrialTimeout(f"time limit of {limit_s:g} s exceeded (trial process killed)")
+        try:
+            return self.conn.recv()  # type: ignore[no-any-return]
+        except EOFError:
+            self.proc.join(5.0)
+            code = self.proc.exitcode
+            self.stop()
+            raise OdometryError(f"trial process died (exit code {code})") from None
+
+    def alive(self) -> bool:
+        return self.proc.is_alive()
+
+    def stop(self) -> None:
+        """Kill the process (if still running) and forget it."""
+        self.conn.close()
+        if self.proc.is_alive():
+            self.proc.kill()
+        self.proc.join()
+        if self in _SERVER:
+            _SERVER.remove(self)
+
+
+def _trial_server(job: TrialJob) -> TrialServer:
+    """This worker's server for ``job``'s sequences and adapter, (re)started when needed."""
+    key = (tuple(p for _, p in job.sequences), job.adapter,
+           json.dumps(job.adapter_options, sort_keys=True, default=str))
+    for server in list(_SERVER):
+        if server.key == key and server.alive():
+            return server
+        server.stop()
+    _SERVER.append(TrialServer(key))
+    return _SERVER[0]
+
+
+def _serve(conn: Any, parent_end: Any) -> None:
+    """The trial server's loop: receive a TrialJob, send ("ok", out) or ("error", text)."""
+    parent_end.close()
+    while True:
+        try:
+            job = conn.recv()
+        except EOFError:  # the worker is gone
+            return
+        try:
+            message: tuple[str, Any] = ("ok", evaluate_trial(job))
+        except BaseException as exc:
+            message = ("error", _one_line(exc))
+        conn.send(message)
+
+
+def _in_dask_worker() -> bool:
+    """True when this code runs in a task of a Dask distributed worker."""
+    distributed = sys.modules.get("distributed")
+    if distributed is None:
+        return False
+    try:
+        distributed.get_worker()
+    except ValueError:
+        return False
+    return True
+
+
+def _forkserver(job: TrialJob) -> multiprocessing.context.ForkServerContext:
+    """The forkserver context, its preload list set once (the adapter's module among them)."""
     ctx = multiprocessing.get_context("forkserver")
     if not _PRELOADED:
         modules = ["pipeline.tuning.job", "pipeline.evaluation.rte", "pipeline.odometry"]
@@ -276,7 +372,7 @@ def _context(
 
 
 def _child_main(job: TrialJob, conn: Any) -> None:
-    """Entry point of the trial process: evaluate and send ("ok", out) or ("error", text)."""
+    """Entry point of a one-trial process: evaluate and send ("ok", out) or ("error", text)."""
     try:
         message: tuple[str, Any] = ("ok", evaluate_trial(job))
     except BaseException as exc:
@@ -285,12 +381,10 @@ def _child_main(job: TrialJob, conn: Any) -> None:
     conn.close()
 
 
-def _run_in_child(job: TrialJob, limit_s: float) -> dict[str, Any]:
-    """``evaluate_trial(job)`` in a child process, killed after ``limit_s`` seconds."""
-    if multiprocessing.current_process().daemon:
-        raise OdometryError("cannot enforce the time limit in a daemonic worker process; "
-                            "start Dask workers with DASK_DISTRIBUTED__WORKER__DAEMON=False")
-    ctx = _context(job)
+def _run_in_forkserver(job: TrialJob, limit_s: float) -> tuple[str, Any]:
+    """One trial in a process started by the forkserver, killed after ``limit_s`` seconds."""
+    _SCANS.clear()
+    ctx = _forkserver(job)
     recv, send = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child_main, args=(job, send), name=f"trial-{job.trial}")
     proc.start()
@@ -300,7 +394,7 @@ def _run_in_child(job: TrialJob, limit_s: float) -> dict[str, Any]:
             proc.kill()
             raise TrialTimeout(f"time limit of {limit_s:g} s exceeded (trial process killed)")
         try:
-            kind, payload = recv.recv()
+            return recv.recv()  # type: ignore[no-any-return]
         except EOFError:
             proc.join(5.0)
             raise OdometryError(f"trial process died (exit code {proc.exitcode})") from None
@@ -310,9 +404,6 @@ def _run_in_child(job: TrialJob, limit_s: float) -> dict[str, Any]:
         if proc.is_alive():
             proc.kill()
             proc.join()
-    if kind != "ok":
-        raise OdometryError(payload)
-    return payload  # type: ignore[no-any-return]
 
 
 def _one_line(exc: BaseException) -> str:

@@ -6,14 +6,15 @@ frame-to-frame translation is scaled by ``1 + 0.1 (bias - 0.2) + 0.05 ln(gain)``
 turns by ``0.002 (window - 4)`` rad a frame, so the RTE is a real function of the parameters
 (smallest near bias=0.2, gain=1, window=4). It implements the Adapter protocol honestly on
 sequences that carry ground truth.
-``failing``: the same, but when ``bias > threshold`` it fails in one ``mode``: raise, hang
-(blocks every signal, then sleeps: only a kill ends it), nan, lose (drops the last frame),
-jump (a 1 km step).
+``failing``: the same, but when ``bias > threshold`` it fails in one ``mode``: raise, exit (the
+process ends at once), hang (blocks every signal, then sleeps: only a kill ends it), nan, lose
+(drops the last frame), jump (a 1 km step).
 """
 
 from __future__ import annotations
 
 import math
+import os
 import signal
 import time
 from collections.abc import Iterable
@@ -78,6 +79,8 @@ class FailingAdapter(DriftAdapter):
             return super().run(scans, schedule)
         if self.mode == "raise":
             raise RuntimeError("odometry diverged on purpose")
+        if self.mode == "exit":  # the process dies without a word (as a segfault would)
+            os._exit(3)
         if self.mode == "hang":
             signal.pthread_sigmask(signal.SIG_BLOCK, set(signal.valid_signals()) - {signal.SIGKILL})
             while True:

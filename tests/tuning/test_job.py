@@ -1,0 +1,53 @@
+"""One trial with a time limit: the worker's trial server (reuse, kill on timeout, death)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pipeline.tuning import job as trial_job
+from pipeline.tuning.job import TrialJob, run_trial
+
+
+def make_job(sequence: Path, out: Path, trial: int, fails: str | None = None,
+             bias: float = 0.1, limit_s: float = 10.0) -> TrialJob:
+    """A drift trial, or (``fails`` = a mode) a trial of the failing adapter."""
+    return TrialJob(adapter=f"tuning_adapters:{'failing' if fails else 'drift'}",
+                    algorithm="drift", sequences=(("seq_a", str(sequence)),), trial=trial,
+                    seed=trial, params={"bias": bias, "gain": 1.0, "window": 3.0},
+                    out_dir=str(out), length_m=5.0, penalty_pct=100.0, jump_limit_m=5.0,
+                    time_limit_s=limit_s, adapter_options={"mode": fails} if fails else {})
+
+
+def server_pid() -> int:
+    assert len(trial_job._SERVER) == 1 and trial_job._SERVER[0].alive()
+    return trial_job._SERVER[0].proc.pid
+
+
+def test_trials_of_a_study_share_one_server_process(sequences: list[Path],
+                                                    tmp_path: Path) -> None:
+    first = run_trial(make_job(sequences[0], tmp_path, 0))
+    pid = server_pid()
+    second = run_trial(make_job(sequences[0], tmp_path, 1, bias=0.3))
+    assert first.status == second.status == "ok"
+    assert server_pid() == pid
+    assert second.objective != first.objective
+    other = run_trial(make_job(sequences[1], tmp_path, 2))  # other scans: a new server
+    assert other.status == "ok" and server_pid() != pid
+
+
+def test_a_hung_trial_kills_the_server_and_the_next_trial_gets_a_new_one(
+        sequences: list[Path], tmp_path: Path) -> None:
+    run_trial(make_job(sequences[0], tmp_path, 0))
+    pid = server_pid()
+    hung = run_trial(make_job(sequences[0], tmp_path, 1, "hang", bias=0.5, limit_s=1.0))
+    assert hung.status == "failed" and "time limit of 1 s exceeded" in hung.error
+    assert not trial_job._SERVER
+    after = run_trial(make_job(sequences[0], tmp_path, 2))
+    assert after.status == "ok" and server_pid() != pid
+
+
+def test_a_trial_that_kills_its_process_is_a_failed_trial(sequences: list[Path],
+                                                         tmp_path: Path) -> None:
+    died = run_trial(make_job(sequences[0], tmp_path, 0, "exit", bias=0.5))
+    assert died.status == "failed" and died.error == "trial process died (exit code 3)"
+    assert run_trial(make_job(sequences[0], tmp_path, 1)).status == "ok"
