@@ -304,7 +304,7 @@ class Neighbourhood:
         pts[:, :-1] = model.rows_x[self.rows]
         pts[:, -1] = np.repeat(np.sqrt(d2[taken]), lens)
         self.t = model.rows_t[self.rows]
-        self.tree = cKDTree(pts, leafsize=16, balanced_tree=False, compact_nodes=False)
+        self.tree = cKDTree(pts, leafsize=16)  # balanced, compact: queries dominate
         self.x_scale = model.x_scale
 
     def predict(self, U: NDArray[np.float64]) -> Prediction:

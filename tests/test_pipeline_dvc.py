@@ -129,8 +129,8 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
     assert "cross_validation" not in metrics and "mae" in json.loads(
         (root / "metrics/surrogate.json").read_text())
     report = (root / "report/report.md").read_text()
-    for png in ("schedule_composite_0.png", "rte_composite_0.png", "trajectory_composite_0.png",
-                "trials.png"):
+    for png in ("world_composite_0.png", "schedule_composite_0.png", "rte_composite_0.png",
+                "trajectory_composite_0.png", "trials.png"):
         assert f"(figures/{png})" in report
         assert (root / "report" / "figures" / png).read_bytes()[:4] == b"\x89PNG"
     for csv in ("schedule/resolution", "schedule/keyframe_interval", "rte_frames",
@@ -157,7 +157,7 @@ def test_metrics_and_plots_commands_read_the_outputs(repro: tuple[Path, str]) ->
     for shown in ("plots/schedule/resolution.csv", "plots/schedule/keyframe_interval.csv",
                   "Per-start-frame RTE [%]", "Trajectories (top view)"):
         assert shown in html, shown
-    assert len(list((root / "dvc_plots" / "static").glob("*.png"))) == 4
+    assert len(list((root / "dvc_plots" / "static").glob("*.png"))) == 5
 
 
 def test_pipeline_runs_on_a_kitti_root(kitti_root: Path,

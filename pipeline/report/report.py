@@ -123,11 +123,18 @@ def write_plot_data(ev: Evaluation, plots_dir: Path) -> None:
 
 def write_figures(ev: Evaluation, trial_rows: list[dict[str, Any]],
                   report_dir: Path) -> dict[str, list[Path]]:
+    from pipeline.sim.plot import plot_world
+    from pipeline.sim.simulate import spec_of
+
     """Every PNG of the report, in ``report_dir``/figures: kind -> files (relative to
     ``report_dir``)."""
-    out: dict[str, list[Path]] = {"schedule": [], "rte": [], "trajectory": [], "trials": []}
+    out: dict[str, list[Path]] = {"world": [], "schedule": [], "rte": [], "trajectory": [],
+                                  "trials": []}
     fig_dir = report_dir / "figures"
     for name in ev.sequences:
+        spec = spec_of(ev.infos[name])
+        if spec is not None:  # a simulated world: its top view, trajectory and one scan
+            out["world"].append(plot_world(spec, fig_dir / f"world_{name}.png"))
         out["schedule"].append(figures.schedule_figure(ev, name, fig_dir / f"schedule_{name}.png"))
         out["rte"].append(figures.rte_figure(ev, name, fig_dir / f"rte_{name}.png"))
         out["trajectory"].append(
@@ -192,7 +199,8 @@ def report_markdown(ev: Evaluation, m: Mapping[str, Any], pngs: Mapping[str, lis
     for study, t in m["trials"].items():
         lines.append(f"| {study} | {t['studies']} | {t['trials']} | {t['failed']} "
                      f"| {t['wall_time_s']:.0f} |")
-    captions = {"schedule": "Parameters chosen online (environment shaded; cf. paper Fig. 5)",
+    captions = {"world": "The validation world from above: trajectory by environment, one scan",
+                "schedule": "Parameters chosen online (environment shaded; cf. paper Fig. 5)",
                 "rte": "Per-start-frame RTE", "trajectory": "Trajectories (top view)",
                 "trials": "SMBO samples per training sequence (cf. paper Fig. 4 and 6)"}
     lines += ["", "## Figures", ""]

@@ -142,6 +142,20 @@ def _extra(spec: SimSpec, world: World) -> dict[str, str]:
     }
 
 
+def spec_of(info: SequenceInfo) -> SimSpec | None:
+    """The SimSpec a simulated sequence was made from (its metadata), or None for other data
+    or a street driven along a KITTI trajectory (whose pose file is not recorded)."""
+    extra = info.extra
+    if not info.source.startswith("simulation:") or "world" not in extra:
+        return None
+    if info.source.startswith("simulation:kitti-trajectory"):
+        return None
+    segments = tuple(s for s in extra.get("segments", "").split(",") if s) or DEFAULT_SEGMENTS
+    return SimSpec(extra["world"], int(extra["seed"]), info.frame_count,
+                   extra.get("sensor_model", "hdl32"), segments, None,
+                   float(extra["range_noise_m"]), float(extra["dropout"]))
+
+
 def world_points(scan: Scan) -> NDArray[np.float64]:
     """(N, 3) points of ``scan`` in the world frame (by its ground-truth pose)."""
     assert scan.T_world_lidar is not None

@@ -225,3 +225,14 @@ def test_cli_plot_world(tmp_path: Path) -> None:
     )
     assert r.exit_code == 0, r.output
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_spec_of_a_simulated_sequence_rebuilds_its_world(tmp_path: Path) -> None:
+    from pipeline.sequence import SequenceInfo
+    from pipeline.sim.simulate import spec_of
+
+    spec = SimSpec("composite", 5, 40, "vlp16", ("street", "cave"), None, 0.03, 0.02)
+    simulate_sequence(spec, tmp_path / "c.mcap")
+    with SequenceReader(tmp_path / "c.mcap") as reader:
+        assert spec_of(reader.info) == spec
+    assert spec_of(SequenceInfo(name="04", source="kitti:04", frame_count=10)) is None
