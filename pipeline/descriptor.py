@@ -40,11 +40,18 @@ Choices the paper (Koide et al., IROS 2021) leaves open, made here:
 Speed: one pass of integer arithmetic and ``np.bincount`` (no sort): a dense voxel index over
 the bounding box of the cropped scan, first moments and second moments per voxel by weighted
 bincounts of coordinates relative to the voxel corner (well conditioned in float64), closed-
-form eigenvalues of symmetric 3x3 matrices, eigenvectors by cross products. numpy only.
+form eigenvalues of symmetric 3x3 matrices, eigenvectors by cross products. The voxel moments
+have two implementations with the same result: a numba kernel (three passes over the points,
+no per-point temporaries; used when numba is installed, compiled on first use) and the numpy
+reference ``voxel_moments`` (used without numba, or for a bounding box of more than
+``_DENSE_MAX_CELLS`` cells). The numpy path allocates a dozen (N,) temporaries per scan, and
+their page faults make it 2-4 times slower and noisier on a virtual machine.
 """
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -118,8 +125,7 @@ def describe(
 
     points_lidar: (N, 3) or (N, 4) points in the sensor frame [m] (a 4th column is ignored).
     """
-    xyz = _crop(points_lidar, config.max_range_m)
-    counts, mean, cov = voxel_moments(xyz, config.voxel_size_m, config.min_points)
+    counts, mean, cov = _moments(points_lidar, config)
     hist = np.zeros((config.range_bins, N_CLASSES, N_SUB), np.float64)
     if len(counts):
         cls, sub = classify(cov, config.t_e)
@@ -133,6 +139,33 @@ def describe(
     return np.asarray(hist, np.float32).reshape(-1)
 
 
+def _moments(
+    points_lidar: NDArray[np.floating], config: DescriptorConfig
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """``voxel_moments`` of the cropped scan, by the numba kernel where it is available."""
+    kernel = _moments_kernel()
+    if kernel is not None:
+        pts = _check_points(points_lidar)
+        ok, counts, mean, cov = kernel(
+            np.ascontiguousarray(pts, np.float32),
+            config.voxel_size_m,
+            config.max_range_m,
+            config.min_points,
+            _DENSE_MAX_CELLS,
+        )
+        if ok:
+            return counts, mean, cov
+    xyz = _crop(points_lidar, config.max_range_m)
+    return voxel_moments(xyz, config.voxel_size_m, config.min_points)
+
+
+def _check_points(points_lidar: NDArray[np.floating]) -> NDArray[np.floating]:
+    pts = np.asarray(points_lidar)
+    if pts.ndim != 2 or pts.shape[1] < 3:
+        raise ValueError(f"points must be (N, 3) or (N, 4), got {pts.shape}")
+    return pts
+
+
 def _crop(
     points_lidar: NDArray[np.floating], max_range_m: float
 ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
@@ -141,9 +174,7 @@ def _crop(
     The kept points are interleaved (stride ``_STRIDE``): neighbouring scan points fall into the
     same voxel, and ``np.bincount`` runs about twice as fast when consecutive points do not.
     """
-    pts = np.asarray(points_lidar)
-    if pts.ndim != 2 or pts.shape[1] < 3:
-        raise ValueError(f"points must be (N, 3) or (N, 4), got {pts.shape}")
+    pts = _check_points(points_lidar)
     if pts.dtype != np.float32:
         pts = pts.astype(np.float32)
     x, y, z = pts[:, 0], pts[:, 1], pts[:, 2]
@@ -218,6 +249,23 @@ def voxel_moments(
     cov[:, 1, 2] = cov[:, 2, 1] = e[4] - s[1] * s[2]
     cov[:, 2, 2] = e[5] - s[2] * s[2]
     return n.astype(np.int64), np.stack(s, axis=1), cov
+
+
+Moments = tuple[bool, NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]
+
+
+@functools.cache
+def _moments_kernel() -> Callable[..., Moments] | None:
+    """``pipeline.descriptor_kernel.voxel_moments_dense`` (numba), or None without numba.
+
+    Imported on first use: numba takes a second to import, and ``adaptune --help`` must not.
+    """
+    try:
+        from pipeline.descriptor_kernel import voxel_moments_dense
+    except ImportError:  # pragma: no cover - numba is a dependency; the numpy path stays exact
+        return None
+    kernel: Callable[..., Moments] = voxel_moments_dense
+    return kernel
 
 
 def sym3_eigvals(cov: NDArray[np.float64]) -> NDArray[np.float64]:
