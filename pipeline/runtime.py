@@ -2,7 +2,8 @@
 
 Imports numpy, scipy, the standard library and ``pipeline.descriptor`` only (a test checks that
 importing this module pulls in none of sklearn, duckdb, hyperopt, open3d, dvc, pyarrow, click),
-so a robot can carry ``model/`` and this file alone.
+so a robot can carry ``model/`` and this file alone (the descriptor uses numba when it is
+installed, numpy otherwise).
 
 Selection (x_t = argmin_x S(E_t, x), S = the kNN mean of k training targets):
 
@@ -15,6 +16,8 @@ Selection (x_t = argmin_x S(E_t, x), S = the kNN mean of k training targets):
    nearest rows for every candidate at once. A candidate is *certified exact* when its k-th
    neighbour distance is <= the E-distance of the first frame left out (every left-out row is
    at least that far), so it equals the kNN over all rows; ``Prediction.exact`` says which.
+   The search only needs certified values, so it queries the tree with that distance as upper
+   bound (``Neighbourhood.certified``), which prunes more of the tree.
 4. argmin over the certified candidates (the artifact's candidate set: every distinct trial
    parameter vector plus a Sobol set), then a pattern search (``refine_iters`` rounds, step
    halving, moves accepted only to certified points) around the best few.
@@ -304,7 +307,7 @@ class Neighbourhood:
         pts[:, :-1] = model.rows_x[self.rows]
         pts[:, -1] = np.repeat(np.sqrt(d2[taken]), lens)
         self.t = model.rows_t[self.rows]
-        self.tree = cKDTree(pts, leafsize=16)  # balanced, compact: queries dominate
+        self.tree = cKDTree(pts, leafsize=32)  # balanced, compact: queries dominate
         self.x_scale = model.x_scale
 
     def predict(self, U: NDArray[np.float64]) -> Prediction:
@@ -315,6 +318,19 @@ class Neighbourhood:
         if self.k == 1:
             dist, idx = dist[:, None], idx[:, None]
         return Prediction(self.t[idx].mean(axis=1), dist[:, -1] ** 2 <= self.boundary2)
+
+    def certified(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``predict(U).t`` where it is certified exact, inf elsewhere: (C,)."""
+        q = np.zeros((len(U), U.shape[1] + 1))
+        q[:, :-1] = U * self.x_scale
+        bound = math.sqrt(self.boundary2) * (1.0 + 1e-9) + 1e-12  # inf: no bound
+        dist, idx = self.tree.query(q, k=self.k, distance_upper_bound=bound)
+        if self.k == 1:
+            dist, idx = dist[:, None], idx[:, None]
+        exact = dist[:, -1] ** 2 <= self.boundary2
+        t = np.full(len(U), np.inf)
+        t[exact] = self.t[idx[exact]].mean(axis=1)
+        return t
 
 
 class Selector:
@@ -403,10 +419,10 @@ class Selector:
         return self.model.params_of(u_best)
 
     def _search(self, nb: Neighbourhood) -> tuple[NDArray[np.float64], float, float]:
-        pred = nb.predict(self.candidates)
-        t = np.where(pred.exact, pred.t, np.inf)
-        if not np.isfinite(t).any():  # nothing certified: fall back to the approximate values
-            t = pred.t
+        t = nb.certified(self.candidates)
+        exact_frac = float(np.isfinite(t).mean())
+        if exact_frac == 0.0:  # nothing certified: fall back to the approximate values
+            t = nb.predict(self.candidates).t
         n = min(self.n_starts, len(t))
         starts = np.argsort(t, kind="stable")[:n]
         best_u, best_t = self.candidates[starts].copy(), t[starts].copy()
@@ -415,8 +431,7 @@ class Selector:
         eye = np.vstack([np.eye(p), -np.eye(p)])
         for _ in range(self.refine_iters):
             probes = self.model.snap((best_u[:, None, :] + step * eye[None]).reshape(-1, p))
-            pp = nb.predict(probes)
-            pt = np.where(pp.exact, pp.t, np.inf).reshape(n, 2 * p)
+            pt = nb.certified(probes).reshape(n, 2 * p)
             j = np.argmin(pt, axis=1)
             better = pt[np.arange(n), j] < best_t
             if better.any():
@@ -425,7 +440,7 @@ class Selector:
             else:
                 step /= 2.0
         i = int(np.argmin(best_t))
-        return best_u[i], float(best_t[i]), float(pred.exact.mean())
+        return best_u[i], float(best_t[i]), exact_frac
 
     def schedule(self, reader: Any) -> Any:
         """The Schedule of a whole recorded sequence (a SequenceReader): a selection every

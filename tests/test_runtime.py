@@ -179,6 +179,10 @@ def test_selection_agrees_with_brute_force(model_dir: Path, kitti_root: Path) ->
         brute = full_knn(model, e_s, sel.candidates)
         assert pred.exact.any()
         np.testing.assert_allclose(pred.t[pred.exact], brute[pred.exact], rtol=1e-12)
+        # the bounded query of the search: the same certified values, inf elsewhere
+        cert = nb.certified(sel.candidates)
+        assert (np.isfinite(cert) == pred.exact).all()
+        np.testing.assert_allclose(cert[pred.exact], brute[pred.exact], rtol=1e-12)
         # with every row in the subset every candidate is certified and exact
         everything = Neighbourhood(model, e_s, len(model.rows_t))
         allp = everything.predict(sel.candidates)
