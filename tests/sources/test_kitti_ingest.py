@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
+from click.testing import CliRunner, Result
 from source_inputs import load_kitti
 
 from pipeline.sequence import SequenceReader
@@ -34,21 +34,15 @@ def test_ingest_real_kitti_sequence(seq: str, kitti_root: Path, tmp_path: Path) 
         assert r.info.sensor == "velodyne_hdl64e" and r.info.source == f"kitti:{seq}"
 
 
+def ingest_06(kitti_root: Path, out: Path, start: int, end: int) -> Result:
+    """``adaptune ingest kitti ROOT 06 --out OUT --start START --end END``."""
+    args = ["ingest", "kitti", str(kitti_root), "06", "--out", str(out)]
+    return CliRunner().invoke(main, [*args, "--start", str(start), "--end", str(end)])
+
+
 def test_start_end_pick_an_inclusive_frame_range(kitti_root: Path, tmp_path: Path) -> None:
     out = tmp_path / "part.mcap"
-    args = [
-        "ingest",
-        "kitti",
-        str(kitti_root),
-        "06",
-        "--out",
-        str(out),
-        "--start",
-        "2",
-        "--end",
-        "4",
-    ]
-    result = CliRunner().invoke(main, args)
+    result = ingest_06(kitti_root, out, 2, 4)
     assert result.exit_code == 0, result.output
     kf = load_kitti(kitti_root, "06")
     with SequenceReader(out) as r:
@@ -60,19 +54,7 @@ def test_start_end_pick_an_inclusive_frame_range(kitti_root: Path, tmp_path: Pat
 
 def test_start_end_out_of_range_is_an_error(kitti_root: Path, tmp_path: Path) -> None:
     out = tmp_path / "bad.mcap"
-    args = [
-        "ingest",
-        "kitti",
-        str(kitti_root),
-        "06",
-        "--out",
-        str(out),
-        "--start",
-        "5",
-        "--end",
-        "10",
-    ]
-    result = CliRunner().invoke(main, args)
+    result = ingest_06(kitti_root, out, 5, 10)
     assert result.exit_code == 1
     assert "--end 10 is not within 0..9" in result.stderr
     assert not out.exists()
