@@ -312,25 +312,31 @@ class Neighbourhood:
 
     def predict(self, U: NDArray[np.float64]) -> Prediction:
         """Prediction at unit points U (C, P)."""
-        q = np.zeros((len(U), U.shape[1] + 1))
-        q[:, :-1] = U * self.x_scale
-        dist, idx = self.tree.query(q, k=self.k)
-        if self.k == 1:
-            dist, idx = dist[:, None], idx[:, None]
+        dist, idx = self._query(U, math.inf)
         return Prediction(self.t[idx].mean(axis=1), dist[:, -1] ** 2 <= self.boundary2)
 
     def certified(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``predict(U).t`` where it is certified exact, inf elsewhere: (C,)."""
-        q = np.zeros((len(U), U.shape[1] + 1))
-        q[:, :-1] = U * self.x_scale
-        bound = math.sqrt(self.boundary2) * (1.0 + 1e-9) + 1e-12  # inf: no bound
-        dist, idx = self.tree.query(q, k=self.k, distance_upper_bound=bound)
-        if self.k == 1:
-            dist, idx = dist[:, None], idx[:, None]
+        """``predict(U).t`` where it is certified exact, inf elsewhere: (C,).
+
+        The tree is searched only within the certification distance (inf: no bound), which
+        prunes more of it than ``predict``."""
+        dist, idx = self._query(U, math.sqrt(self.boundary2) * (1.0 + 1e-9) + 1e-12)
         exact = dist[:, -1] ** 2 <= self.boundary2
         t = np.full(len(U), np.inf)
         t[exact] = self.t[idx[exact]].mean(axis=1)
         return t
+
+    def _query(
+        self, U: NDArray[np.float64], bound: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+        """Distances and row indices (C, k) of the k nearest rows to (U * x_scale, 0) within
+        ``bound`` (inf and len(rows) past it)."""
+        q = np.zeros((len(U), U.shape[1] + 1))
+        q[:, :-1] = U * self.x_scale
+        dist, idx = self.tree.query(q, k=self.k, distance_upper_bound=bound)
+        if self.k == 1:
+            dist, idx = dist[:, None], idx[:, None]
+        return dist, idx
 
 
 class Selector:
