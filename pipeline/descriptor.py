@@ -251,6 +251,7 @@ def voxel_moments(
     return n.astype(np.int64), np.stack(s, axis=1), cov
 
 
+# what the kernel returns: (ok, counts (M,), mean (M, 3), covariance (M, 3, 3))
 Moments = tuple[bool, NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]
 
 

@@ -11,7 +11,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-Moments = tuple[bool, NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]
+from pipeline.descriptor import Moments
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
