@@ -123,11 +123,11 @@ def write_plot_data(ev: Evaluation, plots_dir: Path) -> None:
 
 def write_figures(ev: Evaluation, trial_rows: list[dict[str, Any]],
                   report_dir: Path) -> dict[str, list[Path]]:
+    """Every PNG of the report, in ``report_dir``/figures: kind -> files (relative to
+    ``report_dir``)."""
     from pipeline.sim.plot import plot_world
     from pipeline.sim.simulate import spec_of
 
-    """Every PNG of the report, in ``report_dir``/figures: kind -> files (relative to
-    ``report_dir``)."""
     out: dict[str, list[Path]] = {"world": [], "schedule": [], "rte": [], "trajectory": [],
                                   "trials": []}
     fig_dir = report_dir / "figures"

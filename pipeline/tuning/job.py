@@ -340,11 +340,7 @@ def _serve(conn: Any, parent_end: Any) -> None:
             job = conn.recv()
         except EOFError:  # the worker is gone
             return
-        try:
-            message: tuple[str, Any] = ("ok", evaluate_trial(job))
-        except BaseException as exc:
-            message = ("error", _one_line(exc))
-        conn.send(message)
+        conn.send(_outcome(job))
 
 
 def _in_dask_worker() -> bool:
@@ -373,12 +369,16 @@ def _forkserver(job: TrialJob) -> multiprocessing.context.ForkServerContext:
 
 def _child_main(job: TrialJob, conn: Any) -> None:
     """Entry point of a one-trial process: evaluate and send ("ok", out) or ("error", text)."""
-    try:
-        message: tuple[str, Any] = ("ok", evaluate_trial(job))
-    except BaseException as exc:
-        message = ("error", _one_line(exc))
-    conn.send(message)
+    conn.send(_outcome(job))
     conn.close()
+
+
+def _outcome(job: TrialJob) -> tuple[str, Any]:
+    """("ok", ``evaluate_trial(job)``) or ("error", the exception in one line), for the pipe."""
+    try:
+        return ("ok", evaluate_trial(job))
+    except BaseException as exc:
+        return ("error", _one_line(exc))
 
 
 def _run_in_forkserver(job: TrialJob, limit_s: float) -> tuple[str, Any]:
