@@ -11,14 +11,22 @@ Selection (x_t = argmin_x S(E_t, x), S = the kNN mean of k training targets):
 2. Since E_t is fixed for a query, the joint distance of a row i to (E_t, x) is
    |x - x_i|^2 + dE_i^2 with dE_i = |E_t - E_i|: the joint kNN is a kNN in P + 1 dimensions
    over the points (x_i, dE_i), queried at (x, 0).
-3. Rows are grouped by training frame (environment). The frames nearest to E_t are taken until
-   ``subset_rows`` rows are gathered; a cKDTree over those rows' (x_i, dE_i) answers the k
-   nearest rows for every candidate at once. A candidate is *certified exact* when its k-th
-   neighbour distance is <= the E-distance of the first frame left out (every left-out row is
-   at least that far), so it equals the kNN over all rows; ``Prediction.exact`` says which.
-   The search only needs certified values, so it queries the tree with that distance as upper
-   bound (``Neighbourhood.certified``), which prunes more of the tree.
-4. argmin over the certified candidates (the artifact's candidate set: every distinct trial
+3. Exact kNN over every row, grouped (``TrialGroups``): every frame of a training sequence has
+   one row per trial of that sequence, the same parameter vectors in the same order, so the
+   frames fall into a few groups (one per sequence) that share a block X_g of trial vectors.
+   The k nearest rows of (E_t, x) are among the pairs (one of the k nearest trials of x in X_g,
+   one of the k nearest frames of E_t in group g): any other row is farther than k rows of the
+   same frame (nearer trials) or of the same trial (nearer frames). The nearest trials of the
+   candidate set are static (found once per Selector); per selection only the k nearest frames
+   of each group are found and the pairs merged (a numba kernel, numpy without numba).
+   An artifact whose frames do not form at most ``MAX_GROUPS`` groups uses ``Neighbourhood``:
+   the frames nearest to E_t are taken until ``subset_rows`` rows are gathered, a cKDTree over
+   those rows' (x_i, dE_i) answers the k nearest rows, and a candidate is *certified exact*
+   when its k-th neighbour distance is <= the E-distance of the first frame left out (every
+   left-out row is at least that far), so it equals the kNN over all rows;
+   ``Prediction.exact`` says which, and the search uses certified values only (the tree is
+   searched within that distance, ``Neighbourhood.certified``).
+4. argmin over the (certified) candidates (the artifact's candidate set: every distinct trial
    parameter vector plus a Sobol set), then a pattern search (``refine_iters`` rounds, step
    halving, moves accepted only to certified points) around the best few.
 5. Hysteresis: the current parameters stay unless the new ones are predicted better by more
@@ -36,9 +44,11 @@ Selection (x_t = argmin_x S(E_t, x), S = the kNN mean of k training targets):
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -303,6 +313,7 @@ class Neighbourhood:
         total = int(lens.sum())
         shift = np.repeat(starts - np.concatenate([[0], np.cumsum(lens)[:-1]]), lens)
         self.rows = shift + np.arange(total)
+        self.rows_searched = total
         self.k = min(model.k, total)
         pts = np.empty((total, model.rows_x.shape[1] + 1))
         pts[:, :-1] = model.rows_x[self.rows]
@@ -329,6 +340,10 @@ class Neighbourhood:
         t[exact] = self.t[idx[exact]].mean(axis=1)
         return t
 
+    def candidate_values(self, candidates: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``certified`` at the selector's candidate set."""
+        return self.certified(candidates)
+
     def _query(
         self, U: NDArray[np.float64], bound: float
     ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
@@ -340,6 +355,151 @@ class Neighbourhood:
         if self.k == 1:
             dist, idx = dist[:, None], idx[:, None]
         return dist, idx
+
+
+MAX_GROUPS = 64  # beyond this many frame groups the Selector uses Neighbourhood (step 3)
+
+
+class TrialGroups:
+    """The rows as groups of frames sharing one block of trial vectors (module docstring,
+    step 3), with the k nearest trials of every candidate. Built once per Selector."""
+
+    def __init__(
+        self, model: Model, blocks: list[list[int]], candidates_u: NDArray[np.float64]
+    ) -> None:
+        """``blocks``: the frames of each group (frames whose rows hold the same trial vectors
+        in the same order); candidates_u (C, P): the selector's candidate set."""
+        offsets = model.env_offsets
+        self.k = model.k
+        self.x_scale = model.x_scale
+        self.env = model.env
+        self.env_offsets = offsets
+        self.rows_t = model.rows_t
+        self.trees = [cKDTree(model.rows_x[offsets[f[0]] : offsets[f[0] + 1]]) for f in blocks]
+        self.frame_table = np.full((len(blocks), max(map(len, blocks))), -1, np.int64)  # (G, F)
+        for g, frames in enumerate(blocks):
+            self.frame_table[g, : len(frames)] = frames
+        self.candidates = candidates_u
+        self.candidate_trials = self.nearest_trials(candidates_u)
+
+    @classmethod
+    def build(cls, model: Model, candidates_u: NDArray[np.float64]) -> TrialGroups | None:
+        """The groups of ``model``, or None when its frames form more than MAX_GROUPS groups
+        (or it has fewer than k rows)."""
+        if len(model.rows_t) < model.k:
+            return None
+        offsets = model.env_offsets
+        blocks: dict[bytes, list[int]] = {}
+        for f in range(len(offsets) - 1):
+            key = model.rows_x[offsets[f] : offsets[f + 1]].tobytes()
+            blocks.setdefault(key, []).append(f)
+            if len(blocks) > MAX_GROUPS:
+                return None
+        return cls(model, list(blocks.values()), candidates_u)
+
+    def nearest_trials(
+        self, U: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Squared distances and block positions (n, G, k) of the k nearest trial vectors of
+        each unit point U (n, P) in every group (ascending; inf and 0 past a group's size)."""
+        n = len(U)
+        d2 = np.full((n, len(self.trees), self.k), np.inf)
+        pos = np.zeros((n, len(self.trees), self.k), np.int64)
+        q = U * self.x_scale
+        for g, tree in enumerate(self.trees):
+            kk = min(self.k, tree.n)
+            dist, idx = tree.query(q, k=kk)
+            d2[:, g, :kk] = np.reshape(dist, (n, kk)) ** 2
+            pos[:, g, :kk] = np.reshape(idx, (n, kk))
+        return d2, pos
+
+    def nearest_frames(
+        self, env_d2: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Squared E-distances and first rows (G, k) of each group's k nearest frames, given
+        every frame's squared E-distance env_d2 (n_env,) (ascending; inf and 0 past a group's
+        size)."""
+        table = self.frame_table
+        d2 = np.where(table >= 0, env_d2[table], np.inf)
+        kk = min(self.k, table.shape[1])
+        pick = np.argpartition(d2, kk - 1, axis=1)[:, :kk] if table.shape[1] > kk else None
+        if pick is not None:
+            d2, table = np.take_along_axis(d2, pick, 1), np.take_along_axis(table, pick, 1)
+        order = np.argsort(d2, axis=1, kind="stable")
+        frame_d2 = np.full((len(table), self.k), np.inf)
+        frame_row0 = np.zeros((len(table), self.k), np.int64)
+        frame_d2[:, :kk] = np.take_along_axis(d2, order, 1)
+        frame_row0[:, :kk] = self.env_offsets[np.maximum(np.take_along_axis(table, order, 1), 0)]
+        return frame_d2, frame_row0
+
+
+class GroupedNeighbourhood:
+    """TrialGroups at one environment E_s: the exact kNN over every row (step 3)."""
+
+    def __init__(self, groups: TrialGroups, e_s: NDArray[np.float64]) -> None:
+        diff = groups.env - e_s
+        env_d2 = np.einsum("ij,ij->i", diff, diff)
+        self.nearest = float(np.sqrt(env_d2.min()))  # E-distance to the closest training frame
+        self.groups = groups
+        self.frame_d2, self.frame_row0 = groups.nearest_frames(env_d2)
+        self.rows_searched = len(groups.rows_t)  # all of them
+
+    def predict(self, U: NDArray[np.float64]) -> Prediction:
+        """Prediction at unit points U (C, P), every value exact."""
+        t = self._mean(*self.groups.nearest_trials(U))
+        return Prediction(t, np.ones(len(t), bool))
+
+    def certified(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``predict(U).t`` (every value is exact): (C,)."""
+        return self.predict(U).t
+
+    def candidate_values(self, candidates: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``certified`` at the groups' candidate set (their nearest trials are known)."""
+        if candidates is not self.groups.candidates:
+            return self.certified(candidates)
+        return self._mean(*self.groups.candidate_trials)
+
+    def _mean(
+        self, trial_d2: NDArray[np.float64], trial_pos: NDArray[np.int64]
+    ) -> NDArray[np.float64]:
+        return _knn_mean_kernel()(
+            trial_d2, trial_pos, self.frame_d2, self.frame_row0, self.groups.rows_t, self.groups.k
+        )
+
+
+def knn_mean_numpy(
+    trial_d2: NDArray[np.float64],
+    trial_pos: NDArray[np.int64],
+    frame_d2: NDArray[np.float64],
+    frame_row0: NDArray[np.int64],
+    rows_t: NDArray[np.float64],
+    k: int,
+) -> NDArray[np.float64]:
+    """``pipeline.runtime_kernel.knn_mean`` in numpy (same arguments, same values): (n,).
+
+    Only the pairs (a, j) with (a + 1)(j + 1) <= k can be among a group's k nearest: a pair
+    farther down both sorted lists is beaten by the (a + 1)(j + 1) pairs above and left of it.
+    """
+    a, j = np.array([(a, j) for a in range(k) for j in range(k) if (a + 1) * (j + 1) <= k]).T
+    n = len(trial_d2)
+    d2 = (trial_d2[:, :, a] + frame_d2[None, :, j]).reshape(n, -1)
+    rows = (trial_pos[:, :, a] + frame_row0[None, :, j]).reshape(n, -1)
+    pick = np.argpartition(d2, k - 1, axis=1)[:, :k]
+    return rows_t[np.take_along_axis(rows, pick, 1)].mean(axis=1)
+
+
+KnnMean = Callable[..., NDArray[np.float64]]
+
+
+@functools.cache
+def _knn_mean_kernel() -> KnnMean:
+    """``pipeline.runtime_kernel.knn_mean`` (numba), or ``knn_mean_numpy`` without numba."""
+    try:
+        from pipeline.runtime_kernel import knn_mean
+    except ImportError:  # pragma: no cover - numba is a dependency of the pipeline, not the robot
+        return knn_mean_numpy
+    kernel: KnnMean = knn_mean
+    return kernel
 
 
 class Selector:
@@ -355,6 +515,7 @@ class Selector:
         subset_rows: int | None = None,
         refine_iters: int | None = None,
         n_starts: int = 3,
+        grouped: bool = True,
     ) -> None:
         sel = model.selection
         self.model = model
@@ -369,6 +530,7 @@ class Selector:
         self.novelty_distance = math.inf if novelty is None else float(novelty)
         self.n_starts = n_starts
         self.candidates = np.unique(model.snap(model.candidates_u), axis=0)
+        self.groups = TrialGroups.build(model, self.candidates) if grouped else None
         self.current_u: NDArray[np.float64] | None = None
         self.last_stamp_ns: int | None = None
         self.last: dict[str, Any] = {}
@@ -404,7 +566,7 @@ class Selector:
 
     def select_environment(self, e_s: NDArray[np.float64]) -> Params:
         """The selection for a scaled environment E_s (D,)."""
-        nb = Neighbourhood(self.model, e_s, self.subset_rows)
+        nb = self.neighbourhood(e_s)
         if nb.nearest > self.novelty_distance:  # an unfamiliar scan: the baseline (step 7)
             defaults = self.model.defaults()
             self.current_u = self.model.to_unit(
@@ -422,13 +584,21 @@ class Selector:
             "kept": "hysteresis" if kept else "",
             "predicted_t": t_best,
             "exact_fraction": exact_frac,
-            "subset_rows": len(nb.rows),
+            "rows_searched": nb.rows_searched,
             "nearest_environment": nb.nearest,
         }
         return self.model.params_of(u_best)
 
-    def _search(self, nb: Neighbourhood) -> tuple[NDArray[np.float64], float, float]:
-        t = nb.certified(self.candidates)
+    def neighbourhood(self, e_s: NDArray[np.float64]) -> GroupedNeighbourhood | Neighbourhood:
+        """The search structure at E_s: exact over every row when the frames group (step 3)."""
+        if self.groups is not None:
+            return GroupedNeighbourhood(self.groups, e_s)
+        return Neighbourhood(self.model, e_s, self.subset_rows)
+
+    def _search(
+        self, nb: GroupedNeighbourhood | Neighbourhood
+    ) -> tuple[NDArray[np.float64], float, float]:
+        t = nb.candidate_values(self.candidates)
         exact_frac = float(np.isfinite(t).mean())
         if exact_frac == 0.0:  # nothing certified: fall back to the approximate values
             t = nb.predict(self.candidates).t

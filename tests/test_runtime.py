@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,10 +14,18 @@ from click.testing import CliRunner
 from sklearn.neighbors import KNeighborsRegressor
 from test_surrogate import build_model, kitti_scan, write_tiny_sequence
 
+from pipeline import runtime
 from pipeline.errors import ArtifactError
 from pipeline.odometry.base import Schedule
 from pipeline.odometry.registry import get_adapter
-from pipeline.runtime import Neighbourhood, Selector, canonical_manifest_hash, load_model
+from pipeline.runtime import (
+    GroupedNeighbourhood,
+    Neighbourhood,
+    Selector,
+    canonical_manifest_hash,
+    knn_mean_numpy,
+    load_model,
+)
 from pipeline.sequence import SequenceReader
 from pipeline.surrogate import SurrogateSettings
 from stages.cli import main
@@ -169,12 +178,57 @@ def full_knn(model, e_s: np.ndarray, U: np.ndarray) -> np.ndarray:
     return knn.predict(q)
 
 
-def test_selection_agrees_with_brute_force(model_dir: Path, kitti_root: Path) -> None:
+def test_grouped_search_is_the_exact_knn_over_every_row(
+    model_dir: Path, kitti_root: Path
+) -> None:
     model = load_model(model_dir)
+    sel = Selector(model, hysteresis=0.0, refine_iters=0)
+    assert sel.groups is not None and len(sel.groups.trees) == 4  # one group per sequence
+    off = np.random.default_rng(3).random((50, 2))  # points off the candidate set too
+    for seq, frame in (("01", 5), ("10", 2), ("06", 9)):
+        e_s = model.environment(kitti_scan(kitti_root, seq, frame))
+        nb = sel.neighbourhood(e_s)
+        assert isinstance(nb, GroupedNeighbourhood)
+        brute = full_knn(model, e_s, sel.candidates)
+        values = nb.candidate_values(sel.candidates)
+        np.testing.assert_allclose(values, brute, rtol=1e-12)
+        np.testing.assert_allclose(nb.predict(off).t, full_knn(model, e_s, off), rtol=1e-12)
+        numpy_path = knn_mean_numpy(
+            *sel.groups.candidate_trials, nb.frame_d2, nb.frame_row0, model.rows_t, model.k
+        )
+        np.testing.assert_allclose(numpy_path, values, rtol=1e-12)  # the no-numba fallback
+        assert sel.select_environment(e_s) == model.params_of(sel.candidates[np.argmin(brute)])
+
+
+def test_frames_with_their_own_row_order_form_their_own_group(
+    model_dir: Path, kitti_root: Path
+) -> None:
+    model = load_model(model_dir)
+    a, b = model.env_offsets[0], model.env_offsets[1]
+    perm = np.arange(len(model.rows_t))
+    perm[a:b] = perm[a:b][::-1]  # frame 0 lists its trials backwards
+    shuffled = replace(model, rows_x=model.rows_x[perm], rows_t=model.rows_t[perm])
+    sel = Selector(shuffled, hysteresis=0.0, refine_iters=0)
+    assert sel.groups is not None and len(sel.groups.trees) == 5
+    e_s = model.environment(kitti_scan(kitti_root, "01", 0))
+    np.testing.assert_allclose(
+        sel.neighbourhood(e_s).candidate_values(sel.candidates),
+        full_knn(model, e_s, sel.candidates),
+        rtol=1e-12,
+    )
+
+
+def test_ungrouped_artifacts_use_the_certified_tree(
+    model_dir: Path, kitti_root: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    model = load_model(model_dir)
+    monkeypatch.setattr(runtime, "MAX_GROUPS", 3)  # the 4 sequences no longer qualify
+    assert Selector(model).groups is None
     for seq, frame in (("01", 5), ("10", 2), ("06", 9)):
         e_s = model.environment(kitti_scan(kitti_root, seq, frame))
         sel = Selector(model, hysteresis=0.0, refine_iters=0, subset_rows=200)
-        nb = Neighbourhood(model, e_s, 200)
+        nb = sel.neighbourhood(e_s)
+        assert isinstance(nb, Neighbourhood)
         pred = nb.predict(sel.candidates)
         brute = full_knn(model, e_s, sel.candidates)
         assert pred.exact.any()

@@ -1,0 +1,59 @@
+"""The numba kernel of the grouped kNN search (pipeline/runtime.py, ``TrialGroups``).
+
+Imported by ``pipeline.runtime`` on first use; without numba the runtime uses the numpy
+``knn_mean_numpy``, which gives the same values (tests/test_runtime.py compares both with
+scikit-learn's kNN over every row).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+
+@numba.njit(cache=True, nogil=True)
+def knn_mean(
+    trial_d2: NDArray[np.float64],
+    trial_pos: NDArray[np.int64],
+    frame_d2: NDArray[np.float64],
+    frame_row0: NDArray[np.int64],
+    rows_t: NDArray[np.float64],
+    k: int,
+) -> NDArray[np.float64]:  # pragma: no cover - compiled
+    """Mean target of the k nearest rows of each query point: (n,).
+
+    trial_d2, trial_pos (n, G, k): squared distances (ascending, inf-padded) and block positions
+    of each query's k nearest trial vectors in group g; frame_d2, frame_row0 (G, k): squared
+    E-distances (ascending, inf-padded) and first rows of the group's k nearest frames; rows_t
+    (M,) the targets. A row's squared joint distance is trial_d2 + frame_d2. Both lists are
+    sorted, so a group is left as soon as its next pair cannot beat the k-th best so far.
+    """
+    n, n_groups, width = trial_d2.shape
+    out = np.empty(n)
+    best_d = np.empty(k)
+    best_r = np.empty(k, np.int64)
+    for c in range(n):
+        best_d[:] = np.inf
+        best_r[:] = 0
+        for g in range(n_groups):
+            for a in range(width):
+                da = trial_d2[c, g, a]
+                if da + frame_d2[g, 0] >= best_d[k - 1]:
+                    break
+                for j in range(frame_d2.shape[1]):
+                    d = da + frame_d2[g, j]
+                    if d >= best_d[k - 1]:
+                        break
+                    m = k - 1
+                    while m > 0 and best_d[m - 1] > d:
+                        best_d[m] = best_d[m - 1]
+                        best_r[m] = best_r[m - 1]
+                        m -= 1
+                    best_d[m] = d
+                    best_r[m] = frame_row0[g, j] + trial_pos[c, g, a]
+        total = 0.0
+        for m in range(k):
+            total += rows_t[best_r[m]]
+        out[c] = total / k
+    return out
