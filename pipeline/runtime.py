@@ -37,9 +37,11 @@ Selection (x_t = argmin_x S(E_t, x), S = the kNN mean of k training targets):
 7. Novelty guard (not in the paper): when E_t is farther from every training environment than
    ``novelty_distance`` (a quantile, by default the largest, of the training frames' distances
    to the nearest frame of another training sequence, computed when the model is fitted), the
-   surrogate would be extrapolating; the selector then falls back to the adapter's defaults
-   (the hand-tuned baseline) until the scans look familiar again. ``null`` in the manifest
-   disables it.
+   surrogate would be extrapolating; the selector then falls back to the manifest's
+   ``novelty_fallback_params`` (the joint study's fixed parameters, when the surrogate stage
+   found them better than the defaults on every training sequence:
+   ``pipeline.surrogate.choose_fallback``), else the adapter's defaults, until the scans look
+   familiar again. ``null`` as novelty_distance disables it.
 """
 
 from __future__ import annotations
@@ -134,6 +136,12 @@ class Model:
 
     def defaults(self) -> Params:
         return {str(s["name"]): float(s["default"]) for s in self.space}
+
+    def fallback(self) -> Params:
+        """The parameters for unfamiliar scans (step 7): the manifest's
+        ``novelty_fallback_params``, else the adapter's defaults."""
+        chosen = self.manifest["selection"].get("novelty_fallback_params")
+        return {n: float(chosen[n]) for n in self.names} if chosen else self.defaults()
 
     def environment(self, points_lidar: NDArray[np.floating]) -> NDArray[np.float64]:
         """Scaled environment E_s (D,) of one scan ((N, 3|4) points, sensor frame [m])."""
@@ -567,12 +575,12 @@ class Selector:
     def select_environment(self, e_s: NDArray[np.float64]) -> Params:
         """The selection for a scaled environment E_s (D,)."""
         nb = self.neighbourhood(e_s)
-        if nb.nearest > self.novelty_distance:  # an unfamiliar scan: the baseline (step 7)
-            defaults = self.model.defaults()
+        if nb.nearest > self.novelty_distance:  # an unfamiliar scan: the fallback (step 7)
+            fallback = self.model.fallback()
             self.current_u = self.model.to_unit(
-                np.array([[defaults[n] for n in self.model.names]]))[0]
+                np.array([[fallback[n] for n in self.model.names]]))[0]
             self.last = {"kept": "novel", "nearest_environment": nb.nearest}
-            return defaults
+            return fallback
         u_best, t_best, exact_frac = self._search(nb)
         kept = False
         if self.current_u is not None and not np.array_equal(u_best, self.current_u):

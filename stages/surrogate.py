@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import click
 from pydantic import Field
@@ -29,6 +29,7 @@ class SurrogateSection(Section):
     subset_rows: int = Field(4096, ge=1)
     refine_iters: int = Field(4, ge=0)
     novelty_quantile: float | None = Field(1.0, gt=0, le=1)
+    novelty_fallback: Literal["defaults", "fixed", "auto"] = "auto"
 
 
 @click.command()
@@ -78,6 +79,7 @@ def surrogate(
         Pca,
         SurrogateSettings,
         fit_surrogate,
+        novelty_fallback,
         read_training_rows,
         write_artifact,
     )
@@ -90,13 +92,17 @@ def surrogate(
     settings = SurrogateSettings(p.k, p.w_e, p.w_x, p.target, p.n_sobol, p.seed, p.cv_max_frames,
                                  p.novelty_quantile)
     fitted = fit_surrogate(rows, space, settings)
-    selection = {
+    selection: dict[str, Any] = {
         "period_s": p.period_s,
         "hysteresis": p.hysteresis,
         "min_scan_points": p.min_scan_points,
         "subset_rows": p.subset_rows,
         "refine_iters": p.refine_iters,
     }
+    fallback, record = novelty_fallback(db_path, algo, space, p.novelty_fallback)
+    selection["novelty_fallback"] = record
+    if fallback is not None:
+        selection["novelty_fallback_params"] = fallback
     # the descriptor settings the PCA was fitted with win (pca.json); params only as fallback
     descriptor = (
         DescriptorConfig.from_json(pca.descriptor)

@@ -115,6 +115,9 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
     assert counts["rte_frames"] > 0 and counts["surrogate_rows"] > 0
     model = load_model(root / "model", expected_algorithm="ndt")
     assert len(model.rows_t) == counts["surrogate_rows"]
+    # the novelty fallback was decided on the joint study vs each study's defaults trial
+    fallback = model.selection["novelty_fallback"]
+    assert fallback["mode"] == "auto" and set(fallback["per_sequence"]) == set(index["train"])
     run = root / "results/adaptive/composite_0"
     schedule = Schedule.read(run / "schedule.parquet")
     assert len(schedule) == 60 and set(schedule.values) == set(model.names)

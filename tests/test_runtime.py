@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from sklearn.neighbors import KNeighborsRegressor
-from test_surrogate import build_model, kitti_scan, write_tiny_sequence
+from test_surrogate import SELECTION, build_model, kitti_scan, write_tiny_sequence
 
 from pipeline import runtime
 from pipeline.errors import ArtifactError
@@ -261,9 +261,10 @@ def test_refinement_and_hysteresis(model_dir: Path, kitti_root: Path) -> None:
     assert sticky.last["kept"] == "hysteresis"
 
 
-def test_unfamiliar_scans_fall_back_to_the_defaults(tmp_path: Path, kitti_root: Path) -> None:
+def test_unfamiliar_scans_get_the_fallback(tmp_path: Path, kitti_root: Path) -> None:
     """Novelty guard: an environment farther than novelty_distance from every training frame
-    gets the baseline; a familiar one gets the surrogate's choice again."""
+    gets the fallback (the defaults unless the manifest names parameters); a familiar one gets
+    the surrogate's choice again."""
     model = load_model(build_model(tmp_path / "model", kitti_root))
     limit = model.selection["novelty_distance"]
     assert limit > 0
@@ -277,6 +278,14 @@ def test_unfamiliar_scans_fall_back_to_the_defaults(tmp_path: Path, kitti_root: 
     assert sel.last["kept"] == "novel" and sel.current == model.defaults()
     assert sel.select_environment(familiar) == first
     assert first != model.defaults()
+    # a manifest with fallback parameters (the joint study's, chosen by the surrogate stage)
+    chosen = {"resolution": 2.5, "keyframe_interval": 6.0}
+    selection = {**SELECTION, "novelty_fallback": {"mode": "fixed", "chosen": "fixed"},
+                 "novelty_fallback_params": chosen}
+    fixed = Selector(load_model(build_model(tmp_path / "fixed", kitti_root, selection=selection)),
+                     hysteresis=0.0)
+    assert fixed.select_environment(far) == chosen and fixed.last["kept"] == "novel"
+    assert fixed.select_environment(familiar) == first
     # without a novelty distance (null in the manifest) the surrogate always decides
     off = load_model(build_model(tmp_path / "off", kitti_root,
                                  settings=SurrogateSettings(n_sobol=256, cv_max_frames=5,

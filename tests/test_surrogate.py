@@ -15,6 +15,7 @@ import pytest
 from click.testing import CliRunner
 
 from pipeline.descriptor import DescriptorConfig, describe
+from pipeline.errors import ConfigError, InputError
 from pipeline.odometry.registry import get_adapter
 from pipeline.runtime import load_model
 from pipeline.sequence import SequenceInfo, SequenceWriter
@@ -23,8 +24,11 @@ from pipeline.surrogate import (
     Pca,
     SurrogateSettings,
     TrainingRows,
+    choose_fallback,
     fit_pca,
     fit_surrogate,
+    novelty_fallback,
+    read_fallback_evidence,
     write_artifact,
 )
 from schemas import read_text
@@ -288,6 +292,9 @@ def test_surrogate_stage(tmp_path: Path, kitti_root: Path) -> None:
     assert res.exit_code == 0, res.output
     model = load_model(out, "ndt")
     assert model.manifest["training"]["rows"] == 40 * 8
+    # no trials tables in this database: no joint study to compare, the defaults stay
+    assert model.selection["novelty_fallback"]["chosen"] == "defaults"
+    assert model.fallback() == model.defaults()
     assert json.loads(metrics.read_text())["folds"] == 4
     # an algorithm the database does not have: one line, exit 1, no new artifact
     res = CliRunner().invoke(
@@ -308,3 +315,64 @@ def test_surrogate_stage(tmp_path: Path, kitti_root: Path) -> None:
     )
     assert res.exit_code == 1 and "no surrogate rows for algorithm 'gicp'" in res.output
     assert not (tmp_path / "m2").exists()
+
+
+def fallback_db(path: Path, fixed_rte: dict[str, float], default_rte: dict[str, float]) -> None:
+    """A results database with per-sequence studies (trial 0 = the NDT defaults, trial 1 = other
+    parameters) and a joint study whose best trial (2) scores ``fixed_rte`` per sequence."""
+    con = duckdb.connect(str(path))
+    con.execute(
+        "CREATE TABLE trials (study VARCHAR, algorithm VARCHAR, sequence VARCHAR, trial INTEGER,"
+        " status VARCHAR, objective DOUBLE, params_json VARCHAR)"
+    )
+    con.execute(
+        "CREATE TABLE rte_frames (study VARCHAR, algorithm VARCHAR, sequence VARCHAR,"
+        " trial INTEGER, frame INTEGER, t_err_pct DOUBLE)"
+    )
+    defaults = json.dumps(get_adapter("ndt").space.defaults())
+    other = json.dumps({"resolution": 1.5, "keyframe_interval": 9.0})
+    for seq, y in default_rte.items():
+        con.execute("INSERT INTO trials VALUES ('trials', 'ndt', ?, 0, 'ok', ?, ?)",
+                    [seq, y, defaults])
+        con.execute("INSERT INTO trials VALUES ('trials', 'ndt', ?, 1, 'ok', 0.01, ?)",
+                    [seq, other])
+    joint = {2: (0.5, {"resolution": 2.5, "keyframe_interval": 6.0}),
+             3: (0.9, {"resolution": 3.0, "keyframe_interval": 1.0})}
+    for trial, (objective, params) in joint.items():
+        con.execute("INSERT INTO trials VALUES ('fixed', 'ndt', '__joint__', ?, 'ok', ?, ?)",
+                    [trial, objective, json.dumps(params)])
+        for seq, y in fixed_rte.items():  # two frames each, mean y (trial 3: worse)
+            for frame, dy in ((0, -0.1), (1, 0.1)):
+                con.execute("INSERT INTO rte_frames VALUES ('fixed', 'ndt', ?, ?, ?, ?)",
+                            [seq, trial, frame, y + dy + (trial - 2)])
+    con.close()
+
+
+def test_novelty_fallback_is_fixed_only_where_it_beats_the_defaults_everywhere(
+    tmp_path: Path,
+) -> None:
+    space = get_adapter("ndt").space.to_json()
+    fallback_db(tmp_path / "a.duckdb", {"cave_0": 1.0, "street_0": 0.6},
+                {"cave_0": 3.0, "street_0": 0.7})
+    defaults = get_adapter("ndt").space.defaults()
+    evidence = read_fallback_evidence(tmp_path / "a.duckdb", "ndt", defaults)
+    assert evidence is not None and evidence.fixed_trial == 2
+    assert evidence.fixed == {"resolution": 2.5, "keyframe_interval": 6.0}
+    assert sorted(evidence.per_sequence) == ["cave_0", "street_0"]
+    np.testing.assert_allclose(evidence.per_sequence["cave_0"], (1.0, 3.0))
+    np.testing.assert_allclose(evidence.per_sequence["street_0"], (0.6, 0.7))
+    params, record = novelty_fallback(tmp_path / "a.duckdb", "ndt", space, "auto")
+    assert params == evidence.fixed and record["chosen"] == "fixed"
+    # the defaults win one sequence: auto keeps them, 'fixed' does not ask
+    fallback_db(tmp_path / "b.duckdb", {"cave_0": 1.0, "street_0": 0.8},
+                {"cave_0": 3.0, "street_0": 0.7})
+    params, record = novelty_fallback(tmp_path / "b.duckdb", "ndt", space, "auto")
+    assert params is None and record["chosen"] == "defaults"
+    assert record["per_sequence"]["street_0"] == pytest.approx(
+        {"fixed_rte_pct": 0.8, "defaults_rte_pct": 0.7})
+    assert novelty_fallback(tmp_path / "b.duckdb", "ndt", space, "fixed")[0] == evidence.fixed
+    assert novelty_fallback(tmp_path / "b.duckdb", "ndt", space, "defaults")[0] is None
+    with pytest.raises(ConfigError, match="novelty_fallback must be one of"):
+        choose_fallback("fixed-ish", evidence)
+    with pytest.raises(InputError, match="needs the joint study"):
+        choose_fallback("fixed", None)
