@@ -379,8 +379,8 @@ def read_fallback_evidence(
     db_path: str | Path, algorithm: str, defaults: Mapping[str, float]
 ) -> FallbackEvidence | None:
     """``FallbackEvidence`` of ``algorithm`` from the results database (None without a
-    successful joint trial or without the trials tables). A sequence whose study has no trial with the defaults is left
-    out."""
+    successful joint trial or without the trials tables). A sequence whose study has no trial
+    with the defaults is left out."""
     import duckdb
 
     con = duckdb.connect(str(db_path), read_only=True)
