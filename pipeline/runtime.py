@@ -53,7 +53,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeAlias
 
 import numpy as np
 from numpy.typing import NDArray
@@ -475,14 +475,13 @@ class GroupedNeighbourhood:
         )
 
 
+F64: TypeAlias = NDArray[np.float64]
+I64: TypeAlias = NDArray[np.int64]
+
+
 def knn_mean_numpy(
-    trial_d2: NDArray[np.float64],
-    trial_pos: NDArray[np.int64],
-    frame_d2: NDArray[np.float64],
-    frame_row0: NDArray[np.int64],
-    rows_t: NDArray[np.float64],
-    k: int,
-) -> NDArray[np.float64]:
+    trial_d2: F64, trial_pos: I64, frame_d2: F64, frame_row0: I64, rows_t: F64, k: int
+) -> F64:
     """``pipeline.runtime_kernel.knn_mean`` in numpy (same arguments, same values): (n,).
 
     Only the pairs (a, j) with (a + 1)(j + 1) <= k can be among a group's k nearest: a pair
