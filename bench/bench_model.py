@@ -5,7 +5,8 @@
   (paper: 700 ms; target <= 5 ms). The rows are synthetic but realistic: environments are
   mixtures of the real KITTI descriptors, parameters TPE-like (clustered per sequence), and
   the RTE depends on both. The selection is timed from the environment E_t (the descriptor is
-  the row above) and also end to end from the scan.
+  the row above) and also end to end from the scan; the reference in the same run is the
+  certified kd-tree search the runtime keeps for artifacts whose frames do not group.
 """
 
 from __future__ import annotations
