@@ -315,6 +315,13 @@ def test_surrogate_stage(tmp_path: Path, kitti_root: Path) -> None:
     )
     assert res.exit_code == 1 and "no surrogate rows for algorithm 'gicp'" in res.output
     assert not (tmp_path / "m2").exists()
+    # the fixed parameters as fallback, but no joint study in the database: one line, exit 1
+    params.write_text("surrogate:\n  n_sobol: 32\n  cv_max_frames: 3\n  novelty_fallback: fixed\n")
+    args = ["surrogate", "--params", str(params), "--db", str(db), "--pca", str(tmp_path / "pca"),
+            "--out", str(tmp_path / "m3")]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 1 and "needs the joint study" in res.output
+    assert len(res.output.strip().splitlines()) == 1 and not (tmp_path / "m3").exists()
 
 
 def fallback_db(path: Path, fixed_rte: dict[str, float], default_rte: dict[str, float]) -> None:
