@@ -302,12 +302,17 @@ class Prediction:
     exact: NDArray[np.bool_]
 
 
+def environment_d2(model: Model, e_s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Squared distance (n_env,) of every training frame's scaled environment to E_s (D,)."""
+    diff = model.env - e_s
+    return np.einsum("ij,ij->i", diff, diff)
+
+
 class Neighbourhood:
     """The rows near one environment E_s, as a (P + 1)-D tree (module docstring, step 3)."""
 
     def __init__(self, model: Model, e_s: NDArray[np.float64], subset_rows: int) -> None:
-        diff = model.env - e_s
-        d2 = np.einsum("ij,ij->i", diff, diff)
+        d2 = environment_d2(model, e_s)
         self.nearest = float(np.sqrt(d2.min()))  # E-distance to the closest training frame
         counts = np.diff(model.env_offsets)
         n_env = len(d2)
@@ -378,11 +383,8 @@ class TrialGroups:
         """``blocks``: the frames of each group (frames whose rows hold the same trial vectors
         in the same order); candidates_u (C, P): the selector's candidate set."""
         offsets = model.env_offsets
+        self.model = model
         self.k = model.k
-        self.x_scale = model.x_scale
-        self.env = model.env
-        self.env_offsets = offsets
-        self.rows_t = model.rows_t
         self.trees = [cKDTree(model.rows_x[offsets[f[0]] : offsets[f[0] + 1]]) for f in blocks]
         self.frame_table = np.full((len(blocks), max(map(len, blocks))), -1, np.int64)  # (G, F)
         for g, frames in enumerate(blocks):
@@ -413,7 +415,7 @@ class TrialGroups:
         n = len(U)
         d2 = np.full((n, len(self.trees), self.k), np.inf)
         pos = np.zeros((n, len(self.trees), self.k), np.int64)
-        q = U * self.x_scale
+        q = U * self.model.x_scale
         for g, tree in enumerate(self.trees):
             kk = min(self.k, tree.n)
             dist, idx = tree.query(q, k=kk)
@@ -437,7 +439,8 @@ class TrialGroups:
         frame_d2 = np.full((len(table), self.k), np.inf)
         frame_row0 = np.zeros((len(table), self.k), np.int64)
         frame_d2[:, :kk] = np.take_along_axis(d2, order, 1)
-        frame_row0[:, :kk] = self.env_offsets[np.maximum(np.take_along_axis(table, order, 1), 0)]
+        frames = np.maximum(np.take_along_axis(table, order, 1), 0)  # padding -> frame 0
+        frame_row0[:, :kk] = self.model.env_offsets[frames]
         return frame_d2, frame_row0
 
 
@@ -445,12 +448,11 @@ class GroupedNeighbourhood:
     """TrialGroups at one environment E_s: the exact kNN over every row (step 3)."""
 
     def __init__(self, groups: TrialGroups, e_s: NDArray[np.float64]) -> None:
-        diff = groups.env - e_s
-        env_d2 = np.einsum("ij,ij->i", diff, diff)
+        env_d2 = environment_d2(groups.model, e_s)
         self.nearest = float(np.sqrt(env_d2.min()))  # E-distance to the closest training frame
         self.groups = groups
         self.frame_d2, self.frame_row0 = groups.nearest_frames(env_d2)
-        self.rows_searched = len(groups.rows_t)  # all of them
+        self.rows_searched = len(groups.model.rows_t)  # all of them
 
     def predict(self, U: NDArray[np.float64]) -> Prediction:
         """Prediction at unit points U (C, P), every value exact."""
@@ -471,7 +473,8 @@ class GroupedNeighbourhood:
         self, trial_d2: NDArray[np.float64], trial_pos: NDArray[np.int64]
     ) -> NDArray[np.float64]:
         return _knn_mean_kernel()(
-            trial_d2, trial_pos, self.frame_d2, self.frame_row0, self.groups.rows_t, self.groups.k
+            trial_d2, trial_pos, self.frame_d2, self.frame_row0, self.groups.model.rows_t,
+            self.groups.k,
         )
 
 
