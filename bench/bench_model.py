@@ -40,7 +40,8 @@ def synthetic_rows(
     seed: int = 0,
 ):
     """TrainingRows of n_seq x n_frames x n_trials with environments mixed from real descriptors."""
-    from pipeline.surrogate import TrainingRows, fit_pca
+    from pipeline.pca import fit_pca
+    from pipeline.surrogates.rows import TrainingRows
 
     rng = np.random.default_rng(seed)
     n_env = n_seq * n_frames
@@ -69,10 +70,11 @@ def synthetic_rows(
 
 
 def run() -> list[Row]:
+    from pipeline.artifact import ArtifactInfo, write_artifact
     from pipeline.descriptor import DescriptorConfig
     from pipeline.odometry.registry import get_adapter
     from pipeline.runtime import Neighbourhood, Selector, load_model
-    from pipeline.surrogate import ArtifactInfo, SurrogateSettings, fit_surrogate, write_artifact
+    from pipeline.surrogates.fit import SurrogateSection, fit_surrogate
 
     scans = kitti_scans()
     per_scan = [best_of(lambda s=s: describe(s), repeat=5) for s in scans]
@@ -89,7 +91,7 @@ def run() -> list[Row]:
     descs = np.stack([describe(s) for s in scans])
     space = get_adapter("gicp").space.to_json()
     rows, pca = synthetic_rows(descs, len(space))
-    fitted = fit_surrogate(rows, space, SurrogateSettings(n_sobol=1024, cv_max_frames=2))
+    fitted = fit_surrogate(rows, space, SurrogateSection(n_sobol=1024, cv_max_frames=2))
     selection = {
         "period_s": 1.0,
         "hysteresis": 0.02,

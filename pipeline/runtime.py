@@ -40,8 +40,8 @@ Selection (x_t = argmin_x S(E_t, x), S = the kNN mean of k training targets):
    surrogate would be extrapolating; the selector then falls back to the manifest's
    ``novelty_fallback_params`` (the joint study's fixed parameters, when the surrogate stage
    found them better than the defaults on every training sequence:
-   ``pipeline.surrogate.choose_fallback``), else the adapter's defaults, until the scans look
-   familiar again. ``null`` as novelty_distance disables it.
+   ``pipeline.surrogates.novelty.choose_fallback``), else the adapter's defaults, until the
+   scans look familiar again. ``null`` as novelty_distance disables it.
 """
 
 from __future__ import annotations
@@ -59,8 +59,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from pipeline.artifact import ARTIFACT_KIND, MANIFEST_HASH_KEY, canonical_manifest_hash
 from pipeline.descriptor import DescriptorConfig, describe
 from pipeline.errors import ArtifactError
+from pipeline.unit_cube import UnitCube
 
 SCHEMA_VERSION = "1.0"  # = schemas.SCHEMA_VERSION (not imported: schemas pulls in nothing heavy
 # today, but the runtime must stay importable on its own)
@@ -75,22 +77,12 @@ REQUIRED_FILES = (
     "pca_components.npy",
     "pca_scale.npy",
 )
-MANIFEST_HASH_KEY = "manifest_sha256"
-
 Params = dict[str, float]
-
-
-def canonical_manifest_hash(manifest: dict[str, Any]) -> str:
-    """sha256 of the manifest without its own hash, as sorted compact JSON."""
-    body = {k: v for k, v in manifest.items() if k != MANIFEST_HASH_KEY}
-    return hashlib.sha256(
-        json.dumps(body, sort_keys=True, separators=(",", ":")).encode()
-    ).hexdigest()
 
 
 @dataclass
 class Model:
-    """A loaded, verified artifact (see ``pipeline.surrogate.write_artifact`` for the arrays)."""
+    """A loaded, verified artifact (see ``pipeline.artifact.write_artifact`` for the arrays)."""
 
     path: Path
     manifest: dict[str, Any]
@@ -149,33 +141,18 @@ class Model:
         e = ((np.sqrt(np.maximum(d, 0.0)) - self.pca_mean) / self.pca_scale) @ self.pca_components.T
         return e * self.e_factor
 
-    # parameter <-> unit cube, vectorised, same rules as ParameterSpace.to_unit / from_unit
+    @functools.cached_property
+    def cube(self) -> UnitCube:
+        """The parameter space's mapping to the unit cube."""
+        return UnitCube.of(self.space)
+
     def from_unit(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
         """(C, P) in [0, 1] -> (C, P) parameter values (clipped; ints rounded)."""
-        U = np.clip(np.atleast_2d(np.asarray(U, np.float64)), 0.0, 1.0)
-        out = np.empty_like(U)
-        for j, s in enumerate(self.space):
-            lo, hi = float(s["low"]), float(s["high"])
-            if s["log"]:
-                v = np.exp(math.log(lo) + U[:, j] * (math.log(hi) - math.log(lo)))
-            else:
-                v = lo + U[:, j] * (hi - lo)
-            v = np.round(v) if s["kind"] == "int" else v
-            out[:, j] = np.clip(v, lo, hi)
-        return out
+        return self.cube.from_unit(U)
 
     def to_unit(self, X: NDArray[np.float64]) -> NDArray[np.float64]:
         """(C, P) parameter values -> (C, P) in [0, 1]."""
-        X = np.atleast_2d(np.asarray(X, np.float64))
-        out = np.empty_like(X)
-        for j, s in enumerate(self.space):
-            lo, hi = float(s["low"]), float(s["high"])
-            if s["log"]:
-                lo, hi, x = math.log(lo), math.log(hi), np.log(X[:, j])
-            else:
-                x = X[:, j]
-            out[:, j] = (x - lo) / (hi - lo) if hi > lo else 0.0
-        return out
+        return self.cube.to_unit(X)
 
     def snap(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
         """Unit points moved onto realisable parameters (ints rounded): (C, P)."""
@@ -238,7 +215,7 @@ def _read_manifest(path: Path) -> dict[str, Any]:
         manifest = json.loads(mpath.read_bytes().decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ArtifactError(f"{mpath}: damaged manifest ({exc})") from None
-    if not isinstance(manifest, dict) or manifest.get("kind") != "adaptune.surrogate":
+    if not isinstance(manifest, dict) or manifest.get("kind") != ARTIFACT_KIND:
         raise ArtifactError(f"{mpath}: not an adaptune surrogate manifest")
     if manifest.get(MANIFEST_HASH_KEY) != canonical_manifest_hash(manifest):
         raise ArtifactError(f"{mpath}: manifest checksum mismatch (the manifest was altered)")

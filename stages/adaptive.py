@@ -30,11 +30,12 @@ def adaptive(params_path: Path, model_dir: Path, sequence_dir: Path, split: str 
     from pipeline.adaptive import run_adaptive
     from pipeline.config import load_section
     from pipeline.report.evaluate import EvaluateSection
-    from pipeline.tuning.smbo import TrialsSection, sequences_of_split
+    from pipeline.sequence_index import read_index
+    from pipeline.tuning.smbo import TrialsSection
 
     trials = load_section(params_path, "trials", TrialsSection)
     section = load_section(params_path, "evaluate", EvaluateSection)
-    paths = sequences_of_split(sequence_dir, split or section.split)
+    paths = read_index(sequence_dir).paths(split or section.split)
     for run in run_adaptive(model_dir, paths, out_dir, trials.adapter_options):
         click.echo(f"{run.sequence}: {run.frames} frames, {run.selections} selections, "
                    f"{run.changes} parameter changes, {run.wall_time_s:.1f} s", err=True)

@@ -66,7 +66,8 @@ def trials(
     """SMBO trials: per sequence, or one joint study (--joint) into OUT."""
     from pipeline.config import BaseSection, load_section, validate_section
     from pipeline.errors import ConfigError
-    from pipeline.tuning.smbo import FixedSection, TrialsSection, run_trials, sequences_of_split
+    from pipeline.sequence_index import read_index
+    from pipeline.tuning.smbo import FixedSection, TrialsSection, run_trials
 
     section = load_section(params_path, "trials", TrialsSection)
     if joint:  # the `fixed` section overrides `trials` for the joint study
@@ -92,7 +93,7 @@ def trials(
     if bool(sequence_paths) == (sequence_dir is not None):
         raise ConfigError("give either SEQ.mcap paths or --sequences DIR, not both or neither")
     paths = (
-        sequences_of_split(sequence_dir, settings.split)
+        read_index(sequence_dir).paths(settings.split)
         if sequence_dir is not None
         else list(sequence_paths)
     )

@@ -24,10 +24,10 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def test_every_section_of_the_repository_params_validates() -> None:
+    from pipeline.descriptors.dataset import DescriptorsSection
     from pipeline.evaluation.store import RteSection
     from pipeline.report.evaluate import EvaluateSection
-    from stages.descriptors import DescriptorsSection
-    from stages.surrogate import SurrogateSection
+    from pipeline.surrogates.fit import SurrogateSection
 
     models = {"base": BaseSection, "simulate": SimulateSection, "ingest": IngestSection,
               "descriptors": DescriptorsSection, "trials": TrialsSection, "fixed": FixedSection,

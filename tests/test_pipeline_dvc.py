@@ -82,10 +82,10 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
 
     from pipeline.evaluation.trials import read_trials_tables
     from pipeline.odometry.base import Schedule
+    from pipeline.pca import Pca
     from pipeline.report.evaluate import SETTINGS
     from pipeline.runtime import load_model
     from pipeline.sequence import SequenceReader
-    from pipeline.surrogate import Pca
     from pipeline.trajectory import read_trajectory
     from schemas.arrow import DESCRIPTORS, check_schema_version
 

@@ -27,7 +27,7 @@ from pipeline.runtime import (
     load_model,
 )
 from pipeline.sequence import SequenceReader
-from pipeline.surrogate import SurrogateSettings
+from pipeline.surrogates.fit import SurrogateSection
 from stages.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -288,7 +288,7 @@ def test_unfamiliar_scans_get_the_fallback(tmp_path: Path, kitti_root: Path) -> 
     assert fixed.select_environment(familiar) == first
     # without a novelty distance (null in the manifest) the surrogate always decides
     off = load_model(build_model(tmp_path / "off", kitti_root,
-                                 settings=SurrogateSettings(n_sobol=256, cv_max_frames=5,
+                                 settings=SurrogateSection(n_sobol=256, cv_max_frames=5,
                                                             novelty_quantile=None)))
     assert off.selection["novelty_distance"] is None
     unguarded = Selector(off, hysteresis=0.0)

@@ -1,5 +1,6 @@
-"""PCA, the kNN surrogate, its cross-validation and the artifact (pipeline/surrogate.py), and the
-`descriptors` / `surrogate` stages. Environments come from real KITTI scans."""
+"""PCA (pipeline/pca.py), the kNN surrogate, its cross-validation (pipeline/surrogates/), the
+artifact (pipeline/artifact.py), and the `descriptors` / `surrogate` stages. Environments come
+from real KITTI scans."""
 
 from __future__ import annotations
 
@@ -14,23 +15,16 @@ import pyarrow as pa
 import pytest
 from click.testing import CliRunner
 
+from pipeline.artifact import ArtifactInfo, write_artifact
 from pipeline.descriptor import DescriptorConfig, describe
 from pipeline.errors import ConfigError, InputError
 from pipeline.odometry.registry import get_adapter
+from pipeline.pca import Pca, fit_pca
 from pipeline.runtime import load_model
 from pipeline.sequence import SequenceInfo, SequenceWriter
-from pipeline.surrogate import (
-    ArtifactInfo,
-    Pca,
-    SurrogateSettings,
-    TrainingRows,
-    choose_fallback,
-    fit_pca,
-    fit_surrogate,
-    novelty_fallback,
-    read_fallback_evidence,
-    write_artifact,
-)
+from pipeline.surrogates.fit import SurrogateSection, fit_surrogate
+from pipeline.surrogates.novelty import choose_fallback, novelty_fallback, read_fallback_evidence
+from pipeline.surrogates.rows import TrainingRows
 from schemas import read_text
 from stages.cli import main
 
@@ -92,11 +86,11 @@ def build_model(
     algorithm: str = "ndt",
     selection: dict | None = None,
     trials: int = 24,
-    settings: SurrogateSettings | None = None,
+    settings: SurrogateSection | None = None,
 ) -> Path:
     rows, pca = synthetic_rows(kitti_root, trials)
     space = get_adapter(algorithm).space.to_json()
-    fitted = fit_surrogate(rows, space, settings or SurrogateSettings(n_sobol=256, cv_max_frames=5))
+    fitted = fit_surrogate(rows, space, settings or SurrogateSection(n_sobol=256, cv_max_frames=5))
     info = ArtifactInfo(algorithm, space, DescriptorConfig(), selection or SELECTION)
     write_artifact(out, fitted, pca, info)
     return out
@@ -143,7 +137,7 @@ def test_artifact_round_trip(tmp_path: Path, kitti_root: Path) -> None:
 def test_cross_validation_is_leave_one_sequence_out(tmp_path: Path, kitti_root: Path) -> None:
     rows, _ = synthetic_rows(kitti_root)
     fitted = fit_surrogate(
-        rows, get_adapter("ndt").space.to_json(), SurrogateSettings(n_sobol=64, cv_max_frames=10)
+        rows, get_adapter("ndt").space.to_json(), SurrogateSection(n_sobol=64, cv_max_frames=10)
     )
     cv = fitted.cv
     assert cv["folds"] == 4 and set(cv["per_sequence"]) == set(SEQS)
@@ -156,17 +150,17 @@ def test_cross_validation_is_leave_one_sequence_out(tmp_path: Path, kitti_root: 
 def test_novelty_distance_is_the_leave_one_sequence_out_quantile(kitti_root: Path) -> None:
     rows, _ = synthetic_rows(kitti_root)
     space = get_adapter("ndt").space.to_json()
-    fitted = fit_surrogate(rows, space, SurrogateSettings(n_sobol=0, cv_max_frames=2))
+    fitted = fit_surrogate(rows, space, SurrogateSection(n_sobol=0, cv_max_frames=2))
     seqs = np.array(fitted.env_sequences)
     d = np.linalg.norm(fitted.env[:, None] - fitted.env[None], axis=2)
     d[seqs[:, None] == seqs[None]] = np.inf  # only frames of other sequences
     nearest = d.min(axis=1)
     assert fitted.novelty_distance == pytest.approx(nearest.max(), rel=1e-12)  # default q = 1
-    q90 = fit_surrogate(rows, space, SurrogateSettings(n_sobol=0, cv_max_frames=2,
+    q90 = fit_surrogate(rows, space, SurrogateSection(n_sobol=0, cv_max_frames=2,
                                                        novelty_quantile=0.9))
     assert q90.novelty_distance == pytest.approx(np.quantile(nearest, 0.9), rel=1e-12)
     assert 0 < q90.novelty_distance < fitted.novelty_distance
-    off = fit_surrogate(rows, space, SurrogateSettings(n_sobol=0, cv_max_frames=2,
+    off = fit_surrogate(rows, space, SurrogateSection(n_sobol=0, cv_max_frames=2,
                                                        novelty_quantile=None))
     assert off.novelty_distance is None
 

@@ -28,6 +28,7 @@ from pipeline.evaluation.kitti import LENGTHS_M, STEP_FRAMES
 from pipeline.evaluation.trials import read_trials_tables
 from pipeline.geometry import path_distances
 from pipeline.io_utils import atomic_path
+from pipeline.sequence_index import read_index
 from schemas import read_text
 from schemas.arrow import POSE_COLUMNS
 
@@ -133,7 +134,7 @@ def load_sequences(con: duckdb.DuckDBPyConnection, sequences_dir: Path) -> None:
 
     if not sequences_dir.is_dir():
         raise InputError(f"{sequences_dir}: no such sequences directory")
-    splits = read_splits(sequences_dir / "index.json")
+    splits = read_index(sequences_dir, missing_ok=True).split_of()
     paths = sorted(sequences_dir.glob("*.mcap"))
     if not paths:
         log.warning("%s: no sequence MCAP files", sequences_dir)
@@ -154,17 +155,6 @@ def load_sequences(con: duckdb.DuckDBPyConnection, sequences_dir: Path) -> None:
             log.warning("%s: no ground truth; its trials cannot be scored", path)
             continue
         insert_arrow(con, "ground_truth", ground_truth_table(name, stamps_ns, gt))
-
-
-def read_splits(index_path: Path) -> dict[str, str]:
-    """Sequence name -> split from data/sequences/index.json ({} when there is none)."""
-    if not index_path.is_file():
-        return {}
-    try:
-        data = json.loads(index_path.read_text(encoding="utf-8"))
-        return {str(n): str(split) for split, names in data.items() for n in names}
-    except (json.JSONDecodeError, AttributeError, TypeError) as exc:
-        raise InputError(f"{index_path}: expected {{split: [sequence, ...]}} ({exc})") from None
 
 
 def ground_truth_table(sequence: str, stamps_ns: np.ndarray, gt: np.ndarray) -> pa.Table:

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from pipeline.errors import ConfigError, InputError
 from pipeline.sequence import Scan
 from pipeline.trajectory import Trajectory
+from pipeline.unit_cube import UnitCube
 
 Params = dict[str, float]
 """Parameter name -> value (ints are stored as floats with integral values)."""
@@ -93,26 +94,20 @@ class ParameterSpace:
         out.update({k: self[k].check(v) for k, v in params.items()})
         return out
 
+    @property
+    def unit_cube(self) -> UnitCube:
+        """The mapping of these parameters to [0, 1]^D (log parameters on a log scale)."""
+        return UnitCube.of(self.specs)
+
     def to_unit(self, params: Mapping[str, float]) -> NDArray[np.float64]:
-        """Map params to [0, 1]^D (log parameters on a log scale). (D,) float64."""
-        out = []
-        for s in self.specs:
-            v = float(params[s.name])
-            lo, hi = (math.log(s.low), math.log(s.high)) if s.log else (s.low, s.high)
-            x = math.log(v) if s.log else v
-            out.append((x - lo) / (hi - lo) if hi > lo else 0.0)
-        return np.array(out)
+        """Map params to [0, 1]^D (``UnitCube.to_unit``). (D,) float64."""
+        cube = self.unit_cube
+        return cube.to_unit(cube.values(params))[0]
 
     def from_unit(self, u: NDArray[np.float64]) -> Params:
-        """Inverse of ``to_unit`` (clipped to [0, 1], ints rounded)."""
-        out = {}
-        for s, ui in zip(self.specs, np.clip(np.asarray(u, np.float64), 0.0, 1.0), strict=True):
-            if s.log:
-                v = math.exp(math.log(s.low) + ui * (math.log(s.high) - math.log(s.low)))
-            else:
-                v = s.low + ui * (s.high - s.low)
-            out[s.name] = float(round(v)) if s.kind == "int" else float(min(max(v, s.low), s.high))
-        return out
+        """Inverse of ``to_unit`` (clipped to [0, 1], ints rounded; ``UnitCube.from_unit``)."""
+        cube = self.unit_cube
+        return cube.params(cube.from_unit(u)[0])
 
     def to_json(self) -> list[dict[str, object]]:
         """Plain description (for manifests and reports)."""

@@ -50,10 +50,10 @@ def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection,
     """Evaluate baseline, fixed and adaptive on the ``settings.split`` sequences; write
     everything; return the metrics."""
     from pipeline.evaluation.trials import read_trials_tables
-    from pipeline.tuning.smbo import sequences_of_split
+    from pipeline.sequence_index import read_index
 
     algorithm, fixed = best_fixed_params(paths.fixed)
-    sequences = sequences_of_split(paths.sequences, settings.split)
+    sequences = read_index(paths.sequences).paths(settings.split)
     ev = evaluate(sequences, algorithm, fixed, paths.adaptive, paths.runs, settings,
                   adapter_options)
     result = metrics(ev, trials_summary({"trials": paths.trials, "fixed": paths.fixed}))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import logging
 from pathlib import Path
 from typing import Literal
@@ -10,7 +9,7 @@ from typing import Literal
 from pydantic import Field, field_validator
 
 from pipeline.config import Section
-from pipeline.io_utils import atomic_write_text
+from pipeline.sequence_index import write_index
 from pipeline.sim.route import LABELS
 from pipeline.sim.simulate import SimSpec, SimSummary, derive_seed, simulate_sequence
 from pipeline.sim.worlds import WORLDS
@@ -94,5 +93,5 @@ def simulate_set(
     for name, (split, spec) in dataset_specs(section, base_seed).items():
         done.append(simulate_sequence(spec, out_dir / f"{name}.mcap", name=name, progress=progress))
         index[split].append(name)
-    atomic_write_text(out_dir / "index.json", json.dumps(index, indent=2) + "\n")
+    write_index(out_dir, index)
     return done

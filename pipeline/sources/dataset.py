@@ -8,14 +8,13 @@ configured it writes an empty index (the toy pipeline then runs on the simulated
 
 from __future__ import annotations
 
-import json
 import logging
 from pathlib import Path
 
 from pydantic import Field, model_validator
 
 from pipeline.config import Section
-from pipeline.io_utils import atomic_write_text
+from pipeline.sequence_index import write_index
 from pipeline.sources.base import IngestReport
 from pipeline.sources.kitti import ingest_kitti
 
@@ -59,5 +58,5 @@ def ingest_kitti_set(section: IngestSection, out_dir: str | Path) -> list[Ingest
             reports.append(ingest_kitti(section.kitti_root, seq, out_dir / f"{seq}.mcap",
                                         section.start, section.end, name=seq))
     index = {"train": list(section.train), "validation": list(section.validation)}
-    atomic_write_text(out_dir / "index.json", json.dumps(index, indent=2) + "\n")
+    write_index(out_dir, index)
     return reports

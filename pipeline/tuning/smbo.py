@@ -328,24 +328,3 @@ def _result_of(fut: Future[TrialResult], tid: int) -> TrialResult:
         raise OdometryError(f"trial {tid}: the executor failed ({type(exc).__name__}: {exc}); "
                             "finished trials are saved, run again to resume") from exc
 
-
-def sequences_of_split(folder: str | Path, split: str) -> list[Path]:
-    """The MCAPs of ``split`` in ``folder/index.json`` ({"train": [stem, ...], ...})."""
-    import json
-
-    folder = Path(folder)
-    index = folder / "index.json"
-    try:
-        data = json.loads(index.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{index}: no such sequence index") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{index}: not valid JSON ({exc})") from None
-    if not isinstance(data, dict) or not isinstance(data.get(split), list) or not data[split]:
-        known = ", ".join(sorted(data)) if isinstance(data, dict) else "none"
-        raise InputError(f"{index}: no sequences in split {split!r} (splits: {known})")
-    paths = [folder / f"{name}.mcap" for name in data[split]]
-    missing = [p for p in paths if not p.is_file()]
-    if missing:
-        raise InputError(f"{index}: split {split!r} lists {missing[0].name}, which does not exist")
-    return paths

@@ -1,0 +1,1 @@
+"""Environment descriptors of scans and of whole data sets."""

@@ -1,0 +1,91 @@
+"""The index of a sequences folder: ``<folder>/index.json``, split name -> sequence names.
+
+``{"train": ["cave_0", ...], "validation": ["composite_0"]}``: every name is the file stem of
+``<folder>/<name>.mcap``. Written by the ``simulate`` and ``ingest`` stages (``write_index``),
+read by every later stage through ``read_index`` (docs/design.md, "Formats").
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from pipeline.errors import InputError
+
+INDEX_NAME = "index.json"
+
+
+@dataclass(frozen=True)
+class SequenceIndex:
+    """The splits of one sequences folder (names in file order, every split a list)."""
+
+    folder: Path
+    splits: dict[str, list[str]] = field(default_factory=dict)
+
+    @property
+    def path(self) -> Path:
+        return self.folder / INDEX_NAME
+
+    def names(self, split: str) -> list[str]:
+        """The sequence names of ``split``; InputError when it is missing or empty."""
+        names = self.splits.get(split)
+        if not names:
+            known = ", ".join(sorted(self.splits)) or "none"
+            raise InputError(f"{self.path}: no sequences in split {split!r} (splits: {known})")
+        return list(names)
+
+    def paths(self, split: str) -> list[Path]:
+        """The MCAP paths of ``split``; InputError when one does not exist."""
+        paths = [self.folder / f"{name}.mcap" for name in self.names(split)]
+        missing = [p for p in paths if not p.is_file()]
+        if missing:
+            raise InputError(f"{self.path}: split {split!r} lists {missing[0].name}, "
+                             "which does not exist")
+        return paths
+
+    def all_names(self) -> list[str]:
+        """Every listed sequence once, in split order."""
+        return list(dict.fromkeys(n for names in self.splits.values() for n in names))
+
+    def split_of(self) -> dict[str, str]:
+        """Sequence name -> split (the first split that lists it)."""
+        out: dict[str, str] = {}
+        for split, names in self.splits.items():
+            for name in names:
+                out.setdefault(name, split)
+        return out
+
+
+def read_index(folder: str | Path, missing_ok: bool = False) -> SequenceIndex:
+    """``folder``/index.json, validated as {split: [name, ...]}.
+
+    InputError when it is missing (unless ``missing_ok``: then no splits), not JSON, or not a
+    mapping of lists of names.
+    """
+    folder = Path(folder)
+    path = folder / INDEX_NAME
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        if missing_ok:
+            return SequenceIndex(folder)
+        raise InputError(f"{path}: no such sequence index (written by the simulate or ingest "
+                         "stage)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read the sequence index ({exc})") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(data, dict) or not all(
+        isinstance(names, list) and all(isinstance(n, str) and n for n in names)
+        for names in data.values()
+    ):
+        raise InputError(f"{path}: expected {{split: [sequence name, ...]}}")
+    return SequenceIndex(folder, {str(k): list(v) for k, v in data.items()})
+
+
+def write_index(folder: str | Path, splits: dict[str, list[str]]) -> None:
+    """Write ``folder``/index.json atomically."""
+    from pipeline.io_utils import atomic_write_text
+
+    atomic_write_text(Path(folder) / INDEX_NAME, json.dumps(splits, indent=2) + "\n")

@@ -1,0 +1,220 @@
+"""Fitting the surrogate S(E, x) ~ y from the training rows (docs/design.md, "Surrogate").
+
+Scalings (every choice the paper leaves open):
+
+- Surrogate features: E_s = w_e * E / e_scale with e_scale the RMS per dimension of E over the
+  training frames (one number: the PCA geometry is kept, an average dimension has unit
+  variance); X_s = w_x * sqrt(12) * u where u = ``UnitCube.to_unit(x)`` in [0, 1]^P (log
+  parameters on a log scale; sqrt(12) gives a uniformly sampled parameter unit variance).
+  Distance: Euclidean on [E_s, X_s].
+- Target: t = log1p(y) (``target: log``, default) or t = y (``linear``). kNN averages t, so with
+  ``log`` one diverged trial (y of tens of %) no longer dominates the mean of its neighbours.
+  Predictions are reported back in y units (expm1).
+- kNN: k nearest rows, uniform weights.
+- Candidates: every distinct trial parameter vector plus a scrambled Sobol set in the cube.
+- Cross-validation: ``pipeline.surrogates.cross_validation``; the novelty distance and the
+  fallback parameters: ``pipeline.surrogates.novelty``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import Field
+
+from pipeline.config import Section
+from pipeline.errors import ConfigError
+from pipeline.surrogates.rows import TrainingRows
+
+if TYPE_CHECKING:
+    from pipeline.descriptors.dataset import DescriptorsSection
+
+
+class SurrogateSection(Section):
+    """params.yaml ``surrogate``: the model (k, scalings, target, candidates, CV) and the
+    selection settings the artifact carries (pipeline/runtime.py documents them)."""
+
+    k: int = Field(5, ge=1)
+    w_e: float = Field(1.0, gt=0)
+    w_x: float = Field(1.0, gt=0)
+    target: Literal["log", "linear"] = "log"
+    n_sobol: int = Field(1024, ge=0)
+    seed: int = 0
+    cv_max_frames: int = Field(200, ge=1)
+    period_s: float = Field(1.0, gt=0)
+    hysteresis: float = Field(0.02, ge=0)
+    min_scan_points: int = Field(1000, ge=0)
+    subset_rows: int = Field(4096, ge=1)
+    refine_iters: int = Field(4, ge=0)
+    novelty_quantile: float | None = Field(1.0, gt=0, le=1)
+    novelty_fallback: Literal["defaults", "fixed", "auto"] = "auto"
+
+    def selection(self) -> dict[str, Any]:
+        """The manifest's ``selection`` block (the runtime's defaults)."""
+        return {
+            "period_s": self.period_s,
+            "hysteresis": self.hysteresis,
+            "min_scan_points": self.min_scan_points,
+            "subset_rows": self.subset_rows,
+            "refine_iters": self.refine_iters,
+        }
+
+
+@dataclass
+class FittedSurrogate:
+    """The fitted model as the artifact stores it (rows grouped by environment = frame).
+
+    env (n_env, D): scaled E_s of every training frame; env_offsets (n_env+1,): rows of env g are
+    rows env_offsets[g]:env_offsets[g+1]; rows_x (M, P): scaled X_s; rows_t (M,): target t;
+    candidates_u (C, P): candidate parameter vectors in [0, 1].
+    """
+
+    settings: SurrogateSection
+    e_scale: float
+    x_scale: float
+    env: NDArray[np.float64]
+    env_offsets: NDArray[np.int64]
+    env_sequences: list[str]
+    env_frames: NDArray[np.int64]
+    rows_x: NDArray[np.float64]
+    rows_t: NDArray[np.float64]
+    candidates_u: NDArray[np.float64]
+    summary: dict[str, Any]
+    cv: dict[str, Any]
+    novelty_distance: float | None = None
+
+    def joint_features(self) -> NDArray[np.float64]:
+        """(M, D + P) scaled features [E_s, X_s] of every row."""
+        counts = np.diff(self.env_offsets)
+        return np.hstack([np.repeat(self.env, counts, axis=0), self.rows_x])
+
+
+def to_target(y: NDArray[np.float64], target: str) -> NDArray[np.float64]:
+    """y [%] -> the averaged target t."""
+    return np.log1p(np.maximum(y, 0.0)) if target == "log" else np.asarray(y, np.float64)
+
+
+def from_target(t: NDArray[np.float64], target: str) -> NDArray[np.float64]:
+    """Inverse of ``to_target``."""
+    return np.expm1(t) if target == "log" else t
+
+
+def fit_surrogate(
+    rows: TrainingRows, space_json: list[dict[str, Any]], settings: SurrogateSection
+) -> FittedSurrogate:
+    """Scale the rows, group them by environment, build candidates, cross-validate."""
+    from pipeline.surrogates.cross_validation import cross_validate
+    from pipeline.surrogates.novelty import novelty_distance
+
+    if settings.target not in ("log", "linear"):
+        raise ConfigError(f"surrogate.target must be 'log' or 'linear', got {settings.target!r}")
+    seq_names, seq_code = np.unique(rows.sequences.astype(str), return_inverse=True)
+    seq_code = seq_code.reshape(-1).astype(np.int64)
+    span = int(rows.frames.max()) + 1
+    uniq, env_index = np.unique(seq_code * span + rows.frames, return_inverse=True)
+    env_index = env_index.reshape(-1)
+    order = np.argsort(env_index, kind="stable")
+    first = np.zeros(len(uniq), np.int64)
+    first[env_index[order][::-1]] = order[::-1]  # first row of each environment
+    E_env = rows.E[first]
+    e_scale = float(np.sqrt(np.mean((E_env - E_env.mean(0)) ** 2))) or 1.0
+    x_scale = settings.w_x * math.sqrt(12.0)
+    env = settings.w_e * E_env / e_scale
+    counts = np.bincount(env_index, minlength=len(uniq))
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    rows_x = rows.U[order] * x_scale
+    rows_t = to_target(rows.y[order], settings.target)
+    cands = candidate_set(rows.U, len(space_json), settings.n_sobol, settings.seed)
+    summary = {
+        "rows": len(rows.y),
+        "environments": len(uniq),
+        "sequences": sorted(set(rows.sequences.tolist())),
+        "trials": len(np.unique(seq_code * (int(rows.trials.max()) + 1) + rows.trials)),
+        "y_mean": float(rows.y.mean()),
+        "y_median": float(np.median(rows.y)),
+        "candidates": len(cands),
+    }
+    cv = cross_validate(rows, settings, e_scale, x_scale)
+    env_sequences = [str(seq_names[u // span]) for u in uniq]
+    novelty = novelty_distance(env, np.array(env_sequences), settings.novelty_quantile)
+    summary["novelty_distance"] = novelty
+    return FittedSurrogate(
+        settings,
+        e_scale,
+        x_scale,
+        env,
+        offsets,
+        env_sequences,
+        (uniq % span).astype(np.int64),
+        rows_x,
+        rows_t,
+        cands,
+        summary,
+        cv,
+        novelty,
+    )
+
+
+def candidate_set(
+    U: NDArray[np.float64], n_params: int, n_sobol: int, seed: int
+) -> NDArray[np.float64]:
+    """(C, P) candidates in [0, 1]: every distinct trial parameter vector plus a Sobol set."""
+    from scipy.stats import qmc
+
+    distinct = np.unique(np.round(U, 12), axis=0)
+    parts = [distinct]
+    if n_sobol > 0:
+        m = max(1, math.ceil(math.log2(n_sobol)))
+        parts.append(qmc.Sobol(n_params, scramble=True, seed=seed).random_base2(m)[:n_sobol])
+    return np.clip(np.vstack(parts), 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class ModelInputs:
+    """Where the ``surrogate`` stage reads from: the results database, the PCA folder."""
+
+    db: Path
+    pca: Path
+
+
+def build_model(
+    inputs: ModelInputs,
+    out: str | Path,
+    section: SurrogateSection,
+    descriptors: DescriptorsSection,
+    space_of: Callable[[str], Any],
+    algorithm: str | None = None,
+) -> dict[str, Any]:
+    """The ``surrogate`` stage: read the training rows of ``algorithm`` (None: the only one),
+    fit, choose the novelty fallback, write the artifact ``out``; returns its manifest.
+
+    ``space_of(algorithm)`` -> the adapter's ParameterSpace (configured as in the trials).
+    The descriptor settings the PCA was fitted with win (pca.json); ``descriptors`` only
+    stands in for a PCA folder that does not record them.
+    """
+    from pipeline.artifact import ArtifactInfo, write_artifact
+    from pipeline.descriptor import DescriptorConfig
+    from pipeline.pca import Pca
+    from pipeline.surrogates.novelty import novelty_fallback
+    from pipeline.surrogates.rows import read_training_rows
+
+    pca = Pca.load(inputs.pca)
+    algo, space, rows = read_training_rows(inputs.db, algorithm, space_of)
+    fitted = fit_surrogate(rows, space, section)
+    selection = section.selection()
+    fallback, record = novelty_fallback(inputs.db, algo, space, section.novelty_fallback)
+    selection["novelty_fallback"] = record
+    if fallback is not None:
+        selection["novelty_fallback_params"] = fallback
+    descriptor = (
+        DescriptorConfig.from_json(pca.descriptor) if pca.descriptor else descriptors.descriptor()
+    )
+    info = ArtifactInfo(algo, space, descriptor, selection,
+                        {"db": str(inputs.db), "pca": str(inputs.pca)})
+    return write_artifact(out, fitted, pca, info)
