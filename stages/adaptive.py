@@ -11,19 +11,16 @@ from pathlib import Path
 
 import click
 
-from stages.common import params_option
+from stages.common import dir_option, params_option, sequences_option
 
 
 @click.command()
 @params_option
-@click.option("--model", "model_dir", required=True,
-              type=click.Path(file_okay=False, path_type=Path), help="The artifact (model/).")
-@click.option("--sequences", "sequence_dir", required=True,
-              type=click.Path(file_okay=False, path_type=Path),
-              help="Sequence folder with index.json.")
+@dir_option("--model", "model_dir", help="The artifact (model/).")
+@sequences_option
 @click.option("--split", default=None, help="Split of index.json to run [evaluate.split].")
-@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="Output folder: <sequence>/{schedule,trajectory}.parquet and run.json.")
+@dir_option("--out", "out_dir",
+            help="Output folder: <sequence>/{schedule,trajectory}.parquet and run.json.")
 def adaptive(params_path: Path, model_dir: Path, sequence_dir: Path, split: str | None,
              out_dir: Path) -> None:
     """Schedule every validation sequence with the model and run its odometry."""

@@ -7,39 +7,18 @@ from pathlib import Path
 import click
 
 from pipeline.config import load_section
-from stages.common import params_option
+from stages.common import dir_option, file_option, params_option, sequences_option
 
 
 @click.command()
 @params_option
-@click.option(
-    "--sequences",
-    "sequences_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Folder with index.json.",
-)
-@click.option(
-    "--out",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="descriptors Parquet (sequence, frame, stamp_ns, d0..d89).",
-)
-@click.option(
-    "--environment",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="environment Parquet (sequence, frame, e0..e9).",
-)
-@click.option(
-    "--pca",
-    "pca_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="PCA folder (mean.npy, components.npy, scale.npy, pca.json).",
-)
+@sequences_option
+@file_option("--out", help="descriptors Parquet (sequence, frame, stamp_ns, d0..d89).")
+@file_option("--environment", help="environment Parquet (sequence, frame, e0..e9).")
+@dir_option("--pca", "pca_dir",
+            help="PCA folder (mean.npy, components.npy, scale.npy, pca.json).")
 def descriptors(
-    params_path: Path, sequences_dir: Path, out: Path, environment: Path, pca_dir: Path
+    params_path: Path, sequence_dir: Path, out: Path, environment: Path, pca_dir: Path
 ) -> None:
     """Descriptor of every frame of every sequence; PCA fitted on the training frames."""
     from pipeline.descriptors.dataset import (
@@ -49,7 +28,7 @@ def descriptors(
     )
 
     section = load_section(params_path, "descriptors", DescriptorsSection)
-    ds = describe_dataset(sequences_dir, section)
+    ds = describe_dataset(sequence_dir, section)
     write_descriptor_set(ds, out, environment, pca_dir)
     ratio = float(ds.pca.explained_variance_ratio.sum())
     click.echo(

@@ -10,25 +10,20 @@ from pathlib import Path
 
 import click
 
-from stages.common import params_option
-
-_dir = click.Path(file_okay=False, path_type=Path)
+from stages.common import dir_option, file_option, params_option, sequences_option
 
 
 @click.command()
 @params_option
-@click.option("--sequences", required=True, type=_dir, help="Sequence folder with index.json.")
-@click.option("--trials", "trials_dir", required=True, type=_dir, help="Per-sequence SMBO output.")
-@click.option("--fixed", "fixed_dir", required=True, type=_dir, help="Joint SMBO output.")
-@click.option("--adaptive", "adaptive_dir", required=True, type=_dir, help="Adaptive runs.")
-@click.option("--out", "runs_dir", required=True, type=_dir,
-              help="Folder for the baseline and fixed trajectories.")
-@click.option("--metrics", "metrics_path", required=True,
-              type=click.Path(dir_okay=False, path_type=Path), help="Metrics JSON to write.")
-@click.option("--plots", "plots_dir", required=True, type=_dir, help="Folder for plot CSVs.")
-@click.option("--report", "report_dir", required=True, type=_dir,
-              help="Folder for report.md and its figures.")
-def evaluate(params_path: Path, sequences: Path, trials_dir: Path, fixed_dir: Path,
+@sequences_option
+@dir_option("--trials", "trials_dir", help="Per-sequence SMBO output.")
+@dir_option("--fixed", "fixed_dir", help="Joint SMBO output.")
+@dir_option("--adaptive", "adaptive_dir", help="Adaptive runs.")
+@dir_option("--out", "runs_dir", help="Folder for the baseline and fixed trajectories.")
+@file_option("--metrics", "metrics_path", help="Metrics JSON to write.")
+@dir_option("--plots", "plots_dir", help="Folder for plot CSVs.")
+@dir_option("--report", "report_dir", help="Folder for report.md and its figures.")
+def evaluate(params_path: Path, sequence_dir: Path, trials_dir: Path, fixed_dir: Path,
              adaptive_dir: Path, runs_dir: Path, metrics_path: Path, plots_dir: Path,
              report_dir: Path) -> None:
     """Score baseline, fixed and adaptive parameters; write metrics, plots and the report."""
@@ -39,7 +34,7 @@ def evaluate(params_path: Path, sequences: Path, trials_dir: Path, fixed_dir: Pa
 
     settings = load_section(params_path, "evaluate", EvaluateSection)
     trials = load_section(params_path, "trials", TrialsSection)
-    paths = EvaluationPaths(sequences, trials_dir, fixed_dir, adaptive_dir, runs_dir,
+    paths = EvaluationPaths(sequence_dir, trials_dir, fixed_dir, adaptive_dir, runs_dir,
                             metrics_path, plots_dir, report_dir)
     m = run_evaluation(paths, settings, trials.adapter_options)
     rte, ratio = m["rte_pct"], m["ratio"]

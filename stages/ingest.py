@@ -3,56 +3,39 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import click
 
-from stages.common import params_option
+from stages.common import DIR, FILE, compose, dir_option, file_option, params_option
 
-if TYPE_CHECKING:
-    from pipeline.sources.poses import PoseFormat
-
-out_option = click.option(
-    "--out",
-    "out",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="The sequence MCAP to write (atomically).",
-)
+out_option = file_option("--out", help="The sequence MCAP to write (atomically).")
 name_option = click.option("--name", default=None, help="Sequence name (default: from the input).")
 poses_option = click.option(
-    "--poses",
-    type=click.Path(path_type=Path),
-    default=None,
+    "--poses", type=click.Path(path_type=Path), default=None,
     help="Ground-truth pose file: KITTI (12 numbers a line, line k = scan k) "
     "or TUM (stamp tx ty tz qx qy qz qw, matched by time).",
 )
 format_option = click.option(
-    "--poses-format",
-    type=click.Choice(["auto", "kitti", "tum"]),
-    default="auto",
-    show_default=True,
-    help="Format of --poses (auto: by numbers a line).",
+    "--poses-format", type=click.Choice(["auto", "kitti", "tum"]), default="auto",
+    show_default=True, help="Format of --poses (auto: by numbers a line).",
 )
 calib_option = click.option(
-    "--calib",
-    type=click.Path(path_type=Path),
-    default=None,
+    "--calib", type=click.Path(path_type=Path), default=None,
     help="KITTI calib.txt: its Tr turns KITTI camera poses into lidar poses.",
 )
-topic_option = click.option(
-    "--topic", default=None, help="PointCloud2 topic (default: the only one there is)."
+recording_options = compose(
+    out_option,
+    click.option("--topic", default=None,
+                 help="PointCloud2 topic (default: the only one there is)."),
+    click.option("--gt-topic", default=None,
+                 help="Ground-truth topic: PoseStamped, Odometry or TF (tf2_msgs/TFMessage)."),
+    click.option("--gt-child-frame", default=None,
+                 help="With a TF --gt-topic: the child frame whose pose is the ground truth."),
+    poses_option,
+    format_option,
 )
-gt_topic_option = click.option(
-    "--gt-topic",
-    default=None,
-    help="Ground-truth topic: PoseStamped, Odometry or TF (tf2_msgs/TFMessage).",
-)
-child_option = click.option(
-    "--gt-child-frame",
-    default=None,
-    help="With a TF --gt-topic: the child frame whose pose is the ground truth.",
-)
+"""The options of a recording (ROS bag, MCAP): topics, ground truth, poses."""
 
 
 def _done(report: Any) -> None:
@@ -69,7 +52,7 @@ def ingest() -> None:
 
 
 @ingest.command("kitti")
-@click.argument("root", type=click.Path(file_okay=False, path_type=Path))
+@click.argument("root", type=DIR)
 @click.argument("seq")
 @out_option
 @click.option("--start", type=int, default=None, help="First KITTI frame number (default 0).")
@@ -91,126 +74,48 @@ def kitti(
 
 @ingest.command("rosbag")
 @click.argument("bag", type=click.Path(path_type=Path))
-@out_option
-@topic_option
-@gt_topic_option
-@child_option
-@poses_option
-@format_option
+@recording_options
 @calib_option
 @name_option
-def rosbag(
-    bag: Path,
-    out: Path,
-    topic: str | None,
-    gt_topic: str | None,
-    gt_child_frame: str | None,
-    poses: Path | None,
-    poses_format: PoseFormat,
-    calib: Path | None,
-    name: str | None,
-) -> None:
+def rosbag(bag: Path, **options: Any) -> None:
     """ROS 1 .bag file or ROS 2 bag folder (sqlite3 or mcap storage)."""
     from pipeline.sources import ingest_rosbag
 
-    _done(
-        ingest_rosbag(
-            bag,
-            out,
-            topic=topic,
-            gt_topic=gt_topic,
-            gt_child_frame=gt_child_frame,
-            poses=poses,
-            poses_format=poses_format,
-            calib=calib,
-            name=name,
-        )
-    )
+    _done(ingest_rosbag(bag, **options))
 
 
 @ingest.command("folder")
-@click.argument("folder", type=click.Path(file_okay=False, path_type=Path))
+@click.argument("folder", type=DIR)
 @out_option
 @poses_option
 @format_option
-@click.option(
-    "--times",
-    type=click.Path(path_type=Path),
-    default=None,
-    help="Stamps file (seconds, one a line); default: TUM stamps, else frame / --rate.",
-)
-@click.option(
-    "--rate", "rate_hz", type=float, default=10.0, show_default=True, help="Scan rate [Hz]."
-)
+@click.option("--times", type=click.Path(path_type=Path), default=None,
+              help="Stamps file (seconds, one a line); default: TUM stamps, else frame / --rate.")
+@click.option("--rate", "rate_hz", type=float, default=10.0, show_default=True,
+              help="Scan rate [Hz].")
 @calib_option
 @name_option
-def folder(
-    folder: Path,
-    out: Path,
-    poses: Path | None,
-    poses_format: PoseFormat,
-    times: Path | None,
-    rate_hz: float,
-    calib: Path | None,
-    name: str | None,
-) -> None:
+def folder(folder: Path, **options: Any) -> None:
     """Scan files (.bin / .pcd / .ply) of FOLDER in name order, one per frame."""
     from pipeline.sources import ingest_folder
 
-    _done(
-        ingest_folder(
-            folder,
-            out,
-            poses=poses,
-            poses_format=poses_format,
-            times=times,
-            calib=calib,
-            rate_hz=rate_hz,
-            name=name,
-        )
-    )
+    _done(ingest_folder(folder, **options))
 
 
 @ingest.command("mcap")
-@click.argument("path", type=click.Path(dir_okay=False, path_type=Path))
-@out_option
-@topic_option
-@gt_topic_option
-@child_option
-@poses_option
-@format_option
+@click.argument("path", type=FILE)
+@recording_options
 @name_option
-def mcap(
-    path: Path,
-    out: Path,
-    topic: str | None,
-    gt_topic: str | None,
-    gt_child_frame: str | None,
-    poses: Path | None,
-    poses_format: PoseFormat,
-    name: str | None,
-) -> None:
+def mcap(path: Path, **options: Any) -> None:
     """Any MCAP with PointCloud2 messages (cdr or ros1 encoding), e.g. a ROS 2 recording."""
     from pipeline.sources import ingest_mcap
 
-    _done(
-        ingest_mcap(
-            path,
-            out,
-            topic=topic,
-            gt_topic=gt_topic,
-            gt_child_frame=gt_child_frame,
-            poses=poses,
-            poses_format=poses_format,
-            name=name,
-        )
-    )
+    _done(ingest_mcap(path, **options))
 
 
 @click.command("ingest-set")
 @params_option
-@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="Folder for <NN>.mcap and index.json (data/kitti).")
+@dir_option("--out", "out_dir", help="Folder for <NN>.mcap and index.json (data/kitti).")
 def ingest_set(params_path: Path, out_dir: Path) -> None:
     """Ingest the KITTI sequences of the params section ``ingest`` (dvc stage)."""
     from pipeline.config import load_section

@@ -8,21 +8,14 @@ from pathlib import Path
 
 import click
 
+from stages.common import algorithm_option, file_option, model_argument, sequence_argument
+
 
 @click.command()
-@click.argument("model_dir", type=click.Path(file_okay=False, path_type=Path))
-@click.argument("sequence", type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "--out",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Output MCAP (scans, ground truth, estimated poses, chosen parameters).",
-)
-@click.option(
-    "--algorithm",
-    default=None,
-    help="Odometry algorithm (default: the model's; another one is refused).",
-)
+@model_argument
+@sequence_argument
+@file_option("--out", help="Output MCAP (scans, ground truth, estimated poses, chosen parameters).")
+@algorithm_option("Odometry algorithm (default: the model's; another one is refused).")
 def live(model_dir: Path, sequence: Path, out: Path, algorithm: str | None) -> None:
     """Stream a sequence through odometry with online parameter selection."""
     from pipeline.runtime import load_model, run_live

@@ -7,22 +7,19 @@ from pathlib import Path
 
 import click
 
-from stages.common import params_option
+from stages.common import dir_option, file_option, params_option, sequences_option
 
 log = logging.getLogger(__name__)
 
-_path = click.Path(path_type=Path)
-
-
 @click.command()
 @params_option
-@click.option("--sequences", type=_path, required=True, help="Folder of sequence MCAPs.")
-@click.option("--trials", "trials_dir", type=_path, help="Per-sequence SMBO output folder.")
-@click.option("--fixed", "fixed_dir", type=_path, help="Joint SMBO output folder.")
-@click.option("--descriptors", type=_path, help="data/descriptors.parquet.")
-@click.option("--environment", type=_path, help="data/environment.parquet.")
-@click.option("--db", type=_path, required=True, help="The database to (re)build.")
-def rte(params_path: Path, sequences: Path, trials_dir: Path | None, fixed_dir: Path | None,
+@sequences_option
+@dir_option("--trials", "trials_dir", required=False, help="Per-sequence SMBO output folder.")
+@dir_option("--fixed", "fixed_dir", required=False, help="Joint SMBO output folder.")
+@file_option("--descriptors", required=False, help="data/descriptors.parquet.")
+@file_option("--environment", required=False, help="data/environment.parquet.")
+@file_option("--db", help="The database to (re)build.")
+def rte(params_path: Path, sequence_dir: Path, trials_dir: Path | None, fixed_dir: Path | None,
         descriptors: Path | None, environment: Path | None, db: Path) -> None:
     """Build the results database: sequences, trials, rte_frames, rte_kitti, descriptors."""
     from pipeline.config import load_section
@@ -31,6 +28,6 @@ def rte(params_path: Path, sequences: Path, trials_dir: Path | None, fixed_dir: 
     settings = load_section(params_path, "rte", RteSection)
     studies = {name: path for name, path in (("trials", trials_dir), ("fixed", fixed_dir))
                if path is not None}
-    summary = build_database(db, sequences, studies, settings, descriptors, environment)
+    summary = build_database(db, sequence_dir, studies, settings, descriptors, environment)
     log.info("%s: %d sequences, %d trials, %d rte_frames rows, %d rte_kitti rows",
              db, summary.sequences, summary.trials, summary.rte_frames, summary.rte_kitti)

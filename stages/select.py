@@ -7,17 +7,14 @@ from pathlib import Path
 
 import click
 
+from stages.common import algorithm_option, file_option, model_argument, sequence_argument
+
 
 @click.command()
-@click.argument("model_dir", type=click.Path(file_okay=False, path_type=Path))
-@click.argument("sequence", type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "--out",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="The schedule Parquet (frame, stamp_ns, one column per parameter).",
-)
-@click.option("--algorithm", default=None, help="Refuse a model made for another algorithm.")
+@model_argument
+@sequence_argument
+@file_option("--out", help="The schedule Parquet (frame, stamp_ns, one column per parameter).")
+@algorithm_option("Refuse a model made for another algorithm.")
 @click.option("--period-s", type=float, default=None, help="Override the model's period [s].")
 def select(
     model_dir: Path, sequence: Path, out: Path, algorithm: str | None, period_s: float | None

@@ -4,68 +4,41 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
-from stages.common import params_option
+from stages.common import compose, dir_option, file_option, params_option
 
 WORLDS = ("cave", "open", "street", "composite")
 SENSORS = ("hdl32", "hdl64", "vlp16")
 
 
-def _world_options(fn):  # type: ignore[no-untyped-def]
-    options = [
-        click.option(
-            "--world",
-            type=click.Choice(WORLDS),
-            default="cave",
-            show_default=True,
-            help="World to generate (street with --kitti-trajectory).",
-        ),
-        click.option(
-            "--seed",
-            type=int,
-            default=0,
-            show_default=True,
-            help="Seed of world, route and sensor noise: same seed, same bytes.",
-        ),
-        click.option("--frames", type=int, default=300, show_default=True, help="Frames (10 Hz)."),
-        click.option(
-            "--sensor",
-            type=click.Choice(SENSORS),
-            default="hdl32",
-            show_default=True,
-            help="hdl32 = Velodyne HDL-32E, hdl64 = HDL-64E (KITTI), vlp16 = VLP-16.",
-        ),
-        click.option(
-            "--segments",
-            default="cave,open,street",
-            show_default=True,
-            help="Composite world: comma-separated segments in driving order.",
-        ),
-        click.option(
-            "--kitti-trajectory",
-            type=click.Path(dir_okay=False, path_type=Path),
-            default=None,
-            help="Drive along a KITTI ground-truth pose file "
-            "(NN.txt, camera frame) through a street world generated along it.",
-        ),
-    ]
-    for opt in reversed(options):
-        fn = opt(fn)
-    return fn
+def _choice(flag: str, choices: tuple[str, ...], help: str):  # type: ignore[no-untyped-def]
+    return click.option(flag, type=click.Choice(choices), default=choices[0], show_default=True,
+                        help=help)
 
 
-def _spec(
-    world: str,
-    seed: int,
-    frames: int,
-    sensor: str,
-    segments: str,
-    kitti_trajectory: Path | None,
-    noise: float | None = None,
-    dropout: float | None = None,
-):  # type: ignore[no-untyped-def]
+_world_options = compose(
+    _choice("--world", WORLDS, "World to generate (street with --kitti-trajectory)."),
+    click.option("--seed", type=int, default=0, show_default=True,
+                 help="Seed of world, route and sensor noise: same seed, same bytes."),
+    click.option("--frames", type=int, default=300, show_default=True,
+                 help="Frames (10 Hz)."),
+    _choice("--sensor", SENSORS, "hdl32 = Velodyne HDL-32E, hdl64 = HDL-64E (KITTI), "
+            "vlp16 = VLP-16."),
+    click.option("--segments", default="cave,open,street", show_default=True,
+                 help="Composite world: comma-separated segments in driving order."),
+    file_option("--kitti-trajectory", required=False,
+                help="Drive along a KITTI ground-truth pose file (NN.txt, camera frame) "
+                "through a street world generated along it."),
+)
+
+
+def _spec(world: str, seed: int, frames: int, sensor: str, segments: str,
+          kitti_trajectory: Path | None, noise: float | None = None,
+          dropout: float | None = None):  # type: ignore[no-untyped-def]
+    """The SimSpec of the ``_world_options`` (and noise / dropout), checked."""
     from pipeline.sim.simulate import SimSpec
 
     if kitti_trajectory is not None and world == "cave":  # the default: switch to street
@@ -83,28 +56,12 @@ def _spec(
     "--dropout", type=float, default=None, help="Return dropout probability (default 0.01)."
 )
 @click.option("--name", default=None, help="Sequence name (default: the file stem of --out).")
-@click.option(
-    "--out",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Sequence MCAP to write (atomically).",
-)
-def simulate(
-    world: str,
-    seed: int,
-    frames: int,
-    sensor: str,
-    segments: str,
-    kitti_trajectory: Path | None,
-    noise: float | None,
-    dropout: float | None,
-    name: str | None,
-    out: Path,
-) -> None:
+@file_option("--out", help="Sequence MCAP to write (atomically).")
+def simulate(name: str | None, out: Path, **world: Any) -> None:
     """Ray-cast a simulated world into a sequence MCAP (points, ground truth, labels)."""
     from pipeline.sim.simulate import simulate_sequence
 
-    spec = _spec(world, seed, frames, sensor, segments, kitti_trajectory, noise, dropout)
+    spec = _spec(**world)
     s = simulate_sequence(spec, out, name=name, progress=sys.stderr.isatty())
     labels = ", ".join(f"{x.label} {x.start}-{x.end}" for x in s.labels)
     click.echo(
@@ -114,12 +71,7 @@ def simulate(
 
 @click.command("simulate-set")
 @params_option
-@click.option(
-    "--out",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Folder for <name>.mcap and index.json (data/sequences).",
-)
+@dir_option("--out", help="Folder for <name>.mcap and index.json (data/sequences).")
 def simulate_set(params_path: Path, out: Path) -> None:
     """Simulate the toy data set of the params section ``simulate`` (dvc stage)."""
     from pipeline.config import BaseSection, load_section
@@ -136,28 +88,12 @@ def simulate_set(params_path: Path, out: Path) -> None:
 
 @click.command("plot-world")
 @_world_options
-@click.option(
-    "--frame",
-    "scan_frame",
-    type=int,
-    default=None,
-    help="Frame whose scan is drawn (default: the middle one).",
-)
-@click.option(
-    "--out", required=True, type=click.Path(dir_okay=False, path_type=Path), help="PNG to write."
-)
-def plot_world(
-    world: str,
-    seed: int,
-    frames: int,
-    sensor: str,
-    segments: str,
-    kitti_trajectory: Path | None,
-    scan_frame: int | None,
-    out: Path,
-) -> None:
+@click.option("--frame", "scan_frame", type=int, default=None,
+              help="Frame whose scan is drawn (default: the middle one).")
+@file_option("--out", help="PNG to write.")
+def plot_world(scan_frame: int | None, out: Path, **world: Any) -> None:
     """Top-down PNG of a world with its trajectory and one scan."""
     from pipeline.sim.plot import plot_world as plot
 
-    spec = _spec(world, seed, frames, sensor, segments, kitti_trajectory)
+    spec = _spec(**world)
     click.echo(str(plot(spec, out, scan_frame)))

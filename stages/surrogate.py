@@ -8,39 +8,16 @@ from pathlib import Path
 import click
 
 from pipeline.config import load_section
-from stages.common import params_option
+from stages.common import algorithm_option, dir_option, file_option, params_option
 
 
 @click.command()
 @params_option
-@click.option(
-    "--db",
-    "db_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="results/adaptune.duckdb (surrogate_rows view).",
-)
-@click.option(
-    "--pca",
-    "pca_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="The PCA folder written by `adaptune descriptors`.",
-)
-@click.option(
-    "--out",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="The artifact folder (model/).",
-)
-@click.option("--algorithm", default=None, help="Algorithm of the rows (default: the only one).")
-@click.option(
-    "--metrics",
-    "metrics_path",
-    default=None,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Write the CV error here (JSON).",
-)
+@file_option("--db", "db_path", help="results/adaptune.duckdb (surrogate_rows view).")
+@dir_option("--pca", "pca_dir", help="The PCA folder written by `adaptune descriptors`.")
+@dir_option("--out", help="The artifact folder (model/).")
+@algorithm_option("Algorithm of the rows (default: the only one).")
+@file_option("--metrics", "metrics_path", required=False, help="Write the CV error here (JSON).")
 def surrogate(
     params_path: Path,
     db_path: Path,

@@ -14,33 +14,24 @@ from pathlib import Path
 
 import click
 
-from stages.common import params_option
+from stages.common import FILE, algorithm_option, dir_option, params_option
 
 log = logging.getLogger(__name__)
 
 
 @click.command()
-@click.argument("sequence_paths", nargs=-1, type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "--out",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Output folder (results/trials, or results/fixed with --joint).",
-)
-@click.option(
-    "--sequences",
-    "sequence_dir",
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Sequence folder with index.json (instead of SEQ.mcap paths).",
-)
+@click.argument("sequence_paths", nargs=-1, type=FILE)
+@dir_option("--out", "out_dir",
+            help="Output folder (results/trials, or results/fixed with --joint).")
+@dir_option("--sequences", "sequence_dir", required=False,
+            help="Sequence folder with index.json (instead of SEQ.mcap paths).")
 @click.option("--split", default=None, help="Split of index.json to use [trials.split].")
-@click.option("--algorithm", default=None, help="Adapter name [trials.algorithm].")
+@algorithm_option("Adapter name [trials.algorithm].")
 @click.option("--iterations", type=int, default=None, help="Trials per study [trials.iterations].")
 @click.option("--seed", type=int, default=None, help="Base seed [base.seed].")
 @click.option("--workers", type=int, default=None, help="Trials in flight [trials.workers].")
 @click.option("--dask", "dask", default=None, help="'local' or a scheduler address [trials.dask].")
-@click.option("--length-m", type=float, default=None, help="RTE segment length [trials.length_m].")
+@click.option("--length-m", type=float, default=None, help="RTE segment length [base.length_m].")
 @click.option(
     "--time-limit-s", type=float, default=None, help="Per sequence run [trials.time_limit_s]."
 )
