@@ -25,13 +25,23 @@ class Section(BaseModel):
 
 
 class BaseSection(Section):
-    """The shared ``base`` section: the seed; L, which the ``trials``, ``rte`` and ``evaluate``
-    sections take by a YAML alias (``length_m: *length_m``) so that it is set once; and the
+    """The shared ``base`` section: the seed; L, the RTE sub-trajectory length that the
+    ``trials``, ``rte`` and ``evaluate`` sections take from here (``FROM_BASE``); and the
     sequence folder every stage after ``simulate`` / ``ingest`` reads (dvc.yaml ``${...}``)."""
 
     seed: int = 0
     length_m: float = Field(25.0, gt=0)
     sequences: Literal["data/sequences", "data/kitti"] = "data/sequences"
+
+
+FROM_BASE: dict[str, tuple[str, ...]] = {
+    "trials": ("length_m",),
+    "rte": ("length_m",),
+    "evaluate": ("length_m",),
+}
+"""Keys that a section takes from ``base``: set once there (dvc.yaml lists ``base.length_m`` as
+a param of these stages, so ``dvc exp run -S base.length_m=100`` re-runs them); a section that
+sets one itself is refused, so that no copy can disagree."""
 
 
 def format_validation_error(section: str, exc: ValidationError) -> str:
@@ -70,5 +80,26 @@ def read_params(path: str | Path) -> dict[str, Any]:
 
 
 def load_section(path: str | Path, section: str, model: type[S]) -> S:
-    """Read ``section`` of the params file at ``path`` and validate it as ``model``."""
-    return validate_section(model, section, read_params(path).get(section))
+    """Read ``section`` of the params file at ``path`` and validate it as ``model``.
+
+    The keys ``FROM_BASE`` names for the section come from the validated ``base`` section.
+    """
+    return validate_section(model, section, section_data(read_params(path), section))
+
+
+def section_data(params: dict[str, Any], section: str) -> Any:
+    """The raw data of ``section`` with the keys it takes from ``base`` filled in.
+
+    ConfigError when the section sets such a key itself.
+    """
+    data = params.get(section)
+    keys = FROM_BASE.get(section, ())
+    if not keys or (data is not None and not isinstance(data, dict)):
+        return data
+    data = dict(data or {})
+    for key in keys:
+        if key in data:
+            raise ConfigError(f"{section}.{key}: set once in base.{key}, not per section, "
+                              f"got {data[key]!r}")
+    base = validate_section(BaseSection, "base", params.get("base"))
+    return {**data, **{key: getattr(base, key) for key in keys}}

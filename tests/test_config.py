@@ -56,3 +56,23 @@ def test_missing_file_and_bad_yaml(tmp_path: Path) -> None:
 def test_repository_params_file_has_base_section() -> None:
     base = load_section(REPO / "params.yaml", "base", BaseSection)
     assert isinstance(base.seed, int)
+
+
+def test_length_is_set_once_in_base(tmp_path: Path) -> None:
+    """trials, rte and evaluate take L from base.length_m; a copy in a section is refused."""
+    from pipeline.evaluation.store import RteSection
+    from pipeline.report.evaluate import EvaluateSection
+    from pipeline.tuning.smbo import TrialsSection
+
+    p = tmp_path / "params.yaml"
+    p.write_text("base:\n  length_m: 100.0\n")
+    for name, model in (("trials", TrialsSection), ("rte", RteSection),
+                        ("evaluate", EvaluateSection)):
+        assert load_section(p, name, model).length_m == 100.0
+    p.write_text("base:\n  length_m: 100.0\nrte:\n  length_m: 25.0\n")
+    with pytest.raises(ConfigError, match=r"^rte\.length_m: set once in base\.length_m, not per "
+                                          r"section, got 25\.0$"):
+        load_section(p, "rte", RteSection)
+    p.write_text("base:\n  length_m: 0\n")
+    with pytest.raises(ConfigError, match=r"^base\.length_m: .*greater than 0"):
+        load_section(p, "trials", TrialsSection)

@@ -31,11 +31,9 @@ def tiny_params() -> dict[str, Any]:
     p["base"]["length_m"] = TINY_L_M
     p["simulate"].update(train={"cave": 1, "street": 1}, train_frames=50, validation_frames=60)
     p["descriptors"].update(workers=1, pca_dim=4)
-    p["trials"].update(iterations=3, workers=1, length_m=TINY_L_M, startup_trials=2)
+    p["trials"].update(iterations=3, workers=1, startup_trials=2)
     p["fixed"].update(iterations=2)
-    p["rte"].update(length_m=TINY_L_M)
     p["surrogate"].update(n_sobol=16, cv_max_frames=20)
-    p["evaluate"].update(length_m=TINY_L_M)
     return p
 
 
@@ -147,6 +145,24 @@ def test_second_repro_is_a_no_op(repro: tuple[Path, str]) -> None:
     log = dvc(root, "repro")
     assert "Running stage" not in log
     assert "up to date" in dvc(root, "status")
+
+
+def test_base_length_makes_the_stages_that_read_it_stale(repro: tuple[Path, str]) -> None:
+    """L is one real parameter: changing base.length_m makes exactly its readers stale."""
+    root, _ = repro
+    path = root / "params.yaml"
+    original = path.read_text()
+    params = yaml.safe_load(original)
+    params["base"]["length_m"] = TINY_L_M + 1
+    try:
+        path.write_text(yaml.safe_dump(params, sort_keys=False))
+        status = json.loads(dvc(root, "status", "--json"))
+    finally:
+        path.write_text(original)
+    changed = {stage: change["changed deps"]["params.yaml"] for stage, changes in status.items()
+               for change in changes if "params.yaml" in change.get("changed deps", {})}
+    assert changed == {stage: {"base.length_m": "modified"}
+                       for stage in ("trials", "fixed", "rte", "evaluate")}
 
 
 def test_metrics_and_plots_commands_read_the_outputs(repro: tuple[Path, str]) -> None:

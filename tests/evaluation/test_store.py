@@ -59,7 +59,8 @@ def make_world(root: Path) -> World:
     }
     write_study(root / "trials", "ndt", {"cave_0": stamped["cave_0"]}, 2, ["resolution_m"], seed=3)
     params = root / "params.yaml"
-    params.write_text(f"rte:\n  length_m: {LENGTH_M}\n  kitti_lengths_m: {list(KITTI_LENGTHS)}\n")
+    params.write_text(f"base:\n  length_m: {LENGTH_M}\n"
+                      f"rte:\n  kitti_lengths_m: {list(KITTI_LENGTHS)}\n")
     return World(root, params, gts, estimates)
 
 
@@ -197,10 +198,10 @@ def test_rte_stage_bad_inputs_leave_no_database(world: World, tmp_path: Path) ->
     cli_fails(world.args(db, "--descriptors", str(tmp_path / "missing.parquet")), "missing.parquet")
     assert not db.exists()
     bad_params = tmp_path / "params.yaml"
-    bad_params.write_text("rte:\n  length_m: -1\n")
+    bad_params.write_text("base:\n  length_m: -1\n")
     args = world.args(db)
     args[args.index("--params") + 1] = str(bad_params)
-    cli_fails(args, "rte.length_m", "greater than 0")
+    cli_fails(args, "base.length_m", "greater than 0")
     assert not db.exists()
     assert not list(tmp_path.glob(".out.duckdb*"))
 

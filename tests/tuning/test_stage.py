@@ -22,12 +22,11 @@ def params_file(tmp_path: Path, **trials: object) -> Path:
     section = dict(
         algorithm="tuning_adapters:drift",
         iterations=3,
-        length_m=5.0,
         time_limit_s=20.0,
         startup_trials=2,
     )
     section.update(trials)
-    p.write_text(json.dumps({"base": {"seed": 3}, "trials": section}))
+    p.write_text(json.dumps({"base": {"seed": 3, "length_m": 5.0}, "trials": section}))
     return p
 
 
