@@ -73,8 +73,10 @@ def run() -> list[Row]:
     from pipeline.artifact import ArtifactInfo, write_artifact
     from pipeline.descriptor import DescriptorConfig
     from pipeline.odometry.registry import get_adapter
-    from pipeline.runtime import Neighbourhood, Selector, load_model
+    from pipeline.runtime import Selector, load_model
+    from pipeline.surrogates.base import environment_d2
     from pipeline.surrogates.fit import SurrogateSection, fit_surrogate
+    from pipeline.surrogates.knn_search import Neighbourhood
 
     scans = kitti_scans()
     per_scan = [best_of(lambda s=s: describe(s), repeat=5) for s in scans]
@@ -121,7 +123,8 @@ def run() -> list[Row]:
     tree_times = [best_of(lambda e=e: fresh(tree, e), repeat=3) for e in envs[::4]]
     exact = []
     for e in envs:
-        nb = Neighbourhood(model, e, selection["subset_rows"])
+        nb = Neighbourhood(model.surrogate, environment_d2(model.env, e),
+                           selection["subset_rows"], model.x_scale)
         exact.append(nb.predict(sel.candidates).exact.mean())
 
     def fresh_scan(s: np.ndarray) -> None:
@@ -129,10 +132,10 @@ def run() -> list[Row]:
         sel.select(s)
 
     end_to_end = [best_of(lambda s=s: fresh_scan(s), repeat=3) for s in scans[::8]]
-    groups = 0 if sel.groups is None else len(sel.groups.trees)
+    groups = 0 if sel.search.groups is None else len(sel.search.groups.trees)
     rows_out += [
         Row(
-            f"one selection, surrogate of {len(model.rows_t) // 1000}k rows, "
+            f"one selection, surrogate of {len(model.surrogate.rows_t) // 1000}k rows, "
             f"{len(sel.candidates)} candidates + refinement, exact ({groups} trial groups)",
             1e3 * float(np.median(times)),
             "ms",

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ArtifactError
+from pipeline.surrogates.base import Arrays, ArraySpec
 
 if TYPE_CHECKING:
     from pipeline.descriptor import DescriptorConfig
@@ -75,14 +76,12 @@ def write_artifact(
 
     arrays = {
         "env.npy": fitted.env,
-        "env_offsets.npy": fitted.env_offsets,
         "env_frames.npy": fitted.env_frames,
-        "rows_x.npy": fitted.rows_x,
-        "rows_t.npy": fitted.rows_t,
         "candidates.npy": fitted.candidates_u,
         "pca_mean.npy": pca.mean,
         "pca_components.npy": pca.components,
         "pca_scale.npy": pca.scale,
+        **fitted.surrogate.arrays(),
     }
     with atomic_dir(out) as tmp:
         files = {name: save_npy(tmp / name, arr) for name, arr in arrays.items()}
@@ -93,13 +92,7 @@ def write_artifact(
             "parameter_space": info.space,
             "descriptor": info.descriptor.to_json(),
             "pca": pca.to_json(),
-            "model": {
-                "type": "knn",
-                "k": fitted.settings.k,
-                "weights": "uniform",
-                "metric": "euclidean",
-                "target": fitted.settings.target,
-            },
+            "model": fitted.surrogate.to_json(),
             "scaling": {
                 "environment": {
                     "w_e": fitted.settings.w_e,
@@ -136,3 +129,258 @@ def validate_manifest(manifest: dict[str, Any]) -> None:
     except jsonschema.ValidationError as exc:
         path = "/".join(str(p) for p in exc.absolute_path) or "(root)"
         raise ArtifactError(f"manifest.json: {path}: {exc.message}") from None
+
+
+# ---------------------------------------------------------------------------------- reading
+
+SCHEMA_VERSION = "1.0"  # = schemas.SCHEMA_VERSION, repeated: the runtime does not import schemas
+COMMON_FILES: dict[str, ArraySpec] = {
+    "env.npy": ArraySpec(2),
+    "env_frames.npy": ArraySpec(1, "i"),
+    "candidates.npy": ArraySpec(2),
+    "pca_mean.npy": ArraySpec(1),
+    "pca_components.npy": ArraySpec(2),
+    "pca_scale.npy": ArraySpec(1),
+}
+"""The arrays of every artifact, whatever its surrogate (which adds its ``files``)."""
+MAX_MANIFEST_BYTES = 64 << 20
+MAX_ARRAY_BYTES = 16 << 30
+MAX_REFINE_ITERS = 64
+
+
+def read_regular_file(path: Path, limit: int) -> bytes:
+    """The bytes of ``path`` if it is a regular file (not a symlink, FIFO, device or folder) of
+    at most ``limit`` bytes; ArtifactError otherwise. Checked with lstat before opening, opened
+    without following links and without blocking, and checked again on the open file."""
+    import os
+    import stat
+
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        raise ArtifactError(f"{path}: missing (listed in manifest.json)") from None
+    except OSError as exc:
+        raise ArtifactError(f"{path}: cannot read ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise ArtifactError(f"{path}: not a regular file ({_file_kind(st.st_mode)})")
+    if st.st_size > limit:
+        raise ArtifactError(f"{path}: {st.st_size} bytes, more than the {limit} allowed")
+    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+    try:
+        fd = os.open(path, flags)
+    except OSError as exc:
+        raise ArtifactError(f"{path}: cannot open ({exc.strerror})") from None
+    with os.fdopen(fd, "rb") as fh:
+        now = os.fstat(fh.fileno())
+        if (now.st_ino, now.st_dev) != (st.st_ino, st.st_dev) or not stat.S_ISREG(now.st_mode):
+            raise ArtifactError(f"{path}: changed while being opened")
+        data = fh.read(limit + 1)
+    if len(data) > limit:
+        raise ArtifactError(f"{path}: more than the {limit} bytes allowed")
+    return data
+
+
+def _file_kind(mode: int) -> str:
+    import stat
+
+    for test, name in ((stat.S_ISLNK, "a symlink"), (stat.S_ISFIFO, "a FIFO"),
+                       (stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a device"),
+                       (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a file"
+
+
+def parse_npy(data: bytes, what: str | Path) -> NDArray[Any]:
+    """The array of an .npy file's bytes, allow_pickle=False in spirit: bool, integer or float
+    only, and the header's shape must account for exactly the bytes that follow it (checked
+    before anything is allocated). ArtifactError otherwise."""
+    import io
+
+    fmt = np.lib.format
+    fp = io.BytesIO(data)
+    try:
+        version = fmt.read_magic(fp)
+        if version == (1, 0):
+            shape, fortran, dtype = fmt.read_array_header_1_0(fp)
+        elif version == (2, 0):
+            shape, fortran, dtype = fmt.read_array_header_2_0(fp)
+        else:
+            raise ValueError(f"npy format version {version}")
+    except (ValueError, SyntaxError, TypeError) as exc:
+        raise ArtifactError(f"{what}: not a plain numpy array ({exc})") from None
+    if dtype.hasobject or dtype.kind not in "biuf" or dtype.subdtype is not None:
+        raise ArtifactError(f"{what}: dtype {dtype} is not a plain number type")
+    count = 1
+    for n in shape:
+        count *= int(n)
+    body = len(data) - fp.tell()
+    if count * dtype.itemsize != body:
+        raise ArtifactError(f"{what}: the header claims shape {tuple(shape)} "
+                            f"({count * dtype.itemsize} bytes), the file holds {body}")
+    arr = np.frombuffer(data, dtype, count, offset=fp.tell())
+    return np.array(arr.reshape(shape, order="F" if fortran else "C"),
+                    dtype=dtype.newbyteorder("="), order="C")
+
+
+def read_manifest(path: Path) -> dict[str, Any]:
+    """``path``/manifest.json: a regular file, valid JSON, an adaptune manifest whose own
+    checksum matches, of a schema version this code reads. ArtifactError otherwise."""
+    mpath = path / "manifest.json"
+    if not mpath.exists() and not mpath.is_symlink():
+        raise ArtifactError(f"{path}: not a model artifact (no manifest.json)")
+    data = read_regular_file(mpath, MAX_MANIFEST_BYTES)
+    try:
+        manifest = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise ArtifactError(f"{mpath}: damaged manifest ({exc})") from None
+    if not isinstance(manifest, dict) or manifest.get("kind") != ARTIFACT_KIND:
+        raise ArtifactError(f"{mpath}: not an adaptune surrogate manifest")
+    if manifest.get(MANIFEST_HASH_KEY) != canonical_manifest_hash(manifest):
+        raise ArtifactError(f"{mpath}: manifest checksum mismatch (the manifest was altered)")
+    major = str(manifest.get("schema_version", "")).split(".")[0]
+    if major != SCHEMA_VERSION.split(".")[0]:
+        raise ArtifactError(f"{path}: artifact schema version {manifest.get('schema_version')!r}, "
+                            f"this adaptune reads {SCHEMA_VERSION}")
+    return manifest
+
+
+def read_arrays(path: Path, manifest: Mapping[str, Any],
+                specs: Mapping[str, ArraySpec]) -> Arrays:
+    """Every file the manifest lists, read safely, checksums verified, parsed, checked against
+    ``specs`` (each spec'd file must be listed) and finite. ArtifactError otherwise."""
+    files = manifest.get("files")
+    if not isinstance(files, dict):
+        raise ArtifactError(f"{path}/manifest.json: no file list")
+    missing = [f for f in specs if f not in files]
+    if missing:
+        raise ArtifactError(f"{path}/manifest.json: does not list {missing[0]}")
+    arrays: Arrays = {}
+    for name, digest in files.items():
+        if (not isinstance(name, str) or Path(name).name != name or name in (".", "..")
+                or not name.endswith(".npy")):
+            raise ArtifactError(f"{path}/manifest.json: file name {name!r} is not a plain "
+                                ".npy name")
+        fpath = path / name
+        data = read_regular_file(fpath, MAX_ARRAY_BYTES)
+        if hashlib.sha256(data).hexdigest() != digest:
+            raise ArtifactError(f"{fpath}: sha256 mismatch (file altered or damaged)")
+        arrays[name] = parse_npy(data, fpath)
+    for name, spec in specs.items():
+        arr = arrays[name]
+        kinds = "f" if spec.kind == "f" else "iu"
+        if arr.ndim != spec.ndim or arr.dtype.kind not in kinds:
+            raise ArtifactError(
+                f"{path / name}: must be {spec.ndim}-D {'float' if spec.kind == 'f' else 'int'}, "
+                f"got {arr.ndim}-D {arr.dtype}")
+        if spec.kind == "f" and not np.isfinite(arr).all():
+            raise ArtifactError(f"{path / name}: holds values that are not finite")
+    return arrays
+
+
+def _number(value: Any, what: str, low: float | None = None, strict: bool = False) -> float:
+    """``value`` as a finite float (> or >= ``low``); ValueError naming ``what`` otherwise."""
+    import math
+
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ValueError(f"{what} must be a finite number, got {value!r}")
+    if low is not None and (value <= low if strict else value < low):
+        raise ValueError(f"{what} must be {'>' if strict else '>='} {low:g}, got {value!r}")
+    return float(value)
+
+
+def _integer(value: Any, what: str, low: int, high: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < low or (
+            high is not None and value > high):
+        bounds = f"in [{low}, {high}]" if high is not None else f">= {low}"
+        raise ValueError(f"{what} must be an integer {bounds}, got {value!r}")
+    return value
+
+
+def validate_values(manifest: Mapping[str, Any]) -> None:
+    """The manifest's numbers and names make sense (its checksum only says they were not
+    altered): the parameter space, the scalings, the selection settings, the fallback.
+    ValueError naming the field and the rule."""
+    space = manifest.get("parameter_space")
+    if not isinstance(space, list) or not space or not all(isinstance(s, dict) for s in space):
+        raise ValueError("parameter_space must be a non-empty list of parameters")
+    names = [s.get("name") for s in space]
+    if not all(isinstance(n, str) and n for n in names) or len(set(names)) != len(names):
+        raise ValueError(f"parameter_space names must be distinct and non-empty, got {names}")
+    for s in space:
+        name = s["name"]
+        low = _number(s.get("low"), f"parameter_space {name}.low")
+        high = _number(s.get("high"), f"parameter_space {name}.high")
+        if not low < high:
+            raise ValueError(f"parameter_space {name}: low must be < high, got "
+                             f"(low={low:g}, high={high:g})")
+        default = _number(s.get("default"), f"parameter_space {name}.default")
+        if not low <= default <= high:
+            raise ValueError(f"parameter_space {name}.default {default:g} is outside "
+                             f"[{low:g}, {high:g}]")
+        if s.get("kind") not in ("float", "int") or not isinstance(s.get("log"), bool):
+            raise ValueError(f"parameter_space {name}: kind must be float|int and log a bool")
+        if s["log"] and low <= 0:
+            raise ValueError(f"parameter_space {name}: a log scale needs low > 0, got {low:g}")
+    scaling = manifest.get("scaling") or {}
+    _number((scaling.get("environment") or {}).get("e_scale"),
+            "scaling.environment.e_scale", 0.0, strict=True)
+    _number((scaling.get("environment") or {}).get("w_e"),
+            "scaling.environment.w_e", 0.0, strict=True)
+    _number((scaling.get("parameters") or {}).get("x_scale"),
+            "scaling.parameters.x_scale", 0.0, strict=True)
+    model = manifest.get("model") or {}
+    if model.get("target") not in ("log", "linear"):
+        raise ValueError(f"model.target must be 'log' or 'linear', got {model.get('target')!r}")
+    _validate_selection(manifest.get("selection"), space)
+
+
+def _validate_selection(sel: Any, space: list[dict[str, Any]]) -> None:
+    if not isinstance(sel, dict):
+        raise ValueError("selection must be an object")
+    _number(sel.get("period_s"), "selection.period_s", 0.0, strict=True)
+    _number(sel.get("hysteresis"), "selection.hysteresis", 0.0)
+    _integer(sel.get("min_scan_points"), "selection.min_scan_points", 0)
+    _integer(sel.get("subset_rows"), "selection.subset_rows", 1)
+    _integer(sel.get("refine_iters"), "selection.refine_iters", 0, MAX_REFINE_ITERS)
+    if sel.get("novelty_distance") is not None:
+        _number(sel["novelty_distance"], "selection.novelty_distance", 0.0)
+    chosen = sel.get("novelty_fallback_params")
+    if chosen is None:
+        return
+    specs = {s["name"]: s for s in space}
+    if not isinstance(chosen, dict) or set(chosen) != set(specs):
+        got = sorted(chosen) if isinstance(chosen, dict) else chosen
+        raise ValueError(f"selection.novelty_fallback_params must name the parameters "
+                         f"{sorted(specs)}, got {got}")
+    for name, value in chosen.items():
+        v = _number(value, f"selection.novelty_fallback_params.{name}")
+        if not specs[name]["low"] <= v <= specs[name]["high"]:
+            raise ValueError(f"selection.novelty_fallback_params.{name} = {v:g} is outside "
+                             f"[{specs[name]['low']:g}, {specs[name]['high']:g}]")
+
+
+def validate_arrays(arrays: Arrays, n_params: int, descriptor_size: int) -> None:
+    """The common arrays fit together: env (n_env, D), env_frames (n_env,), candidates (C, P)
+    in [0, 1], pca_components (D, F), pca_mean and pca_scale (F,) with F the descriptor's size
+    and pca_scale > 0. ValueError naming the file."""
+    env, comps = arrays["env.npy"], arrays["pca_components.npy"]
+    n_env, d = env.shape
+    if n_env < 1 or d < 1:
+        raise ValueError(f"env.npy: needs at least one frame and one dimension, got {env.shape}")
+    if arrays["env_frames.npy"].shape != (n_env,):
+        raise ValueError(f"env_frames.npy: shape {arrays['env_frames.npy'].shape}, "
+                         f"expected ({n_env},)")
+    if comps.shape != (d, descriptor_size):
+        raise ValueError(f"pca_components.npy: shape {comps.shape}, expected "
+                         f"({d}, {descriptor_size}) (environment, descriptor)")
+    for name in ("pca_mean.npy", "pca_scale.npy"):
+        if arrays[name].shape != (descriptor_size,):
+            raise ValueError(f"{name}: shape {arrays[name].shape}, expected ({descriptor_size},)")
+    if not (arrays["pca_scale.npy"] > 0).all():
+        raise ValueError("pca_scale.npy: pca_scale must be > 0")
+    cands = arrays["candidates.npy"]
+    if len(cands) < 1 or cands.shape[1] != n_params:
+        raise ValueError(f"candidates.npy: shape {cands.shape}, expected (C >= 1, {n_params})")
+    if cands.min() < 0.0 or cands.max() > 1.0:
+        raise ValueError("candidates.npy: values must lie in [0, 1] (the unit cube)")

@@ -112,7 +112,7 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
     assert counts["sequences"] == 3 and counts["trials"] == 8
     assert counts["rte_frames"] > 0 and counts["surrogate_rows"] > 0
     model = load_model(root / "model", expected_algorithm="ndt")
-    assert len(model.rows_t) == counts["surrogate_rows"]
+    assert len(model.surrogate.rows_t) == counts["surrogate_rows"]
     # the novelty fallback was decided on the joint study vs each study's defaults trial
     fallback = model.selection["novelty_fallback"]
     assert fallback["mode"] == "auto" and set(fallback["per_sequence"]) == set(index["train"])

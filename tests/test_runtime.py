@@ -14,20 +14,15 @@ from click.testing import CliRunner
 from sklearn.neighbors import KNeighborsRegressor
 from test_surrogate import SELECTION, build_model, kitti_scan, write_tiny_sequence
 
-from pipeline import runtime
+from pipeline.artifact import canonical_manifest_hash
 from pipeline.errors import ArtifactError
 from pipeline.odometry.base import Schedule
 from pipeline.odometry.registry import get_adapter
-from pipeline.runtime import (
-    GroupedNeighbourhood,
-    Neighbourhood,
-    Selector,
-    canonical_manifest_hash,
-    knn_mean_numpy,
-    load_model,
-)
+from pipeline.runtime import Selector, load_model
 from pipeline.sequence import SequenceReader
+from pipeline.surrogates import knn_search
 from pipeline.surrogates.fit import SurrogateSection
+from pipeline.surrogates.knn_search import GroupedNeighbourhood, Neighbourhood, knn_mean_numpy
 from stages.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -171,9 +166,10 @@ def test_too_few_points_keep_last(model_dir: Path, kitti_root: Path) -> None:
 
 def full_knn(model, e_s: np.ndarray, U: np.ndarray) -> np.ndarray:
     """scikit-learn's kNN over ALL rows of the artifact, at (e_s, U)."""
-    counts = np.diff(model.env_offsets)
-    feats = np.hstack([np.repeat(model.env, counts, axis=0), model.rows_x])
-    knn = KNeighborsRegressor(n_neighbors=model.k).fit(feats, model.rows_t)
+    knn_model = model.surrogate
+    counts = np.diff(knn_model.env_offsets)
+    feats = np.hstack([np.repeat(model.env, counts, axis=0), knn_model.rows_x])
+    knn = KNeighborsRegressor(n_neighbors=knn_model.k).fit(feats, knn_model.rows_t)
     q = np.hstack([np.repeat(e_s[None], len(U), 0), U * model.x_scale])
     return knn.predict(q)
 
@@ -183,7 +179,8 @@ def test_grouped_search_is_the_exact_knn_over_every_row(
 ) -> None:
     model = load_model(model_dir)
     sel = Selector(model, hysteresis=0.0, refine_iters=0)
-    assert sel.groups is not None and len(sel.groups.trees) == 4  # one group per sequence
+    groups = sel.search.groups
+    assert groups is not None and len(groups.trees) == 4  # one group per sequence
     off = np.random.default_rng(3).random((50, 2))  # points off the candidate set too
     for seq, frame in (("01", 5), ("10", 2), ("06", 9)):
         e_s = model.environment(kitti_scan(kitti_root, seq, frame))
@@ -194,7 +191,8 @@ def test_grouped_search_is_the_exact_knn_over_every_row(
         np.testing.assert_allclose(values, brute, rtol=1e-12)
         np.testing.assert_allclose(nb.predict(off).t, full_knn(model, e_s, off), rtol=1e-12)
         numpy_path = knn_mean_numpy(
-            *sel.groups.candidate_trials, nb.frame_d2, nb.frame_row0, model.rows_t, model.k
+            *groups.candidate_trials, nb.frame_d2, nb.frame_row0, model.surrogate.rows_t,
+            model.surrogate.k,
         )
         np.testing.assert_allclose(numpy_path, values, rtol=1e-12)  # the no-numba fallback
         assert sel.select_environment(e_s) == model.params_of(sel.candidates[np.argmin(brute)])
@@ -204,12 +202,14 @@ def test_frames_with_their_own_row_order_form_their_own_group(
     model_dir: Path, kitti_root: Path
 ) -> None:
     model = load_model(model_dir)
-    a, b = model.env_offsets[0], model.env_offsets[1]
-    perm = np.arange(len(model.rows_t))
+    knn = model.surrogate
+    a, b = knn.env_offsets[0], knn.env_offsets[1]
+    perm = np.arange(len(knn.rows_t))
     perm[a:b] = perm[a:b][::-1]  # frame 0 lists its trials backwards
-    shuffled = replace(model, rows_x=model.rows_x[perm], rows_t=model.rows_t[perm])
+    shuffled = replace(model, surrogate=replace(knn, rows_x=knn.rows_x[perm],
+                                                rows_t=knn.rows_t[perm]))
     sel = Selector(shuffled, hysteresis=0.0, refine_iters=0)
-    assert sel.groups is not None and len(sel.groups.trees) == 5
+    assert sel.search.groups is not None and len(sel.search.groups.trees) == 5
     e_s = model.environment(kitti_scan(kitti_root, "01", 0))
     np.testing.assert_allclose(
         sel.neighbourhood(e_s).candidate_values(sel.candidates),
@@ -222,8 +222,8 @@ def test_ungrouped_artifacts_use_the_certified_tree(
     model_dir: Path, kitti_root: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     model = load_model(model_dir)
-    monkeypatch.setattr(runtime, "MAX_GROUPS", 3)  # the 4 sequences no longer qualify
-    assert Selector(model).groups is None
+    monkeypatch.setattr(knn_search, "MAX_GROUPS", 3)  # the 4 sequences no longer qualify
+    assert Selector(model).search.groups is None
     for seq, frame in (("01", 5), ("10", 2), ("06", 9)):
         e_s = model.environment(kitti_scan(kitti_root, seq, frame))
         sel = Selector(model, hysteresis=0.0, refine_iters=0, subset_rows=200)
@@ -238,7 +238,9 @@ def test_ungrouped_artifacts_use_the_certified_tree(
         assert (np.isfinite(cert) == pred.exact).all()
         np.testing.assert_allclose(cert[pred.exact], brute[pred.exact], rtol=1e-12)
         # with every row in the subset every candidate is certified and exact
-        everything = Neighbourhood(model, e_s, len(model.rows_t))
+        d2 = ((model.env - e_s) ** 2).sum(1)
+        everything = Neighbourhood(model.surrogate, d2, len(model.surrogate.rows_t),
+                                   model.x_scale)
         allp = everything.predict(sel.candidates)
         assert allp.exact.all()
         np.testing.assert_allclose(allp.t, brute, rtol=1e-12)

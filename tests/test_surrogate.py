@@ -118,7 +118,7 @@ def test_artifact_round_trip(tmp_path: Path, kitti_root: Path) -> None:
     assert manifest["provenance"]["git_revision"]
     assert not any(p.suffix in (".pkl", ".joblib") for p in model_dir.iterdir())
     model = load_model(model_dir, expected_algorithm="ndt")
-    assert model.env.shape == (40, 10) and model.rows_x.shape == (40 * 24, 2)
+    assert model.env.shape == (40, 10) and model.surrogate.rows_x.shape == (40 * 24, 2)
     # the runtime's environment of a scan = the library's PCA of its descriptor, scaled
     _, pca = synthetic_rows(kitti_root)
     scan = kitti_scan(kitti_root, "04", 3)
@@ -377,3 +377,20 @@ def test_novelty_fallback_is_fixed_only_where_it_beats_the_defaults_everywhere(
         choose_fallback("fixed-ish", evidence)
     with pytest.raises(InputError, match="needs the joint study"):
         choose_fallback("fixed", None)
+
+
+def test_the_forest_runtime_predicts_like_scikit_learn(kitti_root: Path) -> None:
+    """The exported forest walked with numpy gives scikit-learn's predictions."""
+    from pipeline.surrogates.base import TrainingSet
+    from pipeline.surrogates.forest import ForestSurrogate
+
+    rows, _ = synthetic_rows(kitti_root, trials=12)
+    settings = SurrogateSection(model="forest", forest={"trees": 6, "max_samples": 300})
+    training = TrainingSet(rows.E, np.arange(len(rows.y) + 1), rows.U, np.log1p(rows.y))
+    estimator = ForestSurrogate._estimator(settings, len(rows.y))
+    estimator.fit(training.features(), training.rows_t)
+    exported = ForestSurrogate.export(estimator, settings)
+    E = rows.E[::7] + 0.05
+    queries = np.hstack([E, np.random.default_rng(2).random((len(E), 2))])
+    np.testing.assert_allclose(exported.predict(queries), estimator.predict(queries), rtol=1e-12)
+    assert len(exported.roots) == 6 and exported.to_json()["nodes"] == len(exported.feature)

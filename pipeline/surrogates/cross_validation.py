@@ -1,9 +1,10 @@
 """Leave-one-sequence-out cross-validation of the surrogate (docs/design.md, "Surrogate").
 
-Every training sequence in turn is held out: the model is fitted on the other sequences' rows
-and predicts the held-out rows. Reported in y units (% RTE): MAE and RMSE; and a regret: for
-every held-out frame, the trial the surrogate ranks best among that frame's trials against the
-best trial of that frame (mean of y_chosen - y_best, and of y_best, y_chosen).
+Every training sequence in turn is held out: a ``Regressor`` of the configured surrogate is
+fitted on the other sequences' rows and predicts the held-out rows. Reported in y units
+(% RTE): MAE and RMSE; and a regret: for every held-out frame, the trial the surrogate ranks
+best among that frame's trials against the best trial of that frame (mean of y_chosen - y_best,
+and of y_best, y_chosen).
 """
 
 from __future__ import annotations
@@ -32,9 +33,10 @@ def cross_validate(
 ) -> dict[str, Any]:
     """Leave-one-sequence-out CV (module docstring). Held-out frames are subsampled to at most
     ``cv_max_frames`` per sequence (all trials of a kept frame stay, for the regret)."""
-    from sklearn.neighbors import KNeighborsRegressor
-
+    from pipeline.surrogates import surrogate_class
     from pipeline.surrogates.fit import from_target, to_target
+
+    kind = surrogate_class(settings.model)
 
     feats = np.hstack([settings.w_e * rows.E / e_scale, rows.U * x_scale])
     t = to_target(rows.y, settings.target)
@@ -52,7 +54,7 @@ def cross_validate(
         if len(frames) > settings.cv_max_frames:
             frames = rng.choice(frames, settings.cv_max_frames, replace=False)
         test &= np.isin(rows.frames, frames)
-        model = KNeighborsRegressor(n_neighbors=settings.k).fit(feats[train], t[train])
+        model = kind.regressor(settings).fit(feats[train], t[train])
         pred_y = from_target(model.predict(feats[test]), settings.target)
         true_y = rows.y[test]
         err = pred_y - true_y

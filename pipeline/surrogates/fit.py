@@ -10,7 +10,9 @@ Scalings (every choice the paper leaves open):
 - Target: t = log1p(y) (``target: log``, default) or t = y (``linear``). kNN averages t, so with
   ``log`` one diverged trial (y of tens of %) no longer dominates the mean of its neighbours.
   Predictions are reported back in y units (expm1).
-- kNN: k nearest rows, uniform weights.
+- The surrogate itself: ``settings.model`` of the registry ``pipeline.surrogates.SURROGATES``
+  (kNN: k nearest rows, uniform weights, the default; a random forest), fitted on the scaled
+  rows grouped by frame (``TrainingSet``).
 - Candidates: every distinct trial parameter vector plus a scrambled Sobol set in the cube.
 - Cross-validation: ``pipeline.surrogates.cross_validation``; the novelty distance and the
   fallback parameters: ``pipeline.surrogates.novelty``.
@@ -26,20 +28,30 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from pipeline.config import Section
 from pipeline.errors import ConfigError
+from pipeline.surrogates.base import Surrogate, TrainingSet
 from pipeline.surrogates.rows import TrainingRows
 
 if TYPE_CHECKING:
     from pipeline.descriptors.dataset import DescriptorsSection
 
 
-class SurrogateSection(Section):
-    """params.yaml ``surrogate``: the model (k, scalings, target, candidates, CV) and the
-    selection settings the artifact carries (pipeline/runtime.py documents them)."""
+class ForestSection(Section):
+    """params.yaml ``surrogate.forest``: the random forest (pipeline/surrogates/forest.py)."""
 
+    trees: int = Field(32, ge=1)
+    min_samples_leaf: int = Field(5, ge=1)
+    max_samples: int | None = Field(20000, ge=1)
+
+
+class SurrogateSection(Section):
+    """params.yaml ``surrogate``: the model (its type, k, scalings, target, candidates, CV) and
+    the selection settings the artifact carries (pipeline/runtime.py documents them)."""
+
+    model: str = "knn"
     k: int = Field(5, ge=1)
     w_e: float = Field(1.0, gt=0)
     w_x: float = Field(1.0, gt=0)
@@ -54,6 +66,16 @@ class SurrogateSection(Section):
     refine_iters: int = Field(4, ge=0)
     novelty_quantile: float | None = Field(1.0, gt=0, le=1)
     novelty_fallback: Literal["defaults", "fixed", "auto"] = "auto"
+    forest: ForestSection = ForestSection()
+
+    @field_validator("model")
+    @classmethod
+    def _registered(cls, v: str) -> str:
+        from pipeline.surrogates import SURROGATES
+
+        if v not in SURROGATES:
+            raise ValueError(f"model must be one of {list(SURROGATES)}, got {v!r}")
+        return v
 
     def selection(self) -> dict[str, Any]:
         """The manifest's ``selection`` block (the runtime's defaults)."""
@@ -68,31 +90,24 @@ class SurrogateSection(Section):
 
 @dataclass
 class FittedSurrogate:
-    """The fitted model as the artifact stores it (rows grouped by environment = frame).
+    """A fitted model and what the artifact stores beside it.
 
-    env (n_env, D): scaled E_s of every training frame; env_offsets (n_env+1,): rows of env g are
-    rows env_offsets[g]:env_offsets[g+1]; rows_x (M, P): scaled X_s; rows_t (M,): target t;
-    candidates_u (C, P): candidate parameter vectors in [0, 1].
+    env (n_env, D): E_s of every training frame (env_sequences, env_frames: which one);
+    surrogate: the fitted ``Surrogate`` (``settings.model``); candidates_u (C, P): candidate
+    parameter vectors in [0, 1]; summary, cv: the training summary and the cross-validation.
     """
 
     settings: SurrogateSection
     e_scale: float
     x_scale: float
     env: NDArray[np.float64]
-    env_offsets: NDArray[np.int64]
     env_sequences: list[str]
     env_frames: NDArray[np.int64]
-    rows_x: NDArray[np.float64]
-    rows_t: NDArray[np.float64]
+    surrogate: Surrogate
     candidates_u: NDArray[np.float64]
     summary: dict[str, Any]
     cv: dict[str, Any]
     novelty_distance: float | None = None
-
-    def joint_features(self) -> NDArray[np.float64]:
-        """(M, D + P) scaled features [E_s, X_s] of every row."""
-        counts = np.diff(self.env_offsets)
-        return np.hstack([np.repeat(self.env, counts, axis=0), self.rows_x])
 
 
 def to_target(y: NDArray[np.float64], target: str) -> NDArray[np.float64]:
@@ -108,7 +123,9 @@ def from_target(t: NDArray[np.float64], target: str) -> NDArray[np.float64]:
 def fit_surrogate(
     rows: TrainingRows, space_json: list[dict[str, Any]], settings: SurrogateSection
 ) -> FittedSurrogate:
-    """Scale the rows, group them by environment, build candidates, cross-validate."""
+    """Scale the rows, group them by environment, fit ``settings.model``, build candidates,
+    cross-validate."""
+    from pipeline.surrogates import surrogate_class
     from pipeline.surrogates.cross_validation import cross_validate
     from pipeline.surrogates.novelty import novelty_distance
 
@@ -130,6 +147,8 @@ def fit_surrogate(
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     rows_x = rows.U[order] * x_scale
     rows_t = to_target(rows.y[order], settings.target)
+    training = TrainingSet(env, offsets, rows_x, rows_t)
+    surrogate = surrogate_class(settings.model).fit(training, settings)
     cands = candidate_set(rows.U, len(space_json), settings.n_sobol, settings.seed)
     summary = {
         "rows": len(rows.y),
@@ -144,21 +163,8 @@ def fit_surrogate(
     env_sequences = [str(seq_names[u // span]) for u in uniq]
     novelty = novelty_distance(env, np.array(env_sequences), settings.novelty_quantile)
     summary["novelty_distance"] = novelty
-    return FittedSurrogate(
-        settings,
-        e_scale,
-        x_scale,
-        env,
-        offsets,
-        env_sequences,
-        (uniq % span).astype(np.int64),
-        rows_x,
-        rows_t,
-        cands,
-        summary,
-        cv,
-        novelty,
-    )
+    return FittedSurrogate(settings, e_scale, x_scale, env, env_sequences,
+                           (uniq % span).astype(np.int64), surrogate, cands, summary, cv, novelty)
 
 
 def candidate_set(

@@ -25,7 +25,7 @@ def novelty_distance(env: NDArray[np.float64], sequences: NDArray[np.str_],
                      quantile: float | None) -> float | None:
     """The ``quantile`` of every training frame's distance to the nearest frame of another
     training sequence (env (n_env, D) scaled environments, sequences (n_env,)): a scan farther
-    than this from every training frame is unlike the training data (pipeline.runtime, step 7).
+    than this from every training frame is unlike the training data (pipeline.runtime, step 3).
     None when disabled or with a single training sequence."""
     from scipy.spatial import cKDTree
 
@@ -58,7 +58,7 @@ class FallbackEvidence:
 def choose_fallback(
     mode: str, evidence: FallbackEvidence | None
 ) -> tuple[dict[str, float] | None, dict[str, Any]]:
-    """Parameters for scans unlike every training frame (pipeline.runtime, step 7): None means
+    """Parameters for scans unlike every training frame (pipeline.runtime, step 3): None means
     the adapter's defaults. Returns (parameters or None, the record for the manifest).
 
     ``defaults``: the defaults. ``fixed``: the joint study's best parameters. ``auto``: the

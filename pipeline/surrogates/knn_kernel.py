@@ -1,8 +1,9 @@
-"""The numba kernel of the grouped kNN search (pipeline/runtime.py, ``TrialGroups``).
+"""The numba kernel of the grouped kNN search (pipeline/surrogates/knn_search.py,
+``TrialGroups``).
 
-Imported by ``pipeline.runtime`` on first use; without numba the runtime uses the numpy
-``knn_mean_numpy``, which gives the same values (tests/test_runtime.py compares both with
-scikit-learn's kNN over every row).
+Imported by the search on first use; without numba it uses the numpy ``knn_mean_numpy``, which
+gives the same values (tests/test_runtime.py compares both with scikit-learn's kNN over every
+row).
 """
 
 from __future__ import annotations

@@ -1,0 +1,111 @@
+"""The k-nearest-neighbour surrogate (the paper's): S(E_s, X_s) = the mean target t of the k
+training rows nearest to [E_s, X_s], Euclidean, uniform weights. The default surrogate.
+
+The artifact keeps every training row, grouped by frame (env_offsets.npy, rows_x.npy,
+rows_t.npy); the selector searches them exactly (``pipeline.surrogates.knn_search``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.surrogates.base import Arrays, ArraySpec, Query, Regressor, TrainingSet
+from pipeline.surrogates.knn_search import GroupedNeighbourhood, Neighbourhood, TrialGroups
+
+if TYPE_CHECKING:
+    from pipeline.surrogates.fit import SurrogateSection
+
+
+@dataclass
+class KnnSurrogate:
+    """k and the training rows: env (n_env, D) E_s, env_offsets (n_env + 1,) the rows of each
+    frame, rows_x (M, P) X_s, rows_t (M,) t (``TrainingSet``)."""
+
+    type: ClassVar[str] = "knn"
+    files: ClassVar[dict[str, ArraySpec]] = {
+        "env_offsets.npy": ArraySpec(1, "i"),
+        "rows_x.npy": ArraySpec(2),
+        "rows_t.npy": ArraySpec(1),
+    }
+
+    k: int
+    target: str
+    env: NDArray[np.float64]
+    env_offsets: NDArray[np.int64]
+    rows_x: NDArray[np.float64]
+    rows_t: NDArray[np.float64]
+
+    @classmethod
+    def fit(cls, training: TrainingSet, section: SurrogateSection) -> KnnSurrogate:
+        """Nothing to fit: the rows are the model."""
+        return cls(section.k, section.target, training.env, training.env_offsets,
+                   training.rows_x, training.rows_t)
+
+    @classmethod
+    def regressor(cls, section: SurrogateSection) -> Regressor:
+        from sklearn.neighbors import KNeighborsRegressor
+
+        regressor: Regressor = KNeighborsRegressor(n_neighbors=section.k)
+        return regressor
+
+    def predict(self, features: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Exact kNN mean over every row (a kd-tree of the joint features): (n,)."""
+        from scipy.spatial import cKDTree
+
+        joint = TrainingSet(self.env, self.env_offsets, self.rows_x, self.rows_t).features()
+        k = min(self.k, len(self.rows_t))
+        _, idx = cKDTree(joint).query(np.atleast_2d(features), k=k)
+        return np.asarray(self.rows_t[np.reshape(idx, (len(idx), k))].mean(axis=1))
+
+    def arrays(self) -> Arrays:
+        return {"env_offsets.npy": self.env_offsets, "rows_x.npy": self.rows_x,
+                "rows_t.npy": self.rows_t}
+
+    def to_json(self) -> dict[str, Any]:
+        return {"type": self.type, "k": self.k, "weights": "uniform", "metric": "euclidean",
+                "target": self.target}
+
+    @classmethod
+    def from_artifact(cls, model: Mapping[str, Any], arrays: Arrays) -> KnnSurrogate:
+        env = arrays["env.npy"]
+        offsets = arrays["env_offsets.npy"]
+        rows_x, rows_t = arrays["rows_x.npy"], arrays["rows_t.npy"]
+        k = model.get("k")
+        if not isinstance(k, int) or isinstance(k, bool) or not 1 <= k <= len(rows_t):
+            raise ValueError(f"model.k must be an integer in [1, {len(rows_t)}] (the rows), "
+                             f"got {k!r}")
+        if (offsets.shape != (len(env) + 1,) or offsets[0] != 0 or offsets[-1] != len(rows_t)
+                or np.any(np.diff(offsets) < 0)):
+            raise ValueError("env_offsets.npy: does not partition the rows into the frames")
+        p = arrays["candidates.npy"].shape[1]
+        if rows_x.shape != (len(rows_t), p):
+            raise ValueError(f"rows_x.npy: shape {rows_x.shape}, expected ({len(rows_t)}, {p}) "
+                             "(rows, parameters)")
+        return cls(k, str(model.get("target", "log")), env, offsets.astype(np.int64), rows_x,
+                   rows_t)
+
+    def search(self, candidates_u: NDArray[np.float64], x_scale: float,
+               options: Mapping[str, Any]) -> KnnSearch:
+        return KnnSearch(self, candidates_u, x_scale, int(options.get("subset_rows", 4096)),
+                         bool(options.get("grouped", True)))
+
+
+class KnnSearch:
+    """The exact grouped search when the frames group, else the certified kd-tree."""
+
+    def __init__(self, model: KnnSurrogate, candidates_u: NDArray[np.float64], x_scale: float,
+                 subset_rows: int, grouped: bool = True) -> None:
+        self.model = model
+        self.x_scale = x_scale
+        self.subset_rows = subset_rows
+        self.groups = TrialGroups.build(model, candidates_u, x_scale) if grouped else None
+
+    def at(self, e_s: NDArray[np.float64], env_d2: NDArray[np.float64]) -> Query:
+        if self.groups is not None:
+            return GroupedNeighbourhood(self.groups, env_d2)
+        return Neighbourhood(self.model, env_d2, self.subset_rows, self.x_scale)

@@ -1,0 +1,250 @@
+"""The kNN surrogate's search: the k nearest training rows of (E_s, x) for many x at once.
+
+Since E_s is fixed for a query, the joint distance of a row i to (E_s, x) is
+|x - x_i|^2 + dE_i^2 with dE_i = |E_s - E_i|: the joint kNN is a kNN in P + 1 dimensions over
+the points (x_i, dE_i), queried at (x, 0).
+
+Exact over every row, grouped (``TrialGroups``, ``GroupedNeighbourhood``): every frame of a
+training sequence has one row per trial of that sequence, the same parameter vectors in the
+same order, so the frames fall into a few groups (one per sequence) that share a block X_g of
+trial vectors. The k nearest rows of (E_s, x) are among the pairs (one of the k nearest trials
+of x in X_g, one of the k nearest frames of E_s in group g): any other row is farther than k
+rows of the same frame (nearer trials) or of the same trial (nearer frames). The nearest trials
+of the candidate set are static (found once per selector); per selection only the k nearest
+frames of each group are found and the pairs merged (``pipeline.surrogates.knn_kernel`` in
+numba, ``knn_mean_numpy`` without numba).
+
+Certified (``Neighbourhood``), for an artifact whose frames do not form at most ``MAX_GROUPS``
+groups: the frames nearest to E_s are taken until ``subset_rows`` rows are gathered, a cKDTree
+over those rows' (x_i, dE_i) answers the k nearest rows, and a value is *certified exact* when
+its k-th neighbour distance is <= the E-distance of the first frame left out (every left-out
+row is at least that far), so it equals the kNN over all rows; ``Prediction.exact`` says which,
+and the search uses certified values only (the tree is searched within that distance,
+``Neighbourhood.certified``).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, TypeAlias
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from pipeline.surrogates.base import Prediction
+
+if TYPE_CHECKING:
+    from pipeline.surrogates.knn import KnnSurrogate
+
+
+class Neighbourhood:
+    """The rows near one environment E_s, as a (P + 1)-D tree (module docstring: the certified
+    search)."""
+
+    def __init__(self, model: KnnSurrogate, d2: NDArray[np.float64], subset_rows: int,
+                 x_scale: float) -> None:
+        """d2 (n_env,): squared E-distances of the training frames to E_s."""
+        counts = np.diff(model.env_offsets)
+        n_env = len(d2)
+        order = np.argsort(d2)
+        cum = np.cumsum(counts[order])
+        n_take = min(int(np.searchsorted(cum, max(subset_rows, model.k))) + 1, n_env)
+        taken = order[:n_take]
+        self.boundary2 = float(d2[order[n_take]]) if n_take < n_env else math.inf
+        lens = counts[taken]
+        starts = model.env_offsets[taken]
+        total = int(lens.sum())
+        shift = np.repeat(starts - np.concatenate([[0], np.cumsum(lens)[:-1]]), lens)
+        self.rows = shift + np.arange(total)
+        self.rows_searched = total
+        self.k = min(model.k, total)
+        pts = np.empty((total, model.rows_x.shape[1] + 1))
+        pts[:, :-1] = model.rows_x[self.rows]
+        pts[:, -1] = np.repeat(np.sqrt(d2[taken]), lens)
+        self.t = model.rows_t[self.rows]
+        # built for every selection and queried ~3000 times: the sliding-midpoint tree builds
+        # in half the time of the balanced one and queries as fast (make bench)
+        self.tree = cKDTree(pts, leafsize=32, balanced_tree=False, compact_nodes=False)
+        self.x_scale = x_scale
+
+    def predict(self, U: NDArray[np.float64]) -> Prediction:
+        """Prediction at unit points U (C, P)."""
+        dist, idx = self._query(U, math.inf)
+        return Prediction(self.t[idx].mean(axis=1), dist[:, -1] ** 2 <= self.boundary2)
+
+    def certified(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``predict(U).t`` where it is certified exact, inf elsewhere: (C,).
+
+        The tree is searched only within the certification distance (inf: no bound), which
+        prunes more of it than ``predict``."""
+        dist, idx = self._query(U, math.sqrt(self.boundary2) * (1.0 + 1e-9) + 1e-12)
+        exact = dist[:, -1] ** 2 <= self.boundary2
+        t = np.full(len(U), np.inf)
+        t[exact] = self.t[idx[exact]].mean(axis=1)
+        return t
+
+    def candidate_values(self, candidates: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``certified`` at the selector's candidate set."""
+        return self.certified(candidates)
+
+    def _query(
+        self, U: NDArray[np.float64], bound: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+        """Distances and row indices (C, k) of the k nearest rows to (U * x_scale, 0) within
+        ``bound`` (inf and len(rows) past it)."""
+        q = np.zeros((len(U), U.shape[1] + 1))
+        q[:, :-1] = U * self.x_scale
+        dist, idx = self.tree.query(q, k=self.k, distance_upper_bound=bound)
+        if self.k == 1:
+            dist, idx = dist[:, None], idx[:, None]
+        return dist, idx
+
+
+MAX_GROUPS = 64  # beyond this many frame groups the search uses Neighbourhood
+
+
+class TrialGroups:
+    """The rows as groups of frames sharing one block of trial vectors (module docstring), with
+    the k nearest trials of every candidate. Built once per Selector."""
+
+    def __init__(
+        self, model: KnnSurrogate, blocks: list[list[int]], candidates_u: NDArray[np.float64],
+        x_scale: float,
+    ) -> None:
+        """``blocks``: the frames of each group (frames whose rows hold the same trial vectors
+        in the same order); candidates_u (C, P): the selector's candidate set."""
+        offsets = model.env_offsets
+        self.model = model
+        self.k = model.k
+        self.x_scale = x_scale
+        self.trees = [cKDTree(model.rows_x[offsets[f[0]] : offsets[f[0] + 1]]) for f in blocks]
+        self.frame_table = np.full((len(blocks), max(map(len, blocks))), -1, np.int64)  # (G, F)
+        for g, frames in enumerate(blocks):
+            self.frame_table[g, : len(frames)] = frames
+        self.candidates = candidates_u
+        self.candidate_trials = self.nearest_trials(candidates_u)
+
+    @classmethod
+    def build(cls, model: KnnSurrogate, candidates_u: NDArray[np.float64],
+              x_scale: float) -> TrialGroups | None:
+        """The groups of ``model``, or None when its frames form more than MAX_GROUPS groups
+        (or it has fewer than k rows)."""
+        if len(model.rows_t) < model.k:
+            return None
+        offsets = model.env_offsets
+        blocks: dict[bytes, list[int]] = {}
+        for f in range(len(offsets) - 1):
+            key = model.rows_x[offsets[f] : offsets[f + 1]].tobytes()
+            blocks.setdefault(key, []).append(f)
+            if len(blocks) > MAX_GROUPS:
+                return None
+        return cls(model, list(blocks.values()), candidates_u, x_scale)
+
+    def nearest_trials(
+        self, U: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Squared distances and block positions (n, G, k) of the k nearest trial vectors of
+        each unit point U (n, P) in every group (ascending; inf and 0 past a group's size)."""
+        n = len(U)
+        d2 = np.full((n, len(self.trees), self.k), np.inf)
+        pos = np.zeros((n, len(self.trees), self.k), np.int64)
+        q = U * self.x_scale
+        for g, tree in enumerate(self.trees):
+            kk = min(self.k, tree.n)
+            dist, idx = tree.query(q, k=kk)
+            d2[:, g, :kk] = np.reshape(dist, (n, kk)) ** 2
+            pos[:, g, :kk] = np.reshape(idx, (n, kk))
+        return d2, pos
+
+    def nearest_frames(
+        self, env_d2: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Squared E-distances and first rows (G, k) of each group's k nearest frames, given
+        every frame's squared E-distance env_d2 (n_env,) (ascending; inf and 0 past a group's
+        size)."""
+        table = self.frame_table
+        d2 = np.where(table >= 0, env_d2[table], np.inf)
+        kk = min(self.k, table.shape[1])
+        pick = np.argpartition(d2, kk - 1, axis=1)[:, :kk] if table.shape[1] > kk else None
+        if pick is not None:
+            d2, table = np.take_along_axis(d2, pick, 1), np.take_along_axis(table, pick, 1)
+        order = np.argsort(d2, axis=1, kind="stable")
+        frame_d2 = np.full((len(table), self.k), np.inf)
+        frame_row0 = np.zeros((len(table), self.k), np.int64)
+        frame_d2[:, :kk] = np.take_along_axis(d2, order, 1)
+        frames = np.maximum(np.take_along_axis(table, order, 1), 0)  # padding -> frame 0
+        frame_row0[:, :kk] = self.model.env_offsets[frames]
+        return frame_d2, frame_row0
+
+
+class GroupedNeighbourhood:
+    """TrialGroups at one environment E_s: the exact kNN over every row."""
+
+    def __init__(self, groups: TrialGroups, env_d2: NDArray[np.float64]) -> None:
+        """env_d2 (n_env,): squared E-distances of the training frames to E_s."""
+        self.groups = groups
+        self.frame_d2, self.frame_row0 = groups.nearest_frames(env_d2)
+        self.rows_searched = len(groups.model.rows_t)  # all of them
+
+    def predict(self, U: NDArray[np.float64]) -> Prediction:
+        """Prediction at unit points U (C, P), every value exact."""
+        t = self._mean(*self.groups.nearest_trials(U))
+        return Prediction(t, np.ones(len(t), bool))
+
+    def certified(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``predict(U).t`` (every value is exact): (C,)."""
+        return self.predict(U).t
+
+    def candidate_values(self, candidates: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``certified`` at the groups' candidate set (their nearest trials are known)."""
+        if candidates is not self.groups.candidates:
+            return self.certified(candidates)
+        return self._mean(*self.groups.candidate_trials)
+
+    def _mean(
+        self, trial_d2: NDArray[np.float64], trial_pos: NDArray[np.int64]
+    ) -> NDArray[np.float64]:
+        return _knn_mean_kernel()(
+            trial_d2, trial_pos, self.frame_d2, self.frame_row0, self.groups.model.rows_t,
+            self.groups.k,
+        )
+
+
+F64: TypeAlias = NDArray[np.float64]
+I64: TypeAlias = NDArray[np.int64]
+
+
+def knn_mean_numpy(
+    trial_d2: F64, trial_pos: I64, frame_d2: F64, frame_row0: I64, rows_t: F64, k: int
+) -> F64:
+    """``pipeline.surrogates.knn_kernel.knn_mean`` in numpy (same arguments, same values): (n,).
+
+    Only the pairs (a, j) with (a + 1)(j + 1) <= k can be among a group's k nearest: a pair
+    farther down both sorted lists is beaten by the (a + 1)(j + 1) pairs above and left of it.
+    """
+    a, j = np.array([(a, j) for a in range(k) for j in range(k) if (a + 1) * (j + 1) <= k]).T
+    n = len(trial_d2)
+    d2 = (trial_d2[:, :, a] + frame_d2[None, :, j]).reshape(n, -1)
+    rows = (trial_pos[:, :, a] + frame_row0[None, :, j]).reshape(n, -1)
+    pick = np.argpartition(d2, k - 1, axis=1)[:, :k]
+    return rows_t[np.take_along_axis(rows, pick, 1)].mean(axis=1)
+
+
+KnnMean = Callable[..., NDArray[np.float64]]
+
+
+@functools.cache
+def _knn_mean_kernel() -> KnnMean:
+    """``pipeline.surrogates.knn_kernel.knn_mean`` (numba), or ``knn_mean_numpy`` without
+    numba."""
+    try:
+        from pipeline.surrogates.knn_kernel import knn_mean
+    except ImportError:  # pragma: no cover - numba is a dependency of the pipeline, not the robot
+        return knn_mean_numpy
+    kernel: KnnMean = knn_mean
+    return kernel
+
+

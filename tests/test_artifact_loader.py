@@ -1,0 +1,142 @@
+"""The artifact loader trusts neither the filesystem nor the numbers (issue 13, item 6).
+
+Every case is a model folder whose checksums all match (the manifest re-signed after the
+change), so only the loader's own checks stand between it and the runtime: each must end in
+one ArtifactError line naming the file or the field, never a hang, a traceback or a model.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from test_surrogate import build_model, write_tiny_sequence
+
+from pipeline.artifact import canonical_manifest_hash
+from pipeline.errors import ArtifactError
+from pipeline.runtime import load_model
+from stages.cli import main
+
+
+@pytest.fixture(scope="module")
+def good(tmp_path_factory: pytest.TempPathFactory, kitti_root: Path) -> Path:
+    return build_model(tmp_path_factory.mktemp("good") / "model", kitti_root)
+
+
+def copy(src: Path, dst: Path) -> Path:
+    shutil.copytree(src, dst)
+    return dst
+
+
+def sign(folder: Path, change: Callable[[dict[str, Any]], None] | None = None) -> None:
+    """Apply ``change`` to the manifest, refresh every file's sha256 and the manifest's own."""
+    import hashlib
+
+    manifest = json.loads((folder / "manifest.json").read_text())
+    if change is not None:
+        change(manifest)
+    for name in manifest["files"]:
+        path = folder / name
+        if path.is_file() and not path.is_symlink():
+            manifest["files"][name] = hashlib.sha256(path.read_bytes()).hexdigest()
+    manifest["manifest_sha256"] = canonical_manifest_hash(manifest)
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+
+
+def refused(folder: Path, *words: str) -> str:
+    with pytest.raises(ArtifactError) as exc:
+        load_model(folder)
+    msg = str(exc.value)
+    assert "\n" not in msg, msg
+    for word in words:
+        assert word in msg, msg
+    return msg
+
+
+def test_a_symlink_out_of_the_folder_is_refused(good: Path, tmp_path: Path) -> None:
+    outside = tmp_path / "elsewhere.npy"
+    shutil.copy(good / "rows_t.npy", outside)  # the same bytes: its sha256 matches
+    bad = copy(good, tmp_path / "m")
+    (bad / "rows_t.npy").unlink()
+    (bad / "rows_t.npy").symlink_to(outside)
+    refused(bad, "rows_t.npy", "regular file")
+
+
+@pytest.mark.timeout(30, method="signal")
+def test_a_fifo_is_refused_without_blocking(good: Path, tmp_path: Path) -> None:
+    bad = copy(good, tmp_path / "m")
+    (bad / "env.npy").unlink()
+    os.mkfifo(bad / "env.npy")
+    refused(bad, "env.npy", "regular file")
+
+
+def test_a_huge_npy_shape_is_refused_before_reading(good: Path, tmp_path: Path) -> None:
+    bad = copy(good, tmp_path / "m")
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, {"descr": "<f8", "fortran_order": False, "shape": (10**12,)})
+    (bad / "rows_t.npy").write_bytes(header.getvalue() + np.zeros(8).tobytes())
+    sign(bad)
+    refused(bad, "rows_t.npy")
+    seq = tmp_path / "s.mcap"
+    res = CliRunner().invoke(main, ["select", str(bad), str(seq), "--out",
+                                    str(tmp_path / "o.parquet")])
+    assert res.exit_code == 1 and res.output.count("\n") == 1, res.output
+
+
+def set_path(manifest: dict[str, Any], dotted: str, value: Any) -> None:
+    keys = dotted.split(".")
+    node = manifest
+    for key in keys[:-1]:
+        node = node[int(key)] if isinstance(node, list) else node[key]
+    node[keys[-1]] = value
+
+
+@pytest.mark.parametrize(("field", "value", "words"), [
+    ("model.k", 0, ("model.k",)),
+    ("model.k", 10**9, ("model.k",)),
+    ("selection.period_s", 0.0, ("period_s",)),
+    ("selection.hysteresis", -1.0, ("hysteresis",)),
+    ("parameter_space.0.low", 50.0, ("resolution", "low")),
+    ("scaling.parameters.x_scale", float("nan"), ("x_scale",)),
+    ("selection.novelty_fallback_params", {"no_such_param": 1.0}, ("no_such_param",)),
+    ("selection.novelty_distance", -2.0, ("novelty_distance",)),
+])
+def test_bad_manifest_values_are_refused(good: Path, tmp_path: Path, field: str, value: Any,
+                                         words: tuple[str, ...]) -> None:
+    bad = copy(good, tmp_path / "m")
+    sign(bad, lambda m: set_path(m, field, value))
+    refused(bad, *words)
+
+
+@pytest.mark.parametrize(("name", "change", "word"), [
+    ("env.npy", lambda a: np.where(np.arange(a.size).reshape(a.shape) == 7, np.nan, a), "finite"),
+    ("rows_t.npy", lambda a: a[:, None], "1-D"),
+    ("candidates.npy", lambda a: a + 2.0, "[0, 1]"),
+    ("pca_scale.npy", lambda a: -a, "pca_scale"),
+    ("env_offsets.npy", lambda a: a.astype(np.float64), "env_offsets"),
+])
+def test_bad_arrays_are_refused(good: Path, tmp_path: Path, name: str,
+                                change: Callable[[np.ndarray], np.ndarray], word: str) -> None:
+    bad = copy(good, tmp_path / "m")
+    np.save(bad / name, change(np.load(good / name)), allow_pickle=False)
+    sign(bad)
+    refused(bad, name, word)
+
+
+def test_the_good_model_loads_and_selects(good: Path, tmp_path: Path, kitti_root: Path) -> None:
+    model = load_model(good)
+    seq = tmp_path / "s.mcap"
+    write_tiny_sequence(seq, kitti_root, "04", n=2)
+    res = CliRunner().invoke(main, ["select", str(good), str(seq), "--out",
+                                    str(tmp_path / "o.parquet")])
+    assert res.exit_code == 0, res.output
+    assert model.algorithm == "ndt"
