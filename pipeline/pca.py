@@ -73,16 +73,19 @@ class Pca:
     @classmethod
     def load(cls, folder: str | Path) -> Pca:
         """Read a folder written by ``save``; InputError when files are missing or altered."""
+        from pipeline.artifact import MAX_ARRAY_BYTES, parse_npy, read_regular_file
+        from pipeline.errors import ArtifactError
+
         folder = Path(folder)
         try:
             meta = json.loads((folder / "pca.json").read_text(encoding="utf-8"))
             arr = {}
             for name in PCA_FILES:
-                data = (folder / name).read_bytes()
+                data = read_regular_file(folder / name, MAX_ARRAY_BYTES)
                 if hashlib.sha256(data).hexdigest() != meta["files"][name]:
                     raise InputError(f"{folder / name}: sha256 does not match pca.json")
-                arr[name] = np.load(folder / name, allow_pickle=False)
-        except (FileNotFoundError, KeyError, ValueError) as exc:
+                arr[name] = parse_npy(data, folder / name)
+        except (OSError, KeyError, TypeError, ValueError, ArtifactError) as exc:
             raise InputError(f"{folder}: not a PCA folder ({type(exc).__name__}: {exc})") from None
         return cls(
             arr["mean.npy"],
