@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import Row, best_of, data_root
 
-from pipeline.descriptor import describe
+from pipeline.descriptors.ndt_histogram import describe
 
 
 def kitti_scans() -> list[np.ndarray]:
@@ -71,7 +71,7 @@ def synthetic_rows(
 
 def run() -> list[Row]:
     from pipeline.artifact import ArtifactInfo, write_artifact
-    from pipeline.descriptor import DescriptorConfig
+    from pipeline.descriptors import NdtHistogram
     from pipeline.odometry.registry import get_adapter
     from pipeline.runtime import Selector, load_model
     from pipeline.surrogates.base import environment_d2
@@ -106,7 +106,7 @@ def run() -> list[Row]:
             Path(tmp) / "model",
             fitted,
             pca,
-            ArtifactInfo("gicp", space, DescriptorConfig(), selection),
+            ArtifactInfo("gicp", space, NdtHistogram(), selection),
         )
         model = load_model(Path(tmp) / "model")
     envs = [model.environment(s) for s in scans]

@@ -25,7 +25,7 @@ from pipeline.errors import ArtifactError
 from pipeline.surrogates.base import Arrays, ArraySpec
 
 if TYPE_CHECKING:
-    from pipeline.descriptor import DescriptorConfig
+    from pipeline.descriptors import Descriptor
     from pipeline.pca import Pca
     from pipeline.surrogates.fit import FittedSurrogate
 
@@ -54,7 +54,7 @@ class ArtifactInfo:
 
     algorithm: str
     space: list[dict[str, Any]]
-    descriptor: DescriptorConfig
+    descriptor: Descriptor
     selection: Mapping[str, Any]
     inputs: Mapping[str, str] = field(default_factory=dict)
 

@@ -47,7 +47,7 @@ from pipeline.artifact import (
     validate_arrays,
     validate_values,
 )
-from pipeline.descriptor import DescriptorConfig, describe
+from pipeline.descriptors import Descriptor, descriptor_from_json
 from pipeline.errors import ArtifactError, ConfigError
 from pipeline.surrogates.base import Query, Surrogate, environment_d2
 from pipeline.unit_cube import UnitCube
@@ -66,7 +66,7 @@ class Model:
 
     path: Path
     manifest: dict[str, Any]
-    descriptor: DescriptorConfig
+    descriptor: Descriptor
     pca_mean: NDArray[np.float64]
     pca_scale: NDArray[np.float64]
     pca_components: NDArray[np.float64]
@@ -111,7 +111,7 @@ class Model:
 
     def environment(self, points_lidar: NDArray[np.floating]) -> NDArray[np.float64]:
         """Scaled environment E_s (D,) of one scan ((N, 3|4) points, sensor frame [m])."""
-        d = describe(points_lidar, self.descriptor).astype(np.float64)
+        d = self.descriptor.describe(points_lidar).astype(np.float64)
         e = ((np.sqrt(np.maximum(d, 0.0)) - self.pca_mean) / self.pca_scale) @ self.pca_components.T
         return e * self.e_factor
 
@@ -158,7 +158,7 @@ def load_model(path: str | Path, expected_algorithm: str | None = None) -> Model
     arrays = read_arrays(path, manifest, {**COMMON_FILES, **kind.files})
     try:
         validate_values(manifest)
-        descriptor = DescriptorConfig.from_json(manifest["descriptor"])
+        descriptor = descriptor_from_json(manifest["descriptor"])
         validate_arrays(arrays, len(manifest["parameter_space"]), descriptor.size)
         surrogate = kind.from_artifact(model_json, arrays)
     except (ValueError, TypeError, KeyError, ConfigError) as exc:

@@ -19,14 +19,33 @@ TRAJECTORY = pa.schema(
 )
 """One trial's estimated trajectory: T_world_lidar per frame."""
 
-DESCRIPTORS = pa.schema(
-    [pa.field("sequence", pa.string(), nullable=False),
-     pa.field("frame", pa.int32(), nullable=False),
-     pa.field("stamp_ns", pa.int64(), nullable=False)]
-    + [pa.field(f"d{i}", pa.float32(), nullable=False) for i in range(90)],
-    metadata={**_META, b"adaptune.table": b"descriptors"},
-)
-"""Environment descriptor (90-bin NDT voxel class histogram) of every frame."""
+FRAME_KEY = [pa.field("sequence", pa.string(), nullable=False),
+             pa.field("frame", pa.int32(), nullable=False)]
+"""The columns that name a frame of a data set."""
+
+
+def descriptors_schema(width: int, descriptor_json: str = "") -> pa.Schema:
+    """The descriptor of every frame: sequence, frame, stamp_ns, then ``width`` float32 values
+    d0 .. d<width-1> (the descriptor's ``size``; 90 for the default NDT histogram). The
+    descriptor's settings (its JSON) go into the metadata as ``adaptune.descriptor``."""
+    meta = {**_META, b"adaptune.table": b"descriptors"}
+    if descriptor_json:
+        meta[b"adaptune.descriptor"] = descriptor_json.encode()
+    return pa.schema(
+        [*FRAME_KEY, pa.field("stamp_ns", pa.int64(), nullable=False)]
+        + [pa.field(f"d{i}", pa.float32(), nullable=False) for i in range(width)],
+        metadata=meta,
+    )
+
+
+def environment_schema(dim: int) -> pa.Schema:
+    """The environment E of every frame: sequence, frame, then ``dim`` float32 values
+    e0 .. e<dim-1> (the PCA's dimension, params ``descriptors.pca_dim``)."""
+    return pa.schema(
+        FRAME_KEY + [pa.field(f"e{i}", pa.float32(), nullable=False) for i in range(dim)],
+        metadata={**_META, b"adaptune.table": b"environment"},
+    )
+
 
 SCHEDULE_BASE = pa.schema(
     [pa.field("frame", pa.int32(), nullable=False),

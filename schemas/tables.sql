@@ -77,23 +77,16 @@ CREATE TABLE rte_kitti (            -- KITTI devkit segments (start every 10 fra
     r_err DOUBLE NOT NULL           -- devkit units: angle(E.R) / length [rad/m]
 );
 
-CREATE TABLE descriptors (          -- from data/descriptors.parquet (schemas.arrow.DESCRIPTORS)
+-- The descriptor and environment tables name a frame; pipeline.evaluation.store adds their value
+-- columns from the Parquet files (d0..d<F-1> FLOAT for a descriptor of width F,
+-- schemas.arrow.descriptors_schema; e0..e<D-1> FLOAT for the PCA's dimension D).
+CREATE TABLE descriptors (          -- from data/descriptors.parquet
     sequence VARCHAR NOT NULL,
     frame INTEGER NOT NULL,
-    stamp_ns BIGINT NOT NULL,
-    d0 FLOAT, d1 FLOAT, d2 FLOAT, d3 FLOAT, d4 FLOAT, d5 FLOAT, d6 FLOAT, d7 FLOAT, d8 FLOAT, d9 FLOAT,
-    d10 FLOAT, d11 FLOAT, d12 FLOAT, d13 FLOAT, d14 FLOAT, d15 FLOAT, d16 FLOAT, d17 FLOAT, d18 FLOAT, d19 FLOAT,
-    d20 FLOAT, d21 FLOAT, d22 FLOAT, d23 FLOAT, d24 FLOAT, d25 FLOAT, d26 FLOAT, d27 FLOAT, d28 FLOAT, d29 FLOAT,
-    d30 FLOAT, d31 FLOAT, d32 FLOAT, d33 FLOAT, d34 FLOAT, d35 FLOAT, d36 FLOAT, d37 FLOAT, d38 FLOAT, d39 FLOAT,
-    d40 FLOAT, d41 FLOAT, d42 FLOAT, d43 FLOAT, d44 FLOAT, d45 FLOAT, d46 FLOAT, d47 FLOAT, d48 FLOAT, d49 FLOAT,
-    d50 FLOAT, d51 FLOAT, d52 FLOAT, d53 FLOAT, d54 FLOAT, d55 FLOAT, d56 FLOAT, d57 FLOAT, d58 FLOAT, d59 FLOAT,
-    d60 FLOAT, d61 FLOAT, d62 FLOAT, d63 FLOAT, d64 FLOAT, d65 FLOAT, d66 FLOAT, d67 FLOAT, d68 FLOAT, d69 FLOAT,
-    d70 FLOAT, d71 FLOAT, d72 FLOAT, d73 FLOAT, d74 FLOAT, d75 FLOAT, d76 FLOAT, d77 FLOAT, d78 FLOAT, d79 FLOAT,
-    d80 FLOAT, d81 FLOAT, d82 FLOAT, d83 FLOAT, d84 FLOAT, d85 FLOAT, d86 FLOAT, d87 FLOAT, d88 FLOAT, d89 FLOAT
+    stamp_ns BIGINT NOT NULL
 );
 
 CREATE TABLE environment (          -- from data/environment.parquet: PCA of the descriptors
     sequence VARCHAR NOT NULL,
-    frame INTEGER NOT NULL,
-    e0 FLOAT, e1 FLOAT, e2 FLOAT, e3 FLOAT, e4 FLOAT, e5 FLOAT, e6 FLOAT, e7 FLOAT, e8 FLOAT, e9 FLOAT
+    frame INTEGER NOT NULL
 );

@@ -1,4 +1,4 @@
-"""The NDT voxel classification histogram (pipeline/descriptor.py)."""
+"""The NDT voxel classification histogram (pipeline/descriptors/ndt_histogram.py)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.descriptor import (
+from pipeline.descriptors.ndt_histogram import (
     _DENSE_MAX_CELLS,
-    DescriptorConfig,
+    NdtHistogram,
     _crop,
     _moments,
     _moments_kernel,
@@ -76,9 +76,9 @@ def grid_plane(
     return centre + uv[:, :1] * a + uv[:, 1:] * b + rng.normal(0, noise, (n, 1)) * normal
 
 
-def classes_of(points: np.ndarray, config: DescriptorConfig | None = None) -> np.ndarray:
+def classes_of(points: np.ndarray, config: NdtHistogram | None = None) -> np.ndarray:
     """(3, 3) class x sub-class fractions of a point set."""
-    h = describe(points.astype(np.float32), config or DescriptorConfig())
+    h = describe(points.astype(np.float32), config or NdtHistogram())
     return h.reshape(10, 3, 3).sum(0)
 
 
@@ -118,7 +118,7 @@ def test_range_bins_and_layout(rng: np.random.Generator) -> None:
     assert len(names) == 90 and names[int(np.argmax(h))] == "r03_planar_horizontal_plane"
     far = pts + np.array([40.0, 0, 0])  # beyond 30 m: cropped, empty histogram
     assert not describe(far.astype(np.float32)).any()
-    raw = describe(pts.astype(np.float32), DescriptorConfig(normalize=False))
+    raw = describe(pts.astype(np.float32), NdtHistogram(normalize=False))
     assert raw.sum() == raw.max() and raw.sum() >= 4  # counts of voxels
 
 
@@ -140,7 +140,7 @@ def test_moments_and_eigenvalues(rng: np.random.Generator) -> None:
     assert cls.shape == sub.shape == (len(cov),) and set(np.unique(sub)) <= {0, 1, 2}
 
 
-def assert_same_moments(points: np.ndarray, config: DescriptorConfig) -> None:
+def assert_same_moments(points: np.ndarray, config: NdtHistogram) -> None:
     """``describe``'s moments equal the numpy reference ``voxel_moments(_crop(points))``."""
     ref = voxel_moments(_crop(points, config.max_range_m), config.voxel_size_m, config.min_points)
     got = _moments(points, config)
@@ -158,16 +158,16 @@ def test_numba_kernel_matches_numpy_reference(
     than _DENSE_MAX_CELLS cells is refused by the kernel and falls back to numpy."""
     kernel = _moments_kernel()
     assert kernel is not None
-    config = DescriptorConfig()
+    config = NdtHistogram()
     for seq, frame in (("04", 0), ("01", 7)):
         scan = kitti(kitti_root, seq, frame)
         assert_same_moments(scan, config)
-        assert_same_moments(scan[:, :3].astype(np.float64), DescriptorConfig(voxel_size_m=0.5))
+        assert_same_moments(scan[:, :3].astype(np.float64), NdtHistogram(voxel_size_m=0.5))
     messy = kitti(kitti_root, "04", 3).copy()
     messy[::97, 1] = np.nan
     messy[::89, :3] *= 40.0  # beyond 30 m
     assert_same_moments(messy, config)
-    fine = DescriptorConfig(voxel_size_m=0.02, min_points=3)
+    fine = NdtHistogram(voxel_size_m=0.02, min_points=3)
     cloud = rng.normal(0, 5.0, (20000, 3)).astype(np.float32)
     cloud[:10000] = np.round(cloud[:10000])  # piles of points on lattice nodes: voxels >= 3
     ok = kernel(cloud, fine.voxel_size_m, fine.max_range_m, fine.min_points, _DENSE_MAX_CELLS)[0]
@@ -179,4 +179,4 @@ def test_degenerate_inputs() -> None:
     assert not describe(np.zeros((0, 4), np.float32)).any()
     assert not describe(np.full((10, 3), np.nan, np.float32)).any()
     with pytest.raises(ConfigError, match="t_e must be in"):
-        DescriptorConfig(t_e=1.5)
+        NdtHistogram(t_e=1.5)

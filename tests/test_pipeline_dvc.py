@@ -30,7 +30,7 @@ def tiny_params() -> dict[str, Any]:
     p = yaml.safe_load((REPO / "params.yaml").read_text())
     p["base"]["length_m"] = TINY_L_M
     p["simulate"].update(train={"cave": 1, "street": 1}, train_frames=50, validation_frames=60)
-    p["descriptors"].update(workers=1, pca_dim=4)
+    p["descriptors"].update(workers=1, pca_dim=4, range_bins=3)  # 27 values: not the default 90
     p["trials"].update(iterations=3, workers=1, startup_trials=2)
     p["fixed"].update(iterations=2)
     p["surrogate"].update(n_sobol=16, cv_max_frames=20)
@@ -85,7 +85,7 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
     from pipeline.runtime import load_model
     from pipeline.sequence import SequenceReader
     from pipeline.trajectory import read_trajectory
-    from schemas.arrow import DESCRIPTORS, check_schema_version
+    from schemas.arrow import check_schema_version, descriptors_schema
 
     root, _ = repro
     index = json.loads((root / "data/sequences/index.json").read_text())
@@ -97,7 +97,7 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
 
     desc = pq.read_table(root / "data/descriptors.parquet")
     check_schema_version(desc.schema, "descriptors")
-    assert desc.schema.names == DESCRIPTORS.names and desc.num_rows == 160
+    assert desc.schema.names == descriptors_schema(27).names and desc.num_rows == 160
     assert Pca.load(root / "data/pca").dim == 4
     trials = read_trials_tables(root / "results/trials")
     assert trials.num_rows == 6
@@ -188,6 +188,7 @@ def test_pipeline_runs_on_a_kitti_root(kitti_root: Path,
     p["base"]["sequences"] = "data/kitti"
     p["simulate"].update(train={"cave": 1}, train_frames=10, validation_count=0)
     p["ingest"].update(kitti_root=str(kitti_root), train=["01", "06"], validation=["04"])
+    p["descriptors"]["range_bins"] = 10  # the default width here
     root, log = reproduce(tmp_path_factory.mktemp("kitti"), p)
     assert "Running stage 'ingest'" in log
     for seq in ("01", "06", "04"):

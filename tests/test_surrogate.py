@@ -16,7 +16,8 @@ import pytest
 from click.testing import CliRunner
 
 from pipeline.artifact import ArtifactInfo, write_artifact
-from pipeline.descriptor import DescriptorConfig, describe
+from pipeline.descriptors import NdtHistogram
+from pipeline.descriptors.ndt_histogram import describe
 from pipeline.errors import ConfigError, InputError
 from pipeline.odometry.registry import get_adapter
 from pipeline.pca import Pca, fit_pca
@@ -64,7 +65,7 @@ def true_y(E: np.ndarray, U: np.ndarray) -> np.ndarray:
 def synthetic_rows(kitti_root: Path, trials: int = 24, seed: int = 0) -> tuple[TrainingRows, Pca]:
     names, frames, desc = kitti_descriptors(kitti_root)
     pca = fit_pca(desc, 10, list(SEQS))
-    pca.descriptor = DescriptorConfig().to_json()
+    pca.descriptor = NdtHistogram().to_json()
     E_f = pca.transform(desc)
     rng = np.random.default_rng(seed)
     U_trials = {s: rng.random((trials, 2)) for s in SEQS}  # each sequence has its own trials
@@ -91,7 +92,7 @@ def build_model(
     rows, pca = synthetic_rows(kitti_root, trials)
     space = get_adapter(algorithm).space.to_json()
     fitted = fit_surrogate(rows, space, settings or SurrogateSection(n_sobol=256, cv_max_frames=5))
-    info = ArtifactInfo(algorithm, space, DescriptorConfig(), selection or SELECTION)
+    info = ArtifactInfo(algorithm, space, NdtHistogram(), selection or SELECTION)
     write_artifact(out, fitted, pca, info)
     return out
 

@@ -14,7 +14,7 @@ import pytest
 from test_surrogate import SELECTION, kitti_scan, synthetic_rows
 
 from pipeline.artifact import ArtifactInfo, canonical_manifest_hash, write_artifact
-from pipeline.descriptor import DescriptorConfig
+from pipeline.descriptors import NdtHistogram
 from pipeline.errors import ArtifactError
 from pipeline.odometry.registry import get_adapter
 from pipeline.runtime import Selector, load_model
@@ -43,7 +43,7 @@ def model_dir(fitted: FittedSurrogate, kitti_root: Path,
     _, pca = synthetic_rows(kitti_root, trials=12)
     out = tmp_path_factory.mktemp(fitted.settings.model) / "model"
     space = get_adapter("ndt").space.to_json()
-    write_artifact(out, fitted, pca, ArtifactInfo("ndt", space, DescriptorConfig(), SELECTION))
+    write_artifact(out, fitted, pca, ArtifactInfo("ndt", space, NdtHistogram(), SELECTION))
     return out
 
 

@@ -9,40 +9,51 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field
+from pydantic import ConfigDict, Field, model_validator
 
 from pipeline.config import Section
-from pipeline.descriptor import DescriptorConfig, describe
+from pipeline.descriptors import DEFAULT_DESCRIPTOR, Descriptor, make_descriptor
 from pipeline.errors import ConfigError, InputError
 from pipeline.pca import Pca, fit_pca
 
 
 class DescriptorsSection(Section):
-    """params.yaml ``descriptors`` (pipeline/descriptor.py documents every choice)."""
+    """params.yaml ``descriptors``: the descriptor's ``type`` (``pipeline.descriptors``
+    registry), its own settings beside it (for ``ndt_histogram``: voxel_size_m, min_points, t_e,
+    range_bins, bin_m, normalize; pipeline/descriptors/ndt_histogram.py documents them), the
+    PCA dimension and the worker processes."""
 
-    voxel_size_m: float = Field(1.0, gt=0)
-    min_points: int = Field(5, ge=3)
-    t_e: float = Field(0.1, gt=0, lt=1)
-    range_bins: int = Field(10, ge=1, le=10)
-    bin_m: float = Field(3.0, gt=0)
-    normalize: bool = True
-    pca_dim: int = Field(10, ge=1, le=90)
+    model_config = ConfigDict(extra="allow", frozen=True)
+
+    type: str = DEFAULT_DESCRIPTOR
+    pca_dim: int = Field(10, ge=1)
     workers: int = Field(2, ge=1)
 
-    def descriptor(self) -> DescriptorConfig:
+    @model_validator(mode="after")
+    def _descriptor_settings(self) -> DescriptorsSection:
+        try:
+            width = self.descriptor().size
+        except ConfigError as exc:
+            raise ValueError(str(exc)) from None
+        if self.pca_dim > width:
+            raise ValueError(f"pca_dim must be <= the descriptor's width {width}, "
+                             f"got {self.pca_dim}")
+        return self
+
+    def descriptor(self) -> Descriptor:
         """The descriptor these settings configure."""
-        return DescriptorConfig(self.voxel_size_m, self.min_points, self.t_e, self.range_bins,
-                                self.bin_m, self.normalize)
+        return make_descriptor(self.type, self.model_extra)
 
 
 def describe_sequence(
-    path: str | Path, config: DescriptorConfig
+    path: str | Path, descriptor: Descriptor
 ) -> tuple[NDArray[np.int32], NDArray[np.int64], NDArray[np.float32]]:
     """Descriptor of every frame of one sequence MCAP: frames (N,), stamps_ns (N,), (N, F)."""
     from pipeline.sequence import SequenceReader
 
     with SequenceReader(path) as reader:
-        rows = [(scan.frame, scan.stamp_ns, describe(scan.points_lidar, config)) for scan in reader]
+        rows = [(scan.frame, scan.stamp_ns, descriptor.describe(scan.points_lidar))
+                for scan in reader]
     if not rows:
         raise InputError(f"{path}: no frames")
     frames = np.array([r[0] for r in rows], np.int32)
@@ -65,7 +76,7 @@ class DescriptorSet:
         return self.pca.transform(self.descriptors).astype(np.float32)
 
 
-def _describe_job(args: tuple[str, DescriptorConfig]) -> tuple[NDArray[Any], ...]:
+def _describe_job(args: tuple[str, Descriptor]) -> tuple[NDArray[Any], ...]:
     return describe_sequence(args[0], args[1])
 
 
@@ -76,14 +87,14 @@ def describe_dataset(sequences_dir: str | Path, section: DescriptorsSection) -> 
 
     from pipeline.sequence_index import read_index
 
-    config = section.descriptor()
+    descriptor = section.descriptor()
     index = read_index(sequences_dir)
     train = index.names("train")
     for split in index.splits:
         if index.splits[split]:
             index.paths(split)  # every listed sequence exists
     names = index.all_names()
-    jobs = [(str(Path(sequences_dir) / f"{n}.mcap"), config) for n in names]
+    jobs = [(str(Path(sequences_dir) / f"{n}.mcap"), descriptor) for n in names]
     if section.workers > 1 and len(jobs) > 1:
         with ProcessPoolExecutor(min(section.workers, len(jobs))) as pool:
             results = list(pool.map(_describe_job, jobs))
@@ -96,41 +107,37 @@ def describe_dataset(sequences_dir: str | Path, section: DescriptorsSection) -> 
     stamps = np.concatenate([r[1] for r in results])
     desc = np.concatenate([r[2] for r in results])
     pca = fit_pca(desc[np.isin(seqs, train)], section.pca_dim, train)
-    pca.descriptor = config.to_json()
+    pca.descriptor = descriptor.to_json()
     return DescriptorSet(seqs.astype(str), frames, stamps, desc, pca)
 
 
 def write_descriptor_set(
     ds: DescriptorSet, out: str | Path, environment: str | Path, pca_dir: str | Path
 ) -> None:
-    """descriptors Parquet (schemas.arrow.DESCRIPTORS), environment Parquet (sequence, frame,
-    e0..) and the PCA folder, each written atomically."""
+    """descriptors Parquet (``schemas.arrow.descriptors_schema`` of the descriptor's width),
+    environment Parquet (``environment_schema``: sequence, frame, e0..) and the PCA folder,
+    each written atomically."""
+    import json
+
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     from pipeline.io_utils import atomic_path
-    from schemas.arrow import DESCRIPTORS
+    from schemas.arrow import descriptors_schema, environment_schema
 
-    if ds.descriptors.shape[1] != 90:
-        raise ConfigError(
-            f"the DESCRIPTORS table has 90 columns, the descriptor has "
-            f"{ds.descriptors.shape[1]} (range_bins must be 10)"
-        )
+    width = ds.descriptors.shape[1]
+    if ds.pca.descriptor and ds.pca.descriptor.get("size", width) != width:
+        raise ConfigError(f"the descriptor has {width} values, its settings say "
+                          f"{ds.pca.descriptor['size']}")
     base = [pa.array(ds.sequences, pa.string()), pa.array(ds.frames, pa.int32())]
     cols = [*base, pa.array(ds.stamps_ns, pa.int64())]
-    cols += [pa.array(ds.descriptors[:, i], pa.float32()) for i in range(90)]
-    table = pa.Table.from_arrays(cols, schema=DESCRIPTORS)
+    cols += [pa.array(ds.descriptors[:, i], pa.float32()) for i in range(width)]
+    schema = descriptors_schema(width, json.dumps(ds.pca.descriptor, sort_keys=True))
+    table = pa.Table.from_arrays(cols, schema=schema)
     env = ds.environment
-    env_schema = pa.schema(
-        [
-            pa.field("sequence", pa.string(), nullable=False),
-            pa.field("frame", pa.int32(), nullable=False),
-        ]
-        + [pa.field(f"e{i}", pa.float32(), nullable=False) for i in range(env.shape[1])],
-        metadata={**(DESCRIPTORS.metadata or {}), b"adaptune.table": b"environment"},
-    )
     env_table = pa.Table.from_arrays(
-        base + [pa.array(env[:, i], pa.float32()) for i in range(env.shape[1])], schema=env_schema
+        base + [pa.array(env[:, i], pa.float32()) for i in range(env.shape[1])],
+        schema=environment_schema(env.shape[1]),
     )
     with atomic_path(out) as tmp:
         pq.write_table(table, tmp)

@@ -287,16 +287,20 @@ def score_kitti(con: duckdb.DuckDBPyConnection, lengths_m: tuple[float, ...],
 # ------------------------------------------------------------------- descriptor tables
 
 
+VALUE_PREFIX = {"descriptors": "d", "environment": "e"}
+"""The value columns of the frame tables: d0..d<F-1> (descriptor), e0..e<D-1> (environment)."""
+
+
 def load_frame_table(con: duckdb.DuckDBPyConnection, table: str, path: Path | None) -> None:
-    """Fill ``descriptors`` or ``environment`` from its Parquet file (left empty when None)."""
+    """Fill ``descriptors`` or ``environment`` from its Parquet file (left empty when None),
+    with as many value columns as the file has."""
     import duckdb
 
     if path is None:
         return
     if not Path(path).is_file():
         raise InputError(f"{path}: no such {table} file")
-    if table == "environment":
-        match_environment_columns(con, path)
+    add_value_columns(con, table, path)
     columns = [r[0] for r in con.execute(f"DESCRIBE {table}").fetchall()]
     try:
         con.execute(f"INSERT INTO {table} SELECT {', '.join(columns)} "
@@ -305,25 +309,23 @@ def load_frame_table(con: duckdb.DuckDBPyConnection, table: str, path: Path | No
         raise InputError(f"{path}: not a valid {table} table ({first_line(exc)})") from None
 
 
-def match_environment_columns(con: duckdb.DuckDBPyConnection, path: Path) -> None:
-    """Give ``environment`` the e0..e<D-1> columns of the Parquet file (D = descriptors.pca_dim;
-    tables.sql declares the default D = 10)."""
+def add_value_columns(con: duckdb.DuckDBPyConnection, table: str, path: Path) -> None:
+    """Give ``table`` the value columns <prefix>0..<prefix>N-1 of the Parquet file (FLOAT; the
+    width is the file's, tables.sql declares none)."""
     import duckdb
 
+    prefix = VALUE_PREFIX[table]
     try:
         file_cols = [r[0] for r in con.execute(
             f"DESCRIBE SELECT * FROM read_parquet({sql_literal(str(path))})").fetchall()]
     except duckdb.Error as exc:
-        raise InputError(f"{path}: not a valid environment table ({first_line(exc)})") from None
-    is_e = lambda c: c[:1] == "e" and c[1:].isdigit()  # noqa: E731
-    have = [r[0] for r in con.execute("DESCRIBE environment").fetchall() if is_e(r[0])]
-    want = [c for c in file_cols if is_e(c)]
-    for c in have:
-        if c not in want:
-            con.execute(f"ALTER TABLE environment DROP COLUMN {c}")
-    for c in want:
-        if c not in have:
-            con.execute(f"ALTER TABLE environment ADD COLUMN {c} FLOAT")
+        raise InputError(f"{path}: not a valid {table} table ({first_line(exc)})") from None
+    values = [c for c in file_cols if c[:1] == prefix and c[1:].isdigit()]
+    if values != [f"{prefix}{i}" for i in range(len(values))]:
+        raise InputError(f"{path}: {table} value columns must be {prefix}0..{prefix}N-1 in "
+                         f"order, got {values[:3]}...")
+    for c in values:
+        con.execute(f"ALTER TABLE {table} ADD COLUMN {c} FLOAT")
 
 
 def count_rows(con: duckdb.DuckDBPyConnection, summary: DatabaseSummary) -> None:

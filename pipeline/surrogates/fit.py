@@ -205,7 +205,7 @@ def build_model(
     stands in for a PCA folder that does not record them.
     """
     from pipeline.artifact import ArtifactInfo, write_artifact
-    from pipeline.descriptor import DescriptorConfig
+    from pipeline.descriptors import descriptor_from_json
     from pipeline.pca import Pca
     from pipeline.surrogates.novelty import novelty_fallback
     from pipeline.surrogates.rows import read_training_rows
@@ -219,7 +219,7 @@ def build_model(
     if fallback is not None:
         selection["novelty_fallback_params"] = fallback
     descriptor = (
-        DescriptorConfig.from_json(pca.descriptor) if pca.descriptor else descriptors.descriptor()
+        descriptor_from_json(pca.descriptor) if pca.descriptor else descriptors.descriptor()
     )
     info = ArtifactInfo(algo, space, descriptor, selection,
                         {"db": str(inputs.db), "pca": str(inputs.pca)})

@@ -1,4 +1,5 @@
-"""The environment descriptor: an NDT voxel classification histogram (DESIGN section 1, item 4).
+"""The NDT voxel classification histogram, the paper's environment descriptor (docs/design.md,
+"Environment").
 
 A scan is cut into cubic voxels; every voxel with at least ``min_points`` points gets the
 eigenvalues l1 >= l2 >= l3 of its point covariance and is classified
@@ -53,6 +54,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -71,13 +73,16 @@ _DENSE_MAX_CELLS = 1_000_000  # above this the bounding box grid falls back to n
 
 
 @dataclass(frozen=True)
-class DescriptorConfig:
-    """Settings of the descriptor (the ``descriptors`` params section carries the same names).
+class NdtHistogram:
+    """The NDT voxel classification histogram with its settings (module docstring); a
+    ``pipeline.descriptors.Descriptor``, registered as ``ndt_histogram``.
 
     voxel_size_m: edge of a cubic voxel [m]; min_points: voxels with fewer points are skipped;
     t_e: eigenvalue ratio threshold; range_bins x bin_m: the range histogram [m];
-    normalize: divide by the number of classified voxels.
+    normalize: divide by the number of classified voxels. Width: range_bins * 9 values.
     """
+
+    type: ClassVar[str] = "ndt_histogram"
 
     voxel_size_m: float = 1.0
     min_points: int = 5
@@ -87,6 +92,9 @@ class DescriptorConfig:
     normalize: bool = True
 
     def __post_init__(self) -> None:
+        for name, kind in (("voxel_size_m", float), ("min_points", int), ("t_e", float),
+                           ("range_bins", int), ("bin_m", float), ("normalize", bool)):
+            object.__setattr__(self, name, _typed(name, getattr(self, name), kind))
         if not self.voxel_size_m > 0:
             raise ConfigError(f"voxel_size_m must be > 0, got {self.voxel_size_m}")
         if self.min_points < 3:
@@ -100,26 +108,44 @@ class DescriptorConfig:
 
     @property
     def size(self) -> int:
-        """Length of the descriptor: range_bins * 9."""
+        """Width of the descriptor: range_bins * 9 values."""
         return self.range_bins * N_CLASSES * N_SUB
 
     @property
     def max_range_m(self) -> float:
         return self.range_bins * self.bin_m
 
-    def to_json(self) -> dict[str, object]:
-        return asdict(self)
+    def describe(self, points_lidar: NDArray[np.floating]) -> NDArray[np.float32]:
+        """``describe(points_lidar, self)``: (size,) float32."""
+        return describe(points_lidar, self)
 
-    @classmethod
-    def from_json(cls, data: dict[str, object]) -> DescriptorConfig:
-        try:
-            return cls(**data)  # type: ignore[arg-type]
-        except TypeError as exc:
-            raise ConfigError(f"descriptor settings: {exc}") from None
+    def value_names(self) -> list[str]:
+        """``bin_names(self)``."""
+        return bin_names(self)
+
+    def to_json(self) -> dict[str, object]:
+        """type, the settings, and the width ``size``."""
+        return {"type": self.type, **asdict(self), "size": self.size}
+
+
+def _typed(name: str, value: object, kind: type) -> object:
+    """``value`` as ``kind`` (an int for an integral float, a float for an int); ConfigError
+    when it is not a number of that kind (or not a bool for a bool)."""
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{name} must be true or false, got {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"{name} must be a number, got {value!r}")
+    if kind is int:
+        if value != int(value):
+            raise ConfigError(f"{name} must be an integer, got {value!r}")
+        return int(value)
+    return float(value)
 
 
 def describe(
-    points_lidar: NDArray[np.floating], config: DescriptorConfig = DescriptorConfig()
+    points_lidar: NDArray[np.floating], config: NdtHistogram = NdtHistogram()
 ) -> NDArray[np.float32]:
     """The descriptor of one scan: (config.size,) float32 (90 values by default).
 
@@ -140,7 +166,7 @@ def describe(
 
 
 def _moments(
-    points_lidar: NDArray[np.floating], config: DescriptorConfig
+    points_lidar: NDArray[np.floating], config: NdtHistogram
 ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
     """``voxel_moments`` of the cropped scan, by the numba kernel where it is available."""
     kernel = _moments_kernel()
@@ -257,12 +283,13 @@ Moments = tuple[bool, NDArray[np.int64], NDArray[np.float64], NDArray[np.float64
 
 @functools.cache
 def _moments_kernel() -> Callable[..., Moments] | None:
-    """``pipeline.descriptor_kernel.voxel_moments_dense`` (numba), or None without numba.
+    """``pipeline.descriptors.ndt_histogram_kernel.voxel_moments_dense`` (numba), or None
+    without numba.
 
     Imported on first use: numba takes a second to import, and ``adaptune --help`` must not.
     """
     try:
-        from pipeline.descriptor_kernel import voxel_moments_dense
+        from pipeline.descriptors.ndt_histogram_kernel import voxel_moments_dense
     except ImportError:  # pragma: no cover - numba is a dependency; the numpy path stays exact
         return None
     kernel: Callable[..., Moments] = voxel_moments_dense
@@ -348,7 +375,7 @@ def classify(cov: NDArray[np.float64], t_e: float) -> tuple[NDArray[np.int64], N
     return cls, sub
 
 
-def bin_names(config: DescriptorConfig = DescriptorConfig()) -> list[str]:
+def bin_names(config: NdtHistogram = NdtHistogram()) -> list[str]:
     """Human-readable name of every descriptor value, e.g. ``r03_planar_vertical_plane``."""
     return [
         f"r{b:02d}_{CLASS_NAMES[c]}_{SUB_NAMES[c][s]}"

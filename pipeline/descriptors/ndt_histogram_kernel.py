@@ -1,6 +1,6 @@
-"""The numba kernel of the descriptor's voxel moments (pipeline/descriptor.py).
+"""The numba kernel of the descriptor's voxel moments (pipeline/descriptors/ndt_histogram.py).
 
-Imported by ``pipeline.descriptor`` on first use. It gives what the numpy reference
+Imported by ``pipeline.descriptors.ndt_histogram`` on first use. It gives what the numpy reference
 ``voxel_moments(_crop(points))`` gives (tests/test_descriptor.py compares them on real scans),
 without the dozen (N,) temporaries whose page faults dominate the numpy path.
 """
@@ -11,7 +11,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.descriptor import Moments
+from pipeline.descriptors.ndt_histogram import Moments
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -33,7 +33,8 @@ def voxel_moments_dense(
     pts: NDArray[np.float32], voxel_size_m: float, max_range_m: float, min_points: int,
     max_cells: int,
 ) -> Moments:  # pragma: no cover - compiled
-    """``voxel_moments(_crop(pts))`` of pipeline.descriptor in three passes over the points.
+    """``voxel_moments(_crop(pts))`` of pipeline.descriptors.ndt_histogram in three passes over
+    the points.
 
     pts (N, >=3) float32 [m] in the sensor frame. Returns (ok, counts (M,), mean (M, 3) [m],
     covariance (M, 3, 3) [m^2]) of the voxels with >= min_points points, in cell order.
