@@ -1,4 +1,8 @@
-"""SE(3) helpers on numpy arrays. Poses are 4x4 homogeneous matrices, metres and radians."""
+"""SE(3) helpers on numpy arrays. Poses are 4x4 homogeneous matrices, metres and radians.
+
+Quaternions, rotation matrices and slerp are scipy's (``scipy.spatial.transform``, imported in
+the functions: it takes about a second to import).
+"""
 
 from __future__ import annotations
 
@@ -21,47 +25,24 @@ def inv_se3(T_a_b: F64) -> F64:
 
 
 def quat_to_rot(q_xyzw: F64) -> F64:
-    """Rotation matrices (..., 3, 3) from unit quaternions (..., 4) in x, y, z, w order."""
+    """Rotation matrices (..., 3, 3) from quaternions (..., 4) in x, y, z, w order (normalised).
+
+    Raises ValueError for a zero quaternion (scipy's Rotation).
+    """
+    from scipy.spatial.transform import Rotation
+
     q = np.asarray(q_xyzw, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    R = np.empty((*q.shape[:-1], 3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - z * w)
-    R[..., 0, 2] = 2 * (x * z + y * w)
-    R[..., 1, 0] = 2 * (x * y + z * w)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - x * w)
-    R[..., 2, 0] = 2 * (x * z - y * w)
-    R[..., 2, 1] = 2 * (y * z + x * w)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
+    R = Rotation.from_quat(q.reshape(-1, 4)).as_matrix()
+    return R.reshape(*q.shape[:-1], 3, 3)
 
 
 def rot_to_quat(R: F64) -> F64:
     """Unit quaternions (..., 4) in x, y, z, w order (w >= 0) from rotations (..., 3, 3)."""
+    from scipy.spatial.transform import Rotation
+
     R = np.asarray(R, dtype=np.float64)
-    m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
-    # Shepperd's method, vectorised: choose the largest of w, x, y, z for stability.
-    t = np.stack([1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22,
-                  1 - m00 - m11 + m22], axis=-1)
-    k = np.argmax(t, axis=-1)
-    s = np.sqrt(np.maximum(np.take_along_axis(t, k[..., None], -1)[..., 0], 1e-300)) * 2
-    r21, r12 = R[..., 2, 1], R[..., 1, 2]
-    r02, r20 = R[..., 0, 2], R[..., 2, 0]
-    r10, r01 = R[..., 1, 0], R[..., 0, 1]
-    cases = [
-        ((r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s, s / 4),
-        (s / 4, (r01 + r10) / s, (r02 + r20) / s, (r21 - r12) / s),
-        ((r01 + r10) / s, s / 4, (r12 + r21) / s, (r02 - r20) / s),
-        ((r02 + r20) / s, (r12 + r21) / s, s / 4, (r10 - r01) / s),
-    ]
-    q = np.zeros((*R.shape[:-2], 4))
-    for i, case in enumerate(cases):
-        sel = (k == i)[..., None]
-        q = np.where(sel, np.stack(case, axis=-1), q)
-    q *= np.where(q[..., 3:4] < 0, -1.0, 1.0)
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    q = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat(canonical=True)
+    return q.reshape(*R.shape[:-2], 4)
 
 
 def pose_from_xyz_quat(xyz: F64, q_xyzw: F64) -> F64:
@@ -76,8 +57,32 @@ def pose_from_xyz_quat(xyz: F64, q_xyzw: F64) -> F64:
 
 def rot_z(yaw_rad: float) -> F64:
     """(3, 3) rotation about z by ``yaw_rad``."""
-    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_euler("z", yaw_rad).as_matrix()
+
+
+def not_rotations(R: F64, tol: float = 1e-3) -> NDArray[np.bool_]:
+    """(...,) True where a (..., 3, 3) matrix is not a rotation: R^T R != I (beyond ``tol``,
+    element-wise) or det(R) != +1 (zero, scaled, reflected or sheared matrices)."""
+    R = np.asarray(R, dtype=np.float64)
+    gram = np.swapaxes(R, -1, -2) @ R
+    off = np.abs(gram - np.eye(3)).max(axis=(-1, -2))
+    det = np.linalg.det(R)
+    return ~((off <= tol) & (np.abs(det - 1.0) <= tol))
+
+
+def interpolate_rotations(
+    t_query: F64, t_key: F64, R_key: F64
+) -> F64:
+    """(Q, 3, 3) rotations at times ``t_query`` (Q,) by slerp between keys ``R_key`` (M, 3, 3)
+    at increasing times ``t_key`` (M,); queries are clipped to the keys' span (scipy's Slerp)."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    if len(t_key) == 1:
+        return np.repeat(np.asarray(R_key, np.float64)[:1], len(t_query), axis=0)
+    slerp = Slerp(np.asarray(t_key, np.float64), Rotation.from_matrix(R_key))
+    return slerp(np.clip(t_query, t_key[0], t_key[-1])).as_matrix()
 
 
 def rotation_angle(R: F64) -> F64:

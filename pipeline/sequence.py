@@ -3,6 +3,9 @@
 Layout (DESIGN section 4):
 - ``/lidar/points``: sensor_msgs/msg/PointCloud2 (float32 x, y, z, intensity), CDR;
 - ``/ground_truth/pose``: geometry_msgs/msg/PoseStamped, T_world_lidar, where known;
+- ``/tf``: tf2_msgs/msg/TFMessage, ``world`` -> ``lidar`` from the same ground truth (so a
+  viewer such as Foxglove places the scans in the world), and any transform added with
+  ``add_tf`` (e.g. an estimate's frame);
 - metadata ``adaptune.sequence``: name, sensor, source, frame_count, labels, schema_version;
 - metadata ``adaptune.frames``: the log times of the frames, so frame k is one seek away.
 Log time = sensor stamp [ns]; frames are 0..N-1 in log-time order. Chunked, zstd, indexed.
@@ -26,22 +29,28 @@ from numpy.typing import NDArray
 from pipeline.errors import InputError, SchemaError
 from pipeline.io_utils import atomic_path
 from pipeline.ros2_cdr import (
+    POINTCLOUD2,
+    POSE_STAMPED,
+    TF_MESSAGE,
+    cloud_to_xyzi,
     decode_pointcloud2,
     decode_pose_stamped,
     encode_pointcloud2,
     encode_pose_stamped,
-    pointcloud2_to_xyzi,
+    encode_tf,
+    schema_text,
 )
-from schemas import SCHEMA_VERSION, read_text
+from schemas import SCHEMA_VERSION
 
 log = logging.getLogger(__name__)
 
 POINTS_TOPIC = "/lidar/points"
 GT_TOPIC = "/ground_truth/pose"
+TF_TOPIC = "/tf"
+WORLD_FRAME = "world"
+LIDAR_FRAME = "lidar"
 META_SEQUENCE = "adaptune.sequence"
 META_FRAMES = "adaptune.frames"
-POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
-POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 
 
 @dataclass(frozen=True)
@@ -135,6 +144,7 @@ class SequenceWriter:
         self.stamps_ns: list[int] = []
         self.dropped_points = 0
         self._poses: dict[str, list[tuple[int, bytes]]] = {}
+        self._tf: list[tuple[int, bytes]] = []
         self._json: dict[str, tuple[dict[str, Any], list[tuple[int, bytes]]]] = {}
 
     def __enter__(self) -> SequenceWriter:
@@ -146,10 +156,8 @@ class SequenceWriter:
         self._w = Writer(self._fh, chunk_size=self.chunk_size, compression=CompressionType.ZSTD)
         self._w.start(profile="ros2", library="adaptune")
         self._schemas = {
-            POINTCLOUD2: self._w.register_schema(
-                POINTCLOUD2, "ros2msg", read_text("ros2/sensor_msgs__PointCloud2.msg").encode()),
-            POSE_STAMPED: self._w.register_schema(
-                POSE_STAMPED, "ros2msg", read_text("ros2/geometry_msgs__PoseStamped.msg").encode()),
+            t: self._w.register_schema(t, "ros2msg", schema_text(t).encode())
+            for t in (POINTCLOUD2, POSE_STAMPED, TF_MESSAGE)
         }
         self._points_ch = self._w.register_channel(POINTS_TOPIC, "cdr", self._schemas[POINTCLOUD2])
         return self
@@ -180,6 +188,7 @@ class SequenceWriter:
             if T.shape != (4, 4) or not np.isfinite(T).all():
                 raise InputError(f"{what}: ground-truth pose is not a finite 4x4 matrix")
             self.add_pose(GT_TOPIC, stamp_ns, T)
+            self.add_tf(stamp_ns, WORLD_FRAME, LIDAR_FRAME, T)
         self.stamps_ns.append(stamp_ns)
         return frame
 
@@ -187,6 +196,12 @@ class SequenceWriter:
         """Queue a PoseStamped on ``topic`` (written after the scans, in its own chunks)."""
         msg = encode_pose_stamped(stamp_ns, T_world_x)
         self._poses.setdefault(topic, []).append((int(stamp_ns), msg))
+
+    def add_tf(self, stamp_ns: int, parent: str, child: str,
+               T_parent_child: NDArray[np.float64]) -> None:
+        """Queue a ``/tf`` transform ``parent`` -> ``child`` (T_parent_child (4, 4)) at
+        ``stamp_ns`` (written after the scans, in its own chunks)."""
+        self._tf.append((int(stamp_ns), encode_tf(stamp_ns, parent, child, T_parent_child)))
 
     def add_json(self, topic: str, stamp_ns: int, message: dict[str, Any],
                  json_schema: dict[str, Any]) -> None:
@@ -210,6 +225,10 @@ class SequenceWriter:
         for topic, msgs in self._poses.items():
             ch = self._w.register_channel(topic, "cdr", self._schemas[POSE_STAMPED])
             for i, (t, data) in enumerate(msgs):
+                self._w.add_message(ch, log_time=t, publish_time=t, data=data, sequence=i)
+        if self._tf:
+            ch = self._w.register_channel(TF_TOPIC, "cdr", self._schemas[TF_MESSAGE])
+            for i, (t, data) in enumerate(sorted(self._tf, key=lambda m: m[0])):
                 self._w.add_message(ch, log_time=t, publish_time=t, data=data, sequence=i)
         for topic, (schema, msgs) in self._json.items():
             sid = self._w.register_schema(topic.strip("/").replace("/", "."), "jsonschema",
@@ -294,9 +313,7 @@ class SequenceReader:
 
     def _decode_points(self, data: bytes, frame: int) -> NDArray[np.float32]:
         what = f"{self.path} frame {frame}"
-        m = decode_pointcloud2(data, what)
-        return pointcloud2_to_xyzi(m.height, m.width, m.fields, m.is_bigendian, m.point_step,
-                                   m.row_step, m.data, what)
+        return cloud_to_xyzi(decode_pointcloud2(data, what), what)
 
     @property
     def has_ground_truth(self) -> bool:

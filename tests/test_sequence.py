@@ -9,10 +9,11 @@ import pytest
 
 from pipeline.errors import InputError
 from pipeline.geometry import pose_from_xyz_quat
-from pipeline.ros2_cdr import decode_pointcloud2, encode_pointcloud2, encode_pose_stamped
+from pipeline.ros2_cdr import POINTCLOUD2, POSE_STAMPED, TF_MESSAGE
 from pipeline.sequence import (
     GT_TOPIC,
     POINTS_TOPIC,
+    TF_TOPIC,
     EnvLabel,
     SequenceInfo,
     SequenceReader,
@@ -55,53 +56,59 @@ def test_without_ground_truth(tmp_path: Path, rng: np.random.Generator) -> None:
 
 
 def test_messages_decode_with_mcap_ros2(tmp_path: Path, rng: np.random.Generator) -> None:
-    """Our hand-written CDR agrees with mcap_ros2's generic decoder (what ROS 2 tools use)."""
+    """What adaptune writes is read back with ROS 2 decoders only (mcap_ros2's DecoderFactory):
+    the scans, the ground truth and /tf (world -> lidar, the ground-truth pose)."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
     clouds = _write(tmp_path / "s.mcap", rng)
     with open(tmp_path / "s.mcap", "rb") as fh:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
-        msgs = list(reader.iter_decoded_messages(topics=[POINTS_TOPIC, GT_TOPIC]))
+        schemas = {s.name: s.encoding for s in reader.get_summary().schemas.values()}
+        msgs = list(reader.iter_decoded_messages(topics=[POINTS_TOPIC, GT_TOPIC, TF_TOPIC]))
+    assert schemas == {t: "ros2msg" for t in (POINTCLOUD2, POSE_STAMPED, TF_MESSAGE)}
     pcs = [m for _, ch, _, m in msgs if ch.topic == POINTS_TOPIC]
     poses = [m for _, ch, _, m in msgs if ch.topic == GT_TOPIC]
-    assert len(pcs) == 5 and len(poses) == 5
+    tfs = [(msg.log_time, m) for _, ch, msg, m in msgs if ch.topic == TF_TOPIC]
+    assert len(pcs) == 5 and len(poses) == 5 and len(tfs) == 5
     assert [f.name for f in pcs[1].fields] == ["x", "y", "z", "intensity"]
+    assert pcs[1].header.frame_id == "lidar"
     got = np.frombuffer(bytes(pcs[1].data), np.float32).reshape(-1, 4)
     np.testing.assert_array_equal(got, clouds[1])
     assert poses[3].pose.position.x == pytest.approx(3.0)
+    log_ns, tf = tfs[3]
+    (t,) = tf.transforms
+    assert (t.header.frame_id, t.child_frame_id) == ("world", "lidar")
+    assert t.header.stamp.sec * 10**9 + t.header.stamp.nanosec == log_ns == 1_300_000_000
+    xyz = [t.transform.translation.x, t.transform.translation.y, t.transform.translation.z]
+    q = [t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z,
+         t.transform.rotation.w]
+    np.testing.assert_allclose(xyz, [3.0, 1.5, 0.0], atol=1e-12)
+    np.testing.assert_allclose(q, [0, 0, np.sin(0.3), np.cos(0.3)], atol=1e-12)
 
 
-def test_encode_matches_mcap_ros2_encoder(rng: np.random.Generator) -> None:
-    from mcap_ros2._dynamic import serialize_dynamic
+def test_no_tf_without_ground_truth_and_extra_transforms(tmp_path: Path) -> None:
+    """/tf carries world -> lidar only where the ground truth is known; ``add_tf`` adds others
+    (e.g. an estimate's frame), in time order, decodable by ROS 2 tools."""
+    from pipeline.ros2_cdr import decode_tf
 
-    from schemas import read_text
-
-    pts = rng.normal(size=(7, 4)).astype(np.float32)
-    enc = serialize_dynamic(
-        "sensor_msgs/msg/PointCloud2", read_text("ros2/sensor_msgs__PointCloud2.msg")
-    )
-    ref = enc["sensor_msgs/msg/PointCloud2"]({
-        "header": {"stamp": {"sec": 3, "nanosec": 5}, "frame_id": "lidar"},
-        "height": 1, "width": 7,
-        "fields": [{"name": n, "offset": 4 * i, "datatype": 7, "count": 1}
-                   for i, n in enumerate(["x", "y", "z", "intensity"])],
-        "is_bigendian": False, "point_step": 16, "row_step": 112,
-        "data": pts.tobytes(), "is_dense": True,
-    })
-    assert encode_pointcloud2(3_000_000_005, pts) == bytes(ref)
-    enc2 = serialize_dynamic(
-        "geometry_msgs/msg/PoseStamped", read_text("ros2/geometry_msgs__PoseStamped.msg")
-    )
-    ref2 = enc2["geometry_msgs/msg/PoseStamped"]({
-        "header": {"stamp": {"sec": 1, "nanosec": 0}, "frame_id": "world"},
-        "pose": {"position": {"x": 1.0, "y": 2.0, "z": 3.0},
-                 "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
-    })
+    with SequenceWriter(tmp_path / "a.mcap", SequenceInfo(name="a")) as w:
+        w.add(10, np.ones((3, 3), np.float32))
+    with SequenceReader(tmp_path / "a.mcap") as r:
+        assert TF_TOPIC not in r.topics
     T = np.eye(4)
     T[:3, 3] = [1, 2, 3]
-    assert encode_pose_stamped(1_000_000_000, T) == bytes(ref2)
-    assert decode_pointcloud2(encode_pointcloud2(7, pts)).width == 7
+    with SequenceWriter(tmp_path / "b.mcap", SequenceInfo(name="b")) as w:
+        w.add(10, np.ones((3, 3), np.float32))
+        w.add_tf(20, "world", "odom_estimate", T)
+        w.add_tf(10, "world", "odom_estimate", np.eye(4))
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "b.mcap", "rb") as fh:
+        got = [decode_tf(m.data) for _, _, m in make_reader(fh).iter_messages(topics=[TF_TOPIC])]
+    assert [g[0][:3] for g in got] == [(10, "world", "odom_estimate"),
+                                      (20, "world", "odom_estimate")]
+    np.testing.assert_allclose(got[1][0][3], T)
 
 
 def test_nan_points_dropped_and_empty_scan_refused(tmp_path: Path) -> None:

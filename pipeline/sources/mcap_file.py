@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from pipeline.errors import ConfigError, InputError
-from pipeline.ros2_cdr import decode_pointcloud2, pointcloud2_to_xyzi
+from pipeline.ros2_cdr import cloud_to_xyzi
 from pipeline.sequence import SequenceInfo
 from pipeline.sources.base import Frame, IngestReport, write_sequence
 from pipeline.sources.poses import PoseFormat, check_count, read_pose_file
@@ -22,7 +22,6 @@ from pipeline.sources.rosbag import GroundTruth, pick_topic
 from pipeline.sources.rosmsg import (
     POINTCLOUD2_TYPES,
     POSE_TYPES,
-    cloud_to_xyzi,
     collect_poses,
     normalise_type,
     poses_of,
@@ -63,7 +62,7 @@ def open_mcap(path: Path) -> Iterator[tuple[Any, Any]]:
 
 
 class _Decoder:
-    """Deserialises messages of one channel (rosbags typestore; own codec for cdr clouds)."""
+    """Deserialises messages of one channel (rosbags typestore, cdr or ros1)."""
 
     def __init__(self, schema: Any, encoding: str, what: str) -> None:
         from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -90,13 +89,11 @@ class _Decoder:
 
     def cloud(self, data: bytes, log_ns: int, what: str) -> tuple[int, Any]:
         """(stamp_ns, (N, 4) float32 points) of a PointCloud2 message."""
-        if self.encoding == "cdr":
-            m = decode_pointcloud2(data, what)
-            pts = pointcloud2_to_xyzi(
-                m.height, m.width, m.fields, m.is_bigendian, m.point_step, m.row_step, m.data, what
-            )
-            return (m.stamp_ns or int(log_ns)), pts
-        msg = self.message(data)
+        try:
+            msg = self.message(data)
+        except Exception as exc:
+            raise InputError(f"{what}: not a valid {self.msgtype} message "
+                             f"({type(exc).__name__}: {exc})") from None
         return stamp_ns(msg, log_ns), cloud_to_xyzi(msg, what)
 
 

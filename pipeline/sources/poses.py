@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
-from pipeline.geometry import inv_se3, pose_from_xyz_quat, quat_to_rot, rot_to_quat
+from pipeline.geometry import interpolate_rotations, inv_se3, pose_from_xyz_quat
 
 PoseFormat = Literal["kitti", "tum", "auto"]
 MATCH_TOLERANCE_NS = 10_000_000
@@ -165,27 +165,11 @@ def interpolate_poses(
     alpha = np.where(gap > 0, (qc - t[lo]) / np.maximum(gap, 1), 0.0)
     out = np.tile(np.eye(4), (len(q), 1, 1))
     out[:, :3, 3] = (1 - alpha)[:, None] * T[lo, :3, 3] + alpha[:, None] * T[hi, :3, 3]
-    out[:, :3, :3] = quat_to_rot(
-        _slerp(rot_to_quat(T[lo, :3, :3]), rot_to_quat(T[hi, :3, :3]), alpha)
+    out[:, :3, :3] = interpolate_rotations(
+        (qc - t[0]).astype(np.float64), (t - t[0]).astype(np.float64), T[:, :3, :3]
     )
     out[exact] = T[hi[exact]]
     return out
-
-
-def _slerp(
-    q0: NDArray[np.float64], q1: NDArray[np.float64], alpha: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """Spherical interpolation of unit quaternions (Q, 4) by ``alpha`` (Q,) in [0, 1]."""
-    dot = np.sum(q0 * q1, axis=1)
-    q1 = np.where(dot[:, None] < 0, -q1, q1)
-    dot = np.clip(np.abs(dot), -1.0, 1.0)
-    theta = np.arccos(dot)
-    small = theta < 1e-9
-    s = np.sin(np.where(small, 1.0, theta))
-    w0 = np.where(small, 1 - alpha, np.sin((1 - alpha) * theta) / s)
-    w1 = np.where(small, alpha, np.sin(alpha * theta) / s)
-    out = w0[:, None] * q0 + w1[:, None] * q1
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
 def ground_truth_for(

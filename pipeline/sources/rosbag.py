@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError, InputError
+from pipeline.ros2_cdr import cloud_to_xyzi
 from pipeline.sequence import SequenceInfo
 from pipeline.sources.base import Frame, IngestReport, write_sequence
 from pipeline.sources.poses import (
@@ -33,7 +34,6 @@ from pipeline.sources.poses import (
 from pipeline.sources.rosmsg import (
     POINTCLOUD2_TYPES,
     POSE_TYPES,
-    cloud_to_xyzi,
     collect_poses,
     normalise_type,
     poses_of,

@@ -1,7 +1,7 @@
 """ROS messages (as ``rosbags`` deserialises them, ROS 1 or ROS 2) -> points, stamps, poses.
 
 Point clouds: sensor_msgs/PointCloud2 of any layout with float32/float64 x, y, z (intensity
-optional), through pipeline.ros2_cdr.pointcloud2_to_xyzi. Ground truth: geometry_msgs
+optional), through pipeline.ros2_cdr.cloud_to_xyzi. Ground truth: geometry_msgs
 PoseStamped / PoseWithCovarianceStamped / TransformStamped, nav_msgs/Odometry, and
 tf2_msgs/TFMessage (the transform whose child frame is ``child_frame``).
 """
@@ -14,8 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
-from pipeline.geometry import pose_from_xyz_quat
-from pipeline.ros2_cdr import pointcloud2_to_xyzi
+from pipeline.ros2_cdr import pose_matrix
 
 POINTCLOUD2_TYPES = ("sensor_msgs/msg/PointCloud2",)
 POSE_TYPES = (
@@ -41,32 +40,12 @@ def stamp_ns(msg: Any, fallback_ns: int) -> int:
     return ns if ns != 0 else int(fallback_ns)
 
 
-def cloud_to_xyzi(msg: Any, what: str) -> NDArray[np.float32]:
-    """(N, 4) float32 x, y, z, intensity of a deserialised PointCloud2."""
-    return pointcloud2_to_xyzi(
-        int(msg.height),
-        int(msg.width),
-        list(msg.fields),
-        bool(msg.is_bigendian),
-        int(msg.point_step),
-        int(msg.row_step),
-        msg.data,
-        what,
-    )
-
-
 def _pose(p: Any) -> NDArray[np.float64]:
-    return pose_from_xyz_quat(
-        np.array([p.position.x, p.position.y, p.position.z]),
-        np.array([p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w]),
-    )
+    return pose_matrix(p.position, p.orientation)
 
 
 def _transform(t: Any) -> NDArray[np.float64]:
-    return pose_from_xyz_quat(
-        np.array([t.translation.x, t.translation.y, t.translation.z]),
-        np.array([t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w]),
-    )
+    return pose_matrix(t.translation, t.rotation)
 
 
 def poses_of(
