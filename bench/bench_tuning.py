@@ -4,9 +4,9 @@ Sequence: a simulated street world (``pipeline.sim``), 300 HDL-32E frames of ~54
 length of a toy training sequence; adapter ``ndt`` at its baseline.
 - bare odometry: ``adapter.run`` over scans already in memory, after ``adapter.warm`` (which a
   worker runs once per study; its cost is its own row) (best of 3);
-- one trial: ``run_trial`` as a process-pool worker runs it (scans decoded once, trial forked
-  with the time limit: run + check + RTE + write Parquet, result back through a pipe; best of
-  3, warm);
+- one trial: ``run_trial`` as a process-pool worker runs it (with the time limit: in the
+  worker's trial server, scans decoded once: run + check + RTE + write Parquet, result back
+  through a socket; best of 3, warm);
   overhead = (trial - bare) / bare;
 - trials/s: ``run_trials`` of 8 trials on an already started process pool of W workers.
 """
@@ -27,8 +27,9 @@ def run() -> list[Row]:
     from pipeline.odometry.registry import get_adapter
     from pipeline.sequence import SequenceReader
     from pipeline.sim.simulate import SimSpec, simulate_sequence
-    from pipeline.tuning.job import TrialJob, run_trial
+    from pipeline.tuning.job import TrialJob
     from pipeline.tuning.smbo import TrialsSection, open_executor, run_trials
+    from pipeline.tuning.worker import run_trial
 
     with tempfile.TemporaryDirectory() as tmp:
         seq = simulate_sequence(SimSpec("street", 1, N_FRAMES), Path(tmp) / "street.mcap").path
@@ -58,7 +59,7 @@ def run() -> list[Row]:
                 time_limit_s=limit,
             )
 
-        assert run_trial(job(600.0)).status == "ok"  # starts the forkserver
+        assert run_trial(job(600.0)).status == "ok"  # starts the trial server
         child_s = best_of(lambda: run_trial(job(600.0)), repeat=3)
         inproc_s = best_of(lambda: run_trial(job(None)), repeat=3)
 

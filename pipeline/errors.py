@@ -33,6 +33,12 @@ class TrialTimeout(OdometryError):  # noqa: N818
     """An odometry run outlived its time limit."""
 
 
+class InfrastructureError(AdaptuneError):
+    """The machinery around an odometry run failed, not the odometry: a trial process killed by
+    a signal from outside (the OOM killer's SIGKILL), a broken executor, a lost worker. The
+    trial is retried; it is never scored."""
+
+
 class ArtifactError(AdaptuneError):
     """A model artifact is missing files, tampered with, or made for something else."""
 

@@ -59,12 +59,12 @@ class DownsampleCache:
     """Voxel-downsampled scans computed ahead of time (``fill``) and looked up by array.
 
     A tuning run gives the same scans to hundreds of trials; what depends only on a scan and
-    untuned options (the ``ndt`` source cloud) is computed once per worker process
-    (``Adapter.warm``) and inherited by the trial processes forked from it. Keys are the
-    array's memory (address, shape, strides) and the voxel size; the cache keeps a reference
-    to every keyed array, so an address cannot be reused while its entry lives. Scans must not
-    be modified (the adapter contract). A lookup that misses computes the result without
-    storing it, so runs outside a tuning loop never grow the cache.
+    untuned options (the ``ndt`` source cloud) is computed once per worker and study
+    (``Adapter.warm``) and kept by the adapter instance the worker runs its trials with. Keys
+    are the array object (its address, shape and strides) and the voxel size; the cache keeps
+    a reference to every keyed array, so an address cannot be reused while its entry lives.
+    Scans must not be modified (the adapter contract). A lookup that misses computes the
+    result without storing it, so runs outside a tuning loop never grow the cache.
     """
 
     def __init__(self) -> None:

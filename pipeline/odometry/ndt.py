@@ -66,9 +66,6 @@ SPACE = ParameterSpace((
     ParamSpec("keyframe_interval", 0.0, 10.0, 4.0, unit="m"),
 ))
 
-SOURCES = DownsampleCache()
-"""The source clouds of the scans of a tuning run (``NdtAdapter.warm``)."""
-
 # neighbours searched around a source point's own voxel
 _OFFSETS = {
     1: np.zeros((1, 3), np.int64),
@@ -215,8 +212,10 @@ def score_constants(resolution: float, outlier_ratio: float) -> tuple[float, flo
 class NdtOdometry:
     """Streaming keyframe NDT: ``step`` one scan at a time, ``set_params`` between scans."""
 
-    def __init__(self, params: Params, options: NdtOptions | None = None) -> None:
+    def __init__(self, params: Params, options: NdtOptions | None = None,
+                 sources: DownsampleCache | None = None) -> None:
         self.options = options or NdtOptions()
+        self.sources = sources if sources is not None else DownsampleCache()
         self.params = SPACE.validate(params)
         self.poses: list[F64] = []
         self.keyframe_world: F64 | None = None
@@ -250,7 +249,7 @@ class NdtOdometry:
             T = np.eye(4)
         else:
             guess = constant_velocity_guess(self.poses)
-            source = SOURCES.get(points_lidar[:, :3], self.options.source_voxel_m)
+            source = self.sources.get(points_lidar[:, :3], self.options.source_voxel_m)
             T = self._align(source, guess)
             self.travelled_m += float(np.linalg.norm(T[:3, 3] - self.poses[-1][:3, 3]))
         self.poses.append(T)
@@ -304,10 +303,12 @@ class NdtAdapter:
 
     def __init__(self, **options: object) -> None:
         self.options = parse_options(NdtOptions, self.name, dict(options))
+        self.sources = DownsampleCache()
+        """The source clouds of the scans this adapter was warmed with (``warm``)."""
 
     def start(self, params: Params) -> NdtOdometry:
         """A streaming odometry with ``params`` (validated; missing ones take defaults)."""
-        return NdtOdometry(params, self.options)
+        return NdtOdometry(params, self.options, self.sources)
 
     def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
         """Run over ``scans`` with the per-frame ``schedule``."""
@@ -315,9 +316,9 @@ class NdtAdapter:
 
     def warm(self, scans: list[Scan]) -> None:
         """Downsample the source cloud of every scan once (it depends on no tuned parameter);
-        later runs over these Scan objects take it from the cache. A two-frame run loads the
-        compiled kernel into this process, so that trial processes forked from it start ready."""
-        SOURCES.fill([scan.xyz for scan in scans], self.options.source_voxel_m)
+        later runs of this adapter over these Scan objects take it from ``self.sources``. A
+        two-frame run loads the compiled kernel into this process."""
+        self.sources.fill([scan.xyz for scan in scans], self.options.source_voxel_m)
         if len(scans) >= 2:
             self.run(scans[:2], Schedule.constant(SPACE.defaults(), 2))
 

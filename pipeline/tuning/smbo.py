@@ -30,9 +30,10 @@ from pydantic import Field, field_validator
 from pipeline.config import Section
 from pipeline.errors import ConfigError, InputError, OdometryError
 from pipeline.odometry.base import Adapter, Params
-from pipeline.tuning.job import TrialJob, TrialResult, resolve_adapter, run_trial
+from pipeline.tuning.job import TrialJob, TrialResult, resolve_adapter
 from pipeline.tuning.table import JOINT, read_trials, trials_path, write_trials
 from pipeline.tuning.tpe import TpeSearch, trial_seed
+from pipeline.tuning.worker import run_trial
 
 log = logging.getLogger(__name__)
 

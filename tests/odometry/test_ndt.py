@@ -7,8 +7,8 @@ from odometry_data import Seq
 
 from pipeline.odometry import get_adapter, run_sequence
 from pipeline.odometry.base import Schedule
-from pipeline.odometry.common import se3_exp, voxel_downsample
-from pipeline.odometry.ndt import SOURCES, NdtOdometry, VoxelMap
+from pipeline.odometry.common import DownsampleCache, se3_exp, voxel_downsample
+from pipeline.odometry.ndt import NdtOdometry, VoxelMap
 from pipeline.sequence import SequenceReader
 
 
@@ -60,12 +60,10 @@ def test_warm_cache_gives_the_bitwise_same_trajectory(synthetic_seq: Seq) -> Non
     schedule = Schedule.constant(adapter.space.defaults(), len(scans))
     cold = adapter.run(scans, schedule)
     adapter.warm(scans)
-    try:
-        assert len(SOURCES) == len(scans)
-        warm = adapter.run(scans, schedule)
-        fresh = run_sequence(adapter, synthetic_seq.path, adapter.space.defaults())  # misses
-    finally:
-        SOURCES.fill([], 1.0)
+    assert len(adapter.sources) == len(scans)  # type: ignore[attr-defined]
+    warm = adapter.run(scans, schedule)
+    fresh = run_sequence(adapter, synthetic_seq.path, adapter.space.defaults())  # misses
+    assert len(get_adapter("ndt").sources) == 0  # type: ignore[attr-defined]  # per instance
     np.testing.assert_array_equal(cold.T_world_lidar, warm.T_world_lidar)
     np.testing.assert_array_equal(cold.T_world_lidar, fresh.T_world_lidar)
 
@@ -74,13 +72,11 @@ def test_cache_is_keyed_by_the_array_and_the_voxel_size(rng: np.random.Generator
     a = rng.uniform(-10, 10, (500, 4)).astype(np.float32)
     b = a.copy()
     expected = voxel_downsample(a[:, :3], 1.0)
-    SOURCES.fill([a[:, :3]], 1.0)
-    try:
-        a[:, 0] += 100.0  # breaks the contract on purpose: shows the hit comes from the cache
-        np.testing.assert_array_equal(SOURCES.get(a[:, :3], 1.0), expected)
-        # another array (same values as before) or another voxel size: computed, not cached
-        np.testing.assert_array_equal(SOURCES.get(b[:, :3], 1.0), expected)
-        assert SOURCES.get(b[:, :3], 1.0) is not SOURCES.get(a[:, :3], 1.0)
-        np.testing.assert_array_equal(SOURCES.get(a[:, :3], 2.0), voxel_downsample(a[:, :3], 2.0))
-    finally:
-        SOURCES.fill([], 1.0)
+    sources = DownsampleCache()
+    sources.fill([a[:, :3]], 1.0)
+    a[:, 0] += 100.0  # breaks the contract on purpose: shows the hit comes from the cache
+    np.testing.assert_array_equal(sources.get(a[:, :3], 1.0), expected)
+    # another array (same values as before) or another voxel size: computed, not cached
+    np.testing.assert_array_equal(sources.get(b[:, :3], 1.0), expected)
+    assert sources.get(b[:, :3], 1.0) is not sources.get(a[:, :3], 1.0)
+    np.testing.assert_array_equal(sources.get(a[:, :3], 2.0), voxel_downsample(a[:, :3], 2.0))

@@ -7,8 +7,8 @@ turns by ``0.002 (window - 4)`` rad a frame, so the RTE is a real function of th
 (smallest near bias=0.2, gain=1, window=4). It implements the Adapter protocol honestly on
 sequences that carry ground truth.
 ``failing``: the same, but when ``bias > threshold`` it fails in one ``mode``: raise, exit (the
-process ends at once), hang (blocks every signal, then sleeps: only a kill ends it), nan, lose
-(drops the last frame), jump (a 1 km step).
+process ends at once), oom (the process is SIGKILLed, as by the OOM killer), hang (blocks every
+signal, then sleeps: only a kill ends it), nan, lose (drops the last frame), jump (a 1 km step).
 """
 
 from __future__ import annotations
@@ -81,6 +81,8 @@ class FailingAdapter(DriftAdapter):
             raise RuntimeError("odometry diverged on purpose")
         if self.mode == "exit":  # the process dies without a word (as a segfault would)
             os._exit(3)
+        if self.mode == "oom":  # killed from outside, as the OOM killer does
+            os.kill(os.getpid(), signal.SIGKILL)
         if self.mode == "hang":
             signal.pthread_sigmask(signal.SIG_BLOCK, set(signal.valid_signals()) - {signal.SIGKILL})
             while True:

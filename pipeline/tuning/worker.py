@@ -1,0 +1,219 @@
+"""What a worker process keeps between trials, in one object: ``WorkerState``.
+
+A worker (a process-pool process, a Dask worker, or a trial server) runs many trials of the
+same study. It keeps:
+- the scan cache: the study's sequences decoded once (only these; skipped when they exceed
+  ``SCAN_CACHE_LIMIT_BYTES``), so reading the MCAPs is paid once, not once per trial;
+- the warmed adapter: one adapter instance per (adapter, options, sequences) on which the
+  optional ``warm(scans)`` ran (``ndt`` keeps its downsampled source clouds there);
+- its idle trial servers (``pipeline.tuning.server``), one per concurrent caller, for trials
+  with a time limit.
+
+``run_trial(job)`` is the top-level, picklable function executors run: it uses this process's
+state (made on first use). Tests make their own ``WorkerState`` and call ``state.run(job)``.
+
+Time limit: with ``time_limit_s`` set (per sequence; a joint trial gets the sum), the trial runs
+in a trial server and is SIGKILLed when it outlives the limit, so even a hang inside C code
+ends; the server holds its own WorkerState. With ``time_limit_s=None`` the trial runs in the
+calling process, with this state's cache.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import math
+import os
+import threading
+import time
+from typing import Any
+
+from pipeline.errors import InfrastructureError, OdometryError
+from pipeline.odometry.base import Adapter
+from pipeline.tuning.job import (
+    TrialJob,
+    TrialResult,
+    evaluate_trial,
+    one_line,
+    remove_trajectories,
+    resolve_adapter,
+)
+
+log = logging.getLogger(__name__)
+
+
+def _scan_cache_limit_bytes() -> int:
+    """A quarter of the machine's memory, at most 8 GiB (1 GiB where it cannot be read)."""
+    try:
+        physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 1 << 30
+    return int(min(physical // 4, 8 << 30))
+
+
+SCAN_CACHE_LIMIT_BYTES = _scan_cache_limit_bytes()
+"""Decoded sequences a worker keeps in memory at most (the MCAP chunks' uncompressed size)."""
+
+
+def study_key(job: TrialJob) -> tuple[Any, ...]:
+    """What a cache, a warmed adapter and a trial server serve: sequences, adapter, options."""
+    return (tuple(p for _, p in job.sequences), job.adapter,
+            json.dumps(job.adapter_options, sort_keys=True, default=str))
+
+
+class WorkerState:
+    """The scan cache, the warmed adapter and the idle trial servers of one worker process.
+
+    Thread-safe: Dask workers run several tasks at once; each running trial with a time limit
+    has a server of its own.
+    """
+
+    def __init__(self, scan_cache_limit_bytes: int = SCAN_CACHE_LIMIT_BYTES) -> None:
+        self.scan_cache_limit_bytes = scan_cache_limit_bytes
+        self.scans: dict[str, list[Any]] = {}
+        self.adapter: tuple[tuple[Any, ...], Adapter] | None = None
+        self.idle: list[Any] = []  # TrialServer
+        self._lock = threading.Lock()
+
+    # -- running a trial -------------------------------------------------------------------
+
+    def run(self, job: TrialJob) -> TrialResult:
+        """Run ``job``: an ok, failed (odometry) or lost (infrastructure) TrialResult, never an
+        exception."""
+        t0 = time.perf_counter()
+        try:
+            if job.time_limit_s is None:
+                out = self.evaluate(job)
+            else:
+                out = self._run_in_server(job, job.time_limit_s * len(job.sequences))
+        except InfrastructureError as exc:
+            remove_trajectories(job)
+            return TrialResult(job.trial, "lost", one_line(exc), math.nan,
+                               time.perf_counter() - t0, job.seed, dict(job.params))
+        except Exception as exc:
+            remove_trajectories(job)
+            return TrialResult(job.trial, "failed", one_line(exc), job.penalty_pct,
+                               time.perf_counter() - t0, job.seed, dict(job.params))
+        return TrialResult(job.trial, "ok", "", out["objective"], time.perf_counter() - t0,
+                           job.seed, dict(job.params), out["rte_pct"], out["odometry_s"])
+
+    def evaluate(self, job: TrialJob) -> dict[str, Any]:
+        """``evaluate_trial`` in this process, with the scan cache and the warmed adapter."""
+        adapter = self.warm(job)
+        return evaluate_trial(job, adapter, self.scans)
+
+    def outcome(self, job: TrialJob) -> tuple[str, Any]:
+        """("ok", ``self.evaluate(job)``) or ("error", the exception in one line)."""
+        try:
+            return ("ok", self.evaluate(job))
+        except BaseException as exc:
+            return ("error", one_line(exc))
+
+    def _run_in_server(self, job: TrialJob, limit_s: float) -> dict[str, Any]:
+        server = self._checkout(study_key(job))
+        kind, payload = server.run(job, limit_s)  # raises when the server had to go
+        self._checkin(server)
+        if kind != "ok":
+            raise OdometryError(payload)
+        return payload  # type: ignore[no-any-return]
+
+    # -- trial servers ---------------------------------------------------------------------
+
+    def _checkout(self, key: tuple[Any, ...]) -> Any:
+        """An idle live server for ``key`` or a new one; idle servers of other keys stop."""
+        from pipeline.tuning.server import TrialServer
+
+        with self._lock:
+            keep: list[Any] = []
+            stale: list[Any] = []
+            for server in self.idle:
+                (keep if server.key == key and server.alive() else stale).append(server)
+            found = keep.pop() if keep else None
+            self.idle = keep
+        for server in stale:
+            server.stop()
+        return found if found is not None else TrialServer(key)
+
+    def _checkin(self, server: Any) -> None:
+        with self._lock:
+            self.idle.append(server)
+
+    def close(self) -> None:
+        """Stop every idle server (running ones end with their trial)."""
+        with self._lock:
+            servers, self.idle = self.idle, []
+        for server in servers:
+            server.stop()
+
+    # -- scan cache and warm adapter -------------------------------------------------------
+
+    def warm(self, job: TrialJob) -> Adapter:
+        """The adapter for ``job``, warmed over its sequences' decoded scans (once per key).
+
+        The sequences are decoded into the cache unless they are too large (then every trial
+        reads its MCAP); the adapter's optional ``warm(scans)`` precomputes what depends on the
+        scans alone. Adapters must not modify the scans they are given (trials share them).
+        """
+        key = study_key(job)
+        with self._lock:
+            if self.adapter is not None and self.adapter[0] == key:
+                return self.adapter[1]
+            adapter = resolve_adapter(job.adapter, job.adapter_options)
+            paths = list(key[0])
+            self._fill_cache(paths)
+            warm = getattr(adapter, "warm", None)
+            if warm is not None and all(p in self.scans for p in paths):
+                warm([scan for p in paths for scan in self.scans[p]])
+            self.adapter = (key, adapter)
+            return adapter
+
+    def warm_quietly(self, job: TrialJob) -> None:
+        """``warm``, errors left to the trial itself (which then reports them)."""
+        with contextlib.suppress(Exception):
+            self.warm(job)
+
+    def _fill_cache(self, paths: list[str]) -> None:
+        """Decode ``paths`` into the cache (and drop other sequences), if they fit."""
+        from pipeline.sequence import SequenceReader
+
+        for stale in set(self.scans) - set(paths):
+            del self.scans[stale]
+        if sum(decoded_bytes(p) for p in paths) > self.scan_cache_limit_bytes:
+            log.info("scan cache: %s too large to keep decoded; every trial reads them", paths)
+            self.scans.clear()
+            return
+        for p in paths:
+            if p not in self.scans:
+                with SequenceReader(p) as reader:
+                    self.scans[p] = list(reader)
+
+
+def decoded_bytes(path: str) -> int:
+    """Uncompressed size [bytes] of a sequence MCAP's chunks: about its decoded size."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as fh:
+            summary = make_reader(fh).get_summary()
+    except Exception:  # unreadable: the trial itself reports it
+        return 0
+    if summary is None:
+        return 0
+    return sum(ci.uncompressed_size for ci in summary.chunk_indexes)
+
+
+_PROCESS_STATE: list[WorkerState] = []
+"""This process's WorkerState (made by the first ``run_trial``)."""
+
+
+def process_state() -> WorkerState:
+    """The WorkerState of this process, made on first use."""
+    if not _PROCESS_STATE:
+        _PROCESS_STATE.append(WorkerState())
+    return _PROCESS_STATE[0]
+
+
+def run_trial(job: TrialJob) -> TrialResult:
+    """Run ``job`` with this process's WorkerState (the function executors are given)."""
+    return process_state().run(job)
