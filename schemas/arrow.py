@@ -86,14 +86,15 @@ TRIALS_BASE = pa.schema(
 )
 """One SMBO study's trials (CONTRACTS.md): these columns plus ``p_<name>`` float64 each."""
 
-TRIAL_STATUSES = ("ok", "failed")
-"""Values of the trials table's ``status`` column."""
+TRIAL_STATUSES = ("ok", "failed", "lost")
+"""Values of the trials table's ``status`` column: ok (scored), failed (the odometry failed:
+objective = the penalty), lost (the machinery failed: objective NaN, run again on resume)."""
 
 
 def trials_schema(param_names: list[str]) -> pa.Schema:
     """Schema of ``<OUT>/trials/algorithm=<A>/sequence=<S>/trials.parquet`` for these parameters.
 
-    Columns: trial int32, status ('ok' | 'failed'), error ('' when ok), objective float64,
+    Columns: trial int32, status (``TRIAL_STATUSES``), error ('' when ok), objective float64,
     wall_time_s float64, seed int64, params_json (JSON object name -> value), then one float64
     column ``p_<name>`` per parameter in the given order.
     """

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.errors import InputError, OdometryError
+from pipeline.errors import AdaptuneError, InputError, OdometryError
 from pipeline.odometry.base import Adapter
 from pipeline.trajectory import Trajectory
 
@@ -155,8 +155,9 @@ def check_jump(traj: Trajectory, jump_limit_m: float) -> None:
 
 
 def one_line(exc: BaseException) -> str:
-    """``exc`` as one line of at most MAX_ERROR_CHARS (odometry errors without their type)."""
-    text = str(exc) if isinstance(exc, OdometryError) else f"{type(exc).__name__}: {exc}"
+    """``exc`` as one line of at most MAX_ERROR_CHARS (adaptune's own errors without their
+    type: their message says it)."""
+    text = str(exc) if isinstance(exc, AdaptuneError) else f"{type(exc).__name__}: {exc}"
     text = " ".join(text.split())
     return text[:MAX_ERROR_CHARS]
 

@@ -5,11 +5,17 @@ sequence (``joint=False``) or one study whose objective is the mean over all seq
 (``joint=True``, sequence ``__joint__``). Each study:
 1. reads its trials table (finished trials of an earlier, killed run) into the TPE history;
 2. keeps up to ``workers`` trials in flight: trial 0 is the baseline (the space's defaults),
-   every other trial t is ``TpeSearch.ask`` over the finished trials 0..t-lag and the pending
-   rest (``told_lag``): the same history whatever order the trials finish in, so runs with
-   the same seed and workers propose the same parameters;
+   every other trial t is ``TpeSearch.ask`` over exactly the finished trials 0..t-lag and the
+   trials t-lag+1..t-1 as pending (``told_lag``): the same history whatever order the trials
+   finish in, and whether the run was killed and resumed in between, so runs with the same
+   seed and workers propose the same parameters;
 3. after every finished trial rewrites the trials table atomically, so a kill loses at most the
    trials in flight, and a restart runs exactly the missing trial ids 0..iterations-1.
+
+Failures: a trial whose odometry fails is *failed* and scored with the penalty. A trial the
+machinery lost (its process killed from outside, a broken executor) is run again, up to
+``retries`` times; after that it is stored as *lost*, the study stops proposing, and the run
+ends with an InfrastructureError once the other studies are done; a resume runs it again.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ import multiprocessing
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,9 +35,9 @@ from typing import Any
 from pydantic import Field, field_validator
 
 from pipeline.config import Section
-from pipeline.errors import ConfigError, InputError, OdometryError
+from pipeline.errors import ConfigError, InfrastructureError, InputError
 from pipeline.odometry.base import Adapter, Params
-from pipeline.tuning.job import TrialJob, TrialResult, resolve_adapter
+from pipeline.tuning.job import TrialJob, TrialResult, one_line, resolve_adapter
 from pipeline.tuning.table import JOINT, read_trials, trials_path, write_trials
 from pipeline.tuning.tpe import TpeSearch, trial_seed
 from pipeline.tuning.worker import run_trial
@@ -46,6 +53,8 @@ class TrialsSection(Section):
     time_limit_s: per sequence run (a joint trial gets the sum); null = no limit, in-process.
     jump_limit_m: a frame-to-frame translation above this fails the trial (diverged odometry).
     startup_trials: random proposals before TPE (hyperopt's n_startup_jobs).
+    retries: times a lost trial (process killed from outside, executor broken) is run again
+    before the run gives up on it (a resume runs it again).
     dask: null = process pool; "local" = a Dask LocalCluster of ``workers`` processes;
     "tcp://host:port" = an existing Dask scheduler.
     """
@@ -59,6 +68,7 @@ class TrialsSection(Section):
     length_m: float = Field(25.0, gt=0)
     jump_limit_m: float = Field(5.0, gt=0)
     startup_trials: int = Field(20, ge=1)
+    retries: int = Field(2, ge=0)
     split: str = "train"
     adapter_options: dict[str, Any] = Field(default_factory=dict)
 
@@ -91,6 +101,7 @@ class StudySummary:
     best_objective: float
     best_params: Params = field(default_factory=dict)
     trials_path: Path | None = None
+    lost: list[TrialResult] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -109,6 +120,7 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
 
     ``executor``: run trials there instead of opening one from ``settings`` (left open).
     ``on_trial(study, result)`` is called after each finished trial is saved.
+    InfrastructureError when trials were lost beyond ``settings.retries`` (all others saved).
     """
     adapter = resolve_adapter(settings.algorithm, settings.adapter_options)
     studies = make_studies(sequence_paths, joint)
@@ -116,12 +128,17 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
         for _, path in study.sequences:
             check_scorable(path, settings.length_m)
     summaries = []
-    with contextlib.ExitStack() as stack:
-        if executor is None:
-            executor = stack.enter_context(open_executor(settings.workers, settings.dask))
+    with TrialExecutor(settings, executor) as pool:
         for study in studies:
-            summaries.append(run_study(study, adapter, executor, Path(out_dir), settings, seed,
+            summaries.append(run_study(study, adapter, pool, Path(out_dir), settings, seed,
                                        progress, on_trial))
+    lost = [(s, r) for s in summaries for r in s.lost]
+    if lost:
+        s, r = lost[0]
+        raise InfrastructureError(
+            f"{len(lost)} trial(s) lost after {settings.retries} retries, e.g. {s.algorithm} "
+            f"{s.sequence} trial {r.trial}: {r.error}; finished trials are saved, run again to "
+            "resume")
     return summaries
 
 
@@ -153,50 +170,60 @@ def check_scorable(path: str | Path, length_m: float) -> None:
                          f"length_m={length_m}: no RTE segment to score")
 
 
-def run_study(study: Study, adapter: Adapter, executor: Executor, out_dir: Path,
+def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path,
               settings: TrialsSection, seed: int, progress: bool = True,
               on_trial: Callable[[Study, TrialResult], None] | None = None) -> StudySummary:
     """Run (or resume) one study until trials 0..iterations-1 are all finished."""
     space = adapter.space
     table = trials_path(out_dir, adapter.name, study.name)
-    done = {r.trial: r for r in read_trials(table, space) if r.trial < settings.iterations}
-    search = TpeSearch(space, seed, settings.startup_trials)
-    for r in done.values():
-        search.tell(r.trial, r.params, r.objective)
+    stored = [r for r in read_trials(table, space) if r.trial < settings.iterations]
+    done = {r.trial: r for r in stored if r.status != "lost"}
+    lost: dict[int, TrialResult] = {}
+    proposed = {t: r.params for t, r in done.items()}
     todo = [t for t in range(settings.iterations) if t not in done]
     ran = 0
     if done:
         log.info("%s %s: resuming, %d of %d trials finished", adapter.name, study.name,
                  len(done), settings.iterations)
     lag = told_lag(settings.workers)
-    untold: dict[int, TrialResult] = {}  # finished in this run, not yet told to the search
+    search = TpeSearch(space, seed, settings.startup_trials)
+    attempts: dict[int, int] = {}
     with _progress_bar(settings.iterations, len(done), f"{adapter.name} {study.name}",
                        progress) as bar:
         _show_best(bar, done)
-        in_flight: dict[Future[TrialResult], int] = {}
+        in_flight: dict[Future[TrialResult], TrialJob] = {}
         while todo or in_flight:
-            while (todo and len(in_flight) < settings.workers
+            while (todo and not lost and len(in_flight) < settings.workers
                    and all(t in done for t in range(todo[0] - lag + 1))):
                 tid = todo.pop(0)
-                for t in sorted(t for t in untold if t <= tid - lag):
-                    r = untold.pop(t)
-                    search.tell(t, r.params, r.objective)
-                params = propose(search, tid)
-                job = make_job(study, adapter, tid, trial_seed(seed, tid), params, out_dir,
-                               settings)
-                in_flight[executor.submit(run_trial, job)] = tid
+                proposed[tid] = propose(search, tid, done, proposed, lag)
+                job = make_job(study, adapter, tid, trial_seed(seed, tid), proposed[tid],
+                               out_dir, settings)
+                in_flight[pool.submit(job)] = job
+            if not in_flight:  # nothing can start: a trial before the next one was lost
+                break
             finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
-            for fut in sorted(finished, key=in_flight.__getitem__):
-                tid = in_flight.pop(fut)
-                result = _result_of(fut, tid)
-                untold[tid] = result
-                done[tid] = result
-                write_trials(table, space, done.values())
+            for fut in sorted(finished, key=lambda f: in_flight[f].trial):
+                job = in_flight.pop(fut)
+                result = _result_of(fut, job)
+                if result.status == "lost":
+                    attempts[job.trial] = attempts.get(job.trial, 0) + 1
+                    if attempts[job.trial] <= settings.retries:
+                        log.warning("%s %s trial %d lost (%s); running it again", adapter.name,
+                                    study.name, job.trial, result.error)
+                        in_flight[pool.submit(job)] = job
+                        continue
+                    lost[job.trial] = result
+                else:
+                    done[job.trial] = result
+                write_trials(table, space, [*done.values(), *lost.values()])
                 ran += 1
                 _report(bar, done, result)
                 if on_trial is not None:
                     on_trial(study, result)
-    return summarize(adapter.name, study.name, done, ran, table)
+    summary = summarize(adapter.name, study.name, done, ran, table)
+    summary.lost = sorted(lost.values(), key=lambda r: r.trial)
+    return summary
 
 
 def told_lag(workers: int) -> int:
@@ -208,12 +235,15 @@ def told_lag(workers: int) -> int:
     return 1 if workers == 1 else 2 * workers - 1
 
 
-def propose(search: TpeSearch, tid: int) -> Params:
-    """Trial 0 is the baseline (defaults); every other trial is a TPE proposal."""
+def propose(search: TpeSearch, tid: int, done: dict[int, TrialResult],
+            proposed: dict[int, Params], lag: int) -> Params:
+    """Parameters of trial ``tid``: the baseline (defaults) for trial 0, else a TPE proposal
+    from exactly the finished trials 0..tid-lag and the pending tid-lag+1..tid-1 (as in an
+    uninterrupted run, whatever a resumed one found finished beyond them)."""
     if tid == 0:
-        params = search.space.defaults()
-        search.pending(0, params)
-        return params
+        return search.space.defaults()
+    search.reset(told={t: (done[t].params, done[t].objective) for t in range(tid - lag + 1)},
+                 pending={t: proposed[t] for t in range(max(0, tid - lag + 1), tid)})
     return search.ask(tid)
 
 
@@ -231,12 +261,50 @@ def summarize(algorithm: str, sequence: str, done: dict[int, TrialResult], ran: 
               table: Path) -> StudySummary:
     """Counts and the best trial (lowest objective among ok trials; the baseline if none is ok)."""
     ok = [r for r in done.values() if r.status == "ok"]
-    best = min(ok or done.values(), key=lambda r: (r.objective, r.trial))
+    best = min(ok or done.values() or [_NO_TRIAL], key=lambda r: (r.objective, r.trial))
     return StudySummary(algorithm, sequence, len(done), len(done) - len(ok), ran, best.trial,
                         best.objective if ok else math.nan, dict(best.params), table)
 
 
+_NO_TRIAL = TrialResult(-1, "lost", "", math.nan, 0.0, 0, {})
+
+
 # -- executors -----------------------------------------------------------------------------
+
+class TrialExecutor:
+    """Where trials run: the given executor, or one opened from the settings, which is opened
+    anew when it breaks (a process-pool worker killed: its trials come back lost and are
+    retried)."""
+
+    def __init__(self, settings: TrialsSection, executor: Executor | None = None) -> None:
+        self.settings = settings
+        self.given = executor
+        self._stack = contextlib.ExitStack()
+        self.executor = executor if executor is not None else self._open()
+
+    def _open(self) -> Executor:
+        return self._stack.enter_context(open_executor(self.settings.workers, self.settings.dask))
+
+    def submit(self, job: TrialJob) -> Future[TrialResult]:
+        """``run_trial(job)`` on the executor."""
+        try:
+            return self.executor.submit(run_trial, job)
+        except BrokenProcessPool:
+            if self.given is not None:
+                raise InfrastructureError("the process pool broke (a worker died); finished "
+                                          "trials are saved, run again to resume") from None
+            log.warning("the process pool broke (a worker died); starting a new one")
+            self._stack.close()
+            self._stack = contextlib.ExitStack()
+            self.executor = self._open()
+            return self.executor.submit(run_trial, job)
+
+    def __enter__(self) -> TrialExecutor:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stack.__exit__(*exc)  # type: ignore[arg-type]
+
 
 @contextlib.contextmanager
 def open_executor(workers: int, dask: str | None = None) -> Iterator[Executor]:
@@ -321,11 +389,12 @@ def _report(bar: Any, done: dict[int, TrialResult], result: TrialResult) -> None
         log.debug("trial %d failed: %s", result.trial, result.error)
 
 
-def _result_of(fut: Future[TrialResult], tid: int) -> TrialResult:
-    """The result of a finished future; OdometryError when the executor itself broke."""
+def _result_of(fut: Future[TrialResult], job: TrialJob) -> TrialResult:
+    """The result of a finished future; a lost result when the executor itself failed (a
+    worker process died, a Dask worker was lost too often)."""
     try:
         return fut.result()
     except Exception as exc:
-        raise OdometryError(f"trial {tid}: the executor failed ({type(exc).__name__}: {exc}); "
-                            "finished trials are saved, run again to resume") from exc
+        return TrialResult(job.trial, "lost", f"executor: {one_line(exc)}", math.nan, 0.0,
+                           job.seed, dict(job.params))
 

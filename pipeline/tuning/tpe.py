@@ -79,6 +79,16 @@ class TpeSearch:
         """Record ``tid`` as running with ``params`` (e.g. the baseline, which is not asked)."""
         self._history[tid] = _Entry(self.space.validate(params), None)
 
+    def reset(self, told: Mapping[int, tuple[Mapping[str, float], float]],
+              pending: Mapping[int, Mapping[str, float]]) -> None:
+        """Replace the history: ``told`` {tid: (params, loss)} finished, ``pending`` {tid:
+        params} running."""
+        self._history = {}
+        for tid, (params, loss) in told.items():
+            self.tell(tid, params, loss)
+        for tid, params in pending.items():
+            self.pending(tid, params)
+
     def tell(self, tid: int, params: Mapping[str, float], loss: float) -> None:
         """Record the finished trial ``tid`` (pending or not) with its finite ``loss``."""
         if not np.isfinite(loss):

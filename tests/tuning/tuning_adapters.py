@@ -8,7 +8,9 @@ turns by ``0.002 (window - 4)`` rad a frame, so the RTE is a real function of th
 sequences that carry ground truth.
 ``failing``: the same, but when ``bias > threshold`` it fails in one ``mode``: raise, exit (the
 process ends at once), oom (the process is SIGKILLed, as by the OOM killer), hang (blocks every
-signal, then sleeps: only a kill ends it), nan, lose (drops the last frame), jump (a 1 km step).
+signal, then sleeps: only a kill ends it), nan, lose (drops the last frame), jump (a 1 km step),
+oom_once (SIGKILLed the first time it sees a parameter set, as by a passing memory shortage:
+``marker_dir`` remembers; then it runs as ``drift``).
 """
 
 from __future__ import annotations
@@ -70,9 +72,10 @@ class FailingAdapter(DriftAdapter):
 
     name = "failing"
 
-    def __init__(self, mode: str, threshold: float = 0.0) -> None:
+    def __init__(self, mode: str, threshold: float = 0.0, marker_dir: str = "") -> None:
         self.mode = mode
         self.threshold = threshold
+        self.marker_dir = marker_dir
 
     def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
         if schedule.at(0)["bias"] <= self.threshold:
@@ -83,6 +86,12 @@ class FailingAdapter(DriftAdapter):
             os._exit(3)
         if self.mode == "oom":  # killed from outside, as the OOM killer does
             os.kill(os.getpid(), signal.SIGKILL)
+        if self.mode == "oom_once":
+            marker = Path(self.marker_dir) / repr(sorted(schedule.at(0).items()))
+            if not marker.exists():
+                marker.touch()
+                os.kill(os.getpid(), signal.SIGKILL)
+            return super().run(scans, schedule)
         if self.mode == "hang":
             signal.pthread_sigmask(signal.SIG_BLOCK, set(signal.valid_signals()) - {signal.SIGKILL})
             while True:
@@ -117,8 +126,8 @@ def drift() -> DriftAdapter:
     return DriftAdapter()
 
 
-def failing(mode: str, threshold: float = 0.0) -> FailingAdapter:
-    return FailingAdapter(mode, threshold)
+def failing(mode: str, threshold: float = 0.0, marker_dir: str = "") -> FailingAdapter:
+    return FailingAdapter(mode, threshold, marker_dir)
 
 
 def write_sequence(
