@@ -103,6 +103,9 @@ def _module_exists(target: str) -> bool:
 @click.version_option(package_name="adaptune")
 def main(verbose: int) -> None:
     """adaptune: adaptive hyperparameter tuning for black-box LiDAR odometry."""
+    from pipeline.lifetime import exit_on_termination
+
+    exit_on_termination()  # SIGTERM ends children and temporary files, as Ctrl-C does
     level = logging.WARNING - 10 * min(verbose, 2) if verbose else logging.INFO
     logging.basicConfig(
         level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr

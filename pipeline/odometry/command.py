@@ -13,6 +13,12 @@ interpreter). The command gets ``time_limit_s`` (``run_sequence``'s, else the ``
 option); past it its whole process group is killed and TrialTimeout raised. A non-zero exit
 status is an OdometryError carrying the last line of its stderr.
 
+The command runs under the guard of ``pipeline.lifetime`` in a process group of its own: when
+the run ends early for any reason (time limit, Ctrl-C, SIGTERM, or this process killed, even by
+SIGKILL, as the tuner does at a trial's hard time limit) the whole group is killed and the work
+directory removed (unless ``keep_workdir``). A command that detaches from its process group
+(``setsid``) is on its own.
+
 The trajectory (T_world_lidar) is read back in ``format``:
 - ``kitti``: 12 numbers a line (row-major 3x4), one line per frame in order: N lines for N frames;
 - ``tum``: ``stamp_s tx ty tz qx qy qz qw`` a line, matched to frames by stamp (nearest, within
@@ -29,7 +35,6 @@ import logging
 import os
 import shlex
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -142,7 +147,8 @@ class CommandAdapter:
             files = write_inputs(work, schedule, stamps_ns)
             argv = [a.format(sequence=sequence, out=work / "trajectory.txt", workdir=work,
                              python=sys.executable, **files) for a in self.options.command]
-            run_process(argv, self.options.cwd, limit)
+            run_process(argv, self.options.cwd, limit,
+                        workdir=None if self.options.keep_workdir else work)
             T = read_poses(work / "trajectory.txt", self.options.format, stamps_ns,
                            self.options.stamp_tolerance_s)
             return Trajectory(np.arange(len(stamps_ns), dtype=np.int32), stamps_ns, T)
@@ -183,25 +189,53 @@ def write_inputs(work: Path, schedule: Schedule, stamps_ns: np.ndarray) -> dict[
     return {"params": params, "schedule": csv, "schedule_json": js}
 
 
-def run_process(argv: list[str], cwd: str | None, time_limit_s: float | None) -> None:
-    """Run ``argv`` in its own process group; TrialTimeout past the limit, else OdometryError."""
+def run_process(argv: list[str], cwd: str | None, time_limit_s: float | None,
+                workdir: Path | None = None) -> None:
+    """Run ``argv`` under the guard (its own process group; killed, and ``workdir`` removed,
+    when this call ends early or this process dies); TrialTimeout past the limit, else
+    OdometryError for a non-zero exit status."""
+    from pipeline.lifetime import GUARD_CANNOT_RUN, guard_argv
+
+    lifeline, keep = os.pipe()  # the guard cleans up when `keep` closes
     try:
-        proc = subprocess.Popen(argv, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                stdin=subprocess.DEVNULL, start_new_session=True)
-    except (FileNotFoundError, PermissionError) as exc:
-        raise ConfigError(f"command: cannot run {argv[0]!r} ({exc.strerror})") from None
+        proc = subprocess.Popen(guard_argv(lifeline, str(workdir or ""), argv), cwd=cwd,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                stdin=subprocess.DEVNULL, pass_fds=(lifeline,),
+                                start_new_session=True)
+    except (FileNotFoundError, NotADirectoryError, PermissionError) as exc:
+        os.close(keep)
+        raise ConfigError(f"command: cannot run {argv[0]!r} in {cwd or '.'} "
+                          f"({exc.strerror})") from None
+    finally:
+        os.close(lifeline)
     try:
         _, err = proc.communicate(timeout=time_limit_s)
     except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.communicate()
+        _cancel(proc, keep)
         raise TrialTimeout(f"command: {argv[0]} outlived its time limit of {time_limit_s:g} s; "
                            "killed") from None
+    except BaseException:  # Ctrl-C, SIGTERM (SystemExit): the tool goes too
+        _cancel(proc, keep)
+        raise
+    os.close(keep)
+    if proc.returncode == GUARD_CANNOT_RUN and err.startswith(b"adaptune guard: "):
+        raise ConfigError(f"command: {err.decode(errors='replace').strip()[16:]}")
     if proc.returncode != 0:
         lines = err.decode(errors="replace").strip().splitlines()
         last = lines[-1] if lines else "no stderr"
         raise OdometryError(f"command: {Path(argv[0]).name} exited with status "
                             f"{proc.returncode}: {last}")
+
+
+def _cancel(proc: subprocess.Popen[bytes], keep: int) -> None:
+    """Close the guard's lifeline (it kills the tool's group and removes the work directory),
+    then wait for the guard (SIGKILL if it does not end within 10 s)."""
+    os.close(keep)
+    try:
+        proc.communicate(timeout=10.0)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
 
 
 def read_poses(path: Path, fmt: str, stamps_ns: np.ndarray, tolerance_s: float) -> F64:

@@ -24,6 +24,7 @@ import contextlib
 import logging
 import math
 import multiprocessing
+import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
@@ -316,10 +317,17 @@ def open_executor(workers: int, dask: str | None = None) -> Iterator[Executor]:
     DASK_DISTRIBUTED__WORKER__DAEMON=False).
     """
     if dask is None:
+        from pipeline.lifetime import become_pool_worker
+
         pool = ProcessPoolExecutor(max_workers=workers,
-                                   mp_context=multiprocessing.get_context("spawn"))
+                                   mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=become_pool_worker, initargs=(os.getpid(),))
         try:
             yield pool
+        except BaseException:  # Ctrl-C, SIGTERM, an error: do not wait for running trials
+            for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                proc.kill()  # their trial servers and tools end with them
+            raise
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
         return
