@@ -58,6 +58,32 @@ def atomic_dir(final: str | os.PathLike[str]) -> Iterator[Path]:
         shutil.rmtree(old, ignore_errors=True)
 
 
+@contextlib.contextmanager
+def exclusive_folder(folder: str | os.PathLike[str], what: str = "another process"
+                     ) -> Iterator[Path]:
+    """Hold an exclusive lock on ``folder`` (made if missing) while the block runs.
+
+    ``fcntl.flock`` on the folder itself (no lock file is left in it); the lock goes with the
+    process however it ends. Raises ConfigError at once when another process holds it.
+    """
+    import fcntl
+
+    from pipeline.errors import ConfigError
+
+    path = Path(folder)
+    path.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ConfigError(f"{path}: {what} is writing there (the folder is locked); wait "
+                              "for it to end or use another output folder") from None
+        yield path
+    finally:
+        os.close(fd)
+
+
 def atomic_write_text(final: str | os.PathLike[str], text: str) -> None:
     """Write ``text`` (UTF-8) to ``final`` atomically."""
     with atomic_path(final) as tmp:

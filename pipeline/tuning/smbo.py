@@ -37,9 +37,11 @@ from pydantic import Field, field_validator
 
 from pipeline.config import Section
 from pipeline.errors import ConfigError, InfrastructureError, InputError
+from pipeline.io_utils import exclusive_folder
 from pipeline.odometry.base import Adapter, Params
 from pipeline.tuning.job import TrialJob, TrialResult, one_line, resolve_adapter
-from pipeline.tuning.table import JOINT, read_trials, trials_path, write_trials
+from pipeline.tuning.fingerprint import check_fingerprint, study_fingerprint
+from pipeline.tuning.table import JOINT, read_study, read_trials, trials_path, write_trials
 from pipeline.tuning.tpe import TpeSearch, trial_seed
 from pipeline.tuning.worker import run_trial
 
@@ -129,7 +131,8 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
         for _, path in study.sequences:
             check_scorable(path, settings.length_m)
     summaries = []
-    with TrialExecutor(settings, executor) as pool:
+    with exclusive_folder(out_dir, "another adaptune trials"), \
+            TrialExecutor(settings, executor) as pool:
         for study in studies:
             summaries.append(run_study(study, adapter, pool, Path(out_dir), settings, seed,
                                        progress, on_trial))
@@ -177,6 +180,9 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
     """Run (or resume) one study until trials 0..iterations-1 are all finished."""
     space = adapter.space
     table = trials_path(out_dir, adapter.name, study.name)
+    fingerprint = study_of(study, adapter, settings, seed, stored=read_study(table))
+    if table.is_file():
+        check_fingerprint(read_study(table), fingerprint, str(table))
     stored = [r for r in read_trials(table, space) if r.trial < settings.iterations]
     done = {r.trial: r for r in stored if r.status != "lost"}
     lost: dict[int, TrialResult] = {}
@@ -217,7 +223,7 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
                     lost[job.trial] = result
                 else:
                     done[job.trial] = result
-                write_trials(table, space, [*done.values(), *lost.values()])
+                write_trials(table, space, [*done.values(), *lost.values()], fingerprint)
                 ran += 1
                 _report(bar, done, result)
                 if on_trial is not None:
@@ -225,6 +231,17 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
     summary = summarize(adapter.name, study.name, done, ran, table)
     summary.lost = sorted(lost.values(), key=lambda r: r.trial)
     return summary
+
+
+def study_of(study: Study, adapter: Adapter, settings: TrialsSection, seed: int,
+             stored: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The fingerprint of ``study`` run with ``settings`` (``pipeline.tuning.fingerprint``)."""
+    return study_fingerprint(
+        adapter=settings.algorithm, adapter_options=settings.adapter_options,
+        space=adapter.space.to_json(), seed=seed, length_m=settings.length_m,
+        penalty_pct=settings.penalty_pct, jump_limit_m=settings.jump_limit_m,
+        time_limit_s=settings.time_limit_s, startup_trials=settings.startup_trials,
+        told_lag=told_lag(settings.workers), sequences=list(study.sequences), stored=stored)
 
 
 def told_lag(workers: int) -> int:

@@ -1,14 +1,18 @@
-"""The trials table of one study (CONTRACTS.md), which is also the resume state.
+"""The trials table of one study (docs/design.md), which is also the resume state.
 
 ``<OUT>/trials/algorithm=<A>/sequence=<S>/trials.parquet`` (schemas.arrow.trials_schema), one
 row per finished trial sorted by trial id, rewritten atomically after every finished trial.
+The study's fingerprint (``pipeline.tuning.fingerprint``: adapter, options, parameter space,
+seed, ...) travels in the file's schema metadata under ``adaptune.study`` (``read_study``): the
+one home of the parameter space a study searched, for every later stage.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -29,8 +33,14 @@ def trials_path(out_dir: str | Path, algorithm: str, sequence: str) -> Path:
             / "trials.parquet")
 
 
-def write_trials(path: str | Path, space: ParameterSpace, results: Iterable[TrialResult]) -> None:
-    """Write the finished ``results`` (sorted by trial) as the trials table, atomically."""
+STUDY_KEY = b"adaptune.study"
+"""Schema metadata key of the study fingerprint (JSON)."""
+
+
+def write_trials(path: str | Path, space: ParameterSpace, results: Iterable[TrialResult],
+                 study: Mapping[str, Any]) -> None:
+    """Write the finished ``results`` (sorted by trial) as the trials table, with the study's
+    fingerprint, atomically."""
     rows = sorted(results, key=lambda r: r.trial)
     names = space.names
     cols: list[pa.Array] = [
@@ -43,9 +53,31 @@ def write_trials(path: str | Path, space: ParameterSpace, results: Iterable[Tria
         pa.array([json.dumps({n: r.params[n] for n in names}) for r in rows], pa.string()),
     ]
     cols += [pa.array([r.params[n] for r in rows], pa.float64()) for n in names]
-    table = pa.Table.from_arrays(cols, schema=trials_schema(names))
+    schema = trials_schema(names)
+    schema = schema.with_metadata({**schema.metadata, STUDY_KEY: json.dumps(study).encode()})
+    table = pa.Table.from_arrays(cols, schema=schema)
     with atomic_path(path) as tmp:
         pq.write_table(table, tmp)
+
+
+def read_study(path: str | Path) -> dict[str, Any] | None:
+    """The study fingerprint stored with the trials table at ``path``; None when there is no
+    table, or it has none (an older one)."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    try:
+        meta = pq.read_schema(path).metadata or {}
+    except (pa.ArrowInvalid, OSError) as exc:
+        raise InputError(f"{path}: not a readable trials table ({exc}); "
+                         "delete it to start over") from exc
+    if STUDY_KEY not in meta:
+        return None
+    try:
+        study = json.loads(meta[STUDY_KEY])
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: its study fingerprint is not JSON ({exc})") from None
+    return study if isinstance(study, dict) else None
 
 
 def read_trials(path: str | Path, space: ParameterSpace) -> list[TrialResult]:

@@ -1,0 +1,108 @@
+"""What defines a study: its fingerprint, stored with its trials table, which a resume must
+match.
+
+A study's proposals and scores depend on the adapter and its options, the parameter space,
+the seed, L (``length_m``), the penalty, the jump limit, the time limit (a trial past it
+fails), TPE's start-up count, how far the proposals lag the results (``told_lag``, from the
+workers) and the sequences' content. Resuming with any of them changed would silently mix two
+studies, so ``check_fingerprint`` refuses it in one line naming every difference. What may
+change on a resume: ``iterations`` (a study can be extended), ``retries``, ``dask``.
+
+Sequences are identified by the SHA-256 of their file; ``sequence_digest`` skips the hashing
+when size and modification time equal the stored ones (a resume of an untouched sequence).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from pipeline.errors import ConfigError
+
+VERSION = 1
+"""Format of the fingerprint (a change of it refuses every older study)."""
+
+COMPARED = ("adapter", "adapter_options", "space", "seed", "length_m", "penalty_pct",
+            "jump_limit_m", "time_limit_s", "startup_trials", "told_lag", "sequences")
+"""Keys that define a study, in the order differences are named."""
+
+
+def study_fingerprint(*, adapter: str, adapter_options: Mapping[str, Any],
+                      space: list[dict[str, Any]], seed: int, length_m: float,
+                      penalty_pct: float, jump_limit_m: float, time_limit_s: float | None,
+                      startup_trials: int, told_lag: int,
+                      sequences: list[tuple[str, str]],
+                      stored: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The fingerprint (plain JSON data) of a study over ``sequences`` ((name, MCAP path)).
+
+    ``stored``: the fingerprint found with the table, whose digests are reused for files whose
+    size and modification time did not change.
+    """
+    known = {s["name"]: s for s in (stored or {}).get("sequences", []) if isinstance(s, dict)}
+    return {
+        "version": VERSION,
+        "adapter": adapter,
+        "adapter_options": json.loads(json.dumps(dict(adapter_options), sort_keys=True,
+                                                  default=str)),
+        "space": space,
+        "seed": int(seed),
+        "length_m": float(length_m),
+        "penalty_pct": float(penalty_pct),
+        "jump_limit_m": float(jump_limit_m),
+        "time_limit_s": None if time_limit_s is None else float(time_limit_s),
+        "startup_trials": int(startup_trials),
+        "told_lag": int(told_lag),
+        "sequences": [sequence_digest(name, path, known.get(name)) for name, path in sequences],
+    }
+
+
+def sequence_digest(name: str, path: str | Path, known: Mapping[str, Any] | None = None
+                    ) -> dict[str, Any]:
+    """{"name", "sha256", "size", "mtime_ns"} of a sequence file; the digest is taken from
+    ``known`` when its size and modification time are those of the file now."""
+    st = os.stat(path)
+    if known and known.get("size") == st.st_size and known.get("mtime_ns") == st.st_mtime_ns:
+        digest = str(known.get("sha256"))
+    else:
+        with open(path, "rb") as fh:
+            digest = hashlib.file_digest(fh, "sha256").hexdigest()
+    return {"name": name, "sha256": digest, "size": st.st_size, "mtime_ns": st.st_mtime_ns}
+
+
+def check_fingerprint(stored: Mapping[str, Any] | None, current: Mapping[str, Any],
+                      where: str) -> None:
+    """ConfigError unless ``stored`` (found with the table at ``where``) defines the same
+    study as ``current``; the message names every difference."""
+    if stored is None or stored.get("version") != VERSION:
+        raise ConfigError(f"{where}: holds trials without a study fingerprint of this adaptune "
+                          "version; delete it (or use another --out) to start over")
+    diffs = [_describe(key, current.get(key), stored.get(key)) for key in COMPARED
+             if _comparable(key, current.get(key)) != _comparable(key, stored.get(key))]
+    if diffs:
+        raise ConfigError(f"{where}: holds a study with other settings ({'; '.join(diffs)}); "
+                          "resume with the same ones, or delete it (or use another --out) to "
+                          "start over")
+
+
+def _comparable(key: str, value: Any) -> Any:
+    """The part of a value that defines the study (sequences: names and digests only)."""
+    if key == "sequences" and isinstance(value, list):
+        return [(s.get("name"), s.get("sha256")) for s in value if isinstance(s, dict)]
+    return json.dumps(value, sort_keys=True)
+
+
+def _describe(key: str, now: Any, stored: Any) -> str:
+    if key == "sequences":
+        a, b = dict(_comparable(key, now)), dict(_comparable(key, stored))
+        if set(a) != set(b):
+            return f"sequences {sorted(a)}, stored {sorted(b)}"
+        changed = sorted(n for n in a if a[n] != b[n])
+        return f"content of sequence {changed[0]} changed (sha256 {a[changed[0]][:12]}, " \
+               f"stored {b[changed[0]][:12]})"
+    if key == "space":
+        return "parameter space differs"
+    return f"{key} {json.dumps(now)}, stored {json.dumps(stored)}"
