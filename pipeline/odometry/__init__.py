@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import OdometryError, TrialTimeout
+from pipeline.errors import ConfigError, OdometryError, TrialTimeout
 from pipeline.io_utils import prefetch
 from pipeline.odometry.base import Adapter, Schedule
 from pipeline.odometry.registry import adapter_names, get_adapter
@@ -38,6 +38,8 @@ def run_sequence(adapter: Adapter, sequence_path: str | Path,
     Raises ConfigError / InputError for bad parameters or input, OdometryError for a failed run.
     """
     path = Path(sequence_path)
+    if time_limit_s is not None and not time_limit_s > 0:  # NaN too
+        raise ConfigError(f"time limit must be a number of seconds > 0, got {time_limit_s}")
     with SequenceReader(path) as reader:
         schedule = make_schedule(adapter, params_or_schedule, len(reader), str(path))
         if getattr(adapter, "accepts_time_limit", False):

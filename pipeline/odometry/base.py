@@ -14,7 +14,9 @@ and without it.
 
 from __future__ import annotations
 
+import json
 import math
+import numbers
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,9 +54,13 @@ class ParamSpec:
         if self.log and self.low <= 0:
             raise ConfigError(f"{self.name}: log scale needs low > 0, got low={self.low}")
 
-    def check(self, value: float) -> float:
-        """``value`` as a float if it is finite, in range (and integral for ints);
-        else ConfigError."""
+    def check(self, value: object) -> float:
+        """``value`` as a float if it is a finite number in range (and integral for ints);
+        else ConfigError. Strings, lists, null and booleans (``true`` is not 1.0) are refused."""
+        if not isinstance(value, numbers.Real) or isinstance(value, bool | np.bool_):
+            shown = json.dumps(value) if isinstance(value, str | bool | None) else repr(value)
+            raise ConfigError(f"{self.name} must be a number, got {shown} "
+                              f"({type(value).__name__})")
         v = float(value)
         if not math.isfinite(v) or not self.low <= v <= self.high:
             raise ConfigError(f"{self.name} must be in [{self.low}, {self.high}], got {value}")
@@ -188,6 +194,16 @@ class Schedule:
         except (FileNotFoundError, pa.ArrowInvalid, OSError) as exc:
             raise InputError(f"{path}: not a readable schedule ({exc})") from exc
         check_schema_version(table.schema, str(path))
+        missing = [c for c in ("frame", "stamp_ns") if c not in table.column_names]
+        if missing:
+            raise InputError(f"{path}: a schedule needs the columns frame and stamp_ns, "
+                             f"{' and '.join(missing)} missing")
+        types = {f.name: f.type for f in table.schema}
+        for name, kind in types.items():
+            if not (pa.types.is_integer(kind) or pa.types.is_floating(kind)):
+                raise InputError(f"{path}: schedule column {name} must be numeric, got {kind}")
+            if table.column(name).null_count:
+                raise InputError(f"{path}: schedule column {name} has missing values")
         names = [c for c in table.column_names if c not in ("frame", "stamp_ns")]
         return cls(table.column("frame").to_numpy().astype(np.int32),
                    {n: table.column(n).to_numpy().astype(np.float64) for n in names},

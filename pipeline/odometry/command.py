@@ -242,8 +242,13 @@ def read_poses(path: Path, fmt: str, stamps_ns: np.ndarray, tolerance_s: float) 
     """(N, 4, 4) T_world_lidar for the N frames at ``stamps_ns`` from a KITTI or TUM file."""
     if not path.is_file():
         raise OdometryError(f"command: wrote no trajectory ({path.name} missing)")
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise OdometryError(f"command: {path.name} is not UTF-8 text (byte "
+                            f"0x{exc.object[exc.start]:02x} at offset {exc.start})") from None
     rows = []
-    for k, line in enumerate(path.read_text().splitlines(), 1):
+    for k, line in enumerate(text.splitlines(), 1):
         line = line.strip()
         if not line or line.startswith("#"):
             continue

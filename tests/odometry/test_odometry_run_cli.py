@@ -55,6 +55,17 @@ def test_run_with_schedule_file(synthetic_seq: Seq, tmp_path: Path) -> None:
     (["-a", "ndt", "-o", "neighbors=3"], "neighbors must be 1 or 7"),
     (["-a", "ndt", "-o", "novalue"], "--option must be key=value"),
     (["-a", "gicp", "--params", "@/nonexistent/p.json"], "cannot read parameters"),
+    # values that are not numbers (issue 13, items 7 and 8)
+    (["-a", "ndt", "--params", '{"resolution": "abc"}'],
+     'resolution must be a number, got "abc" (str)'),
+    (["-a", "ndt", "--params", '{"resolution": "4.0"}'],
+     'resolution must be a number, got "4.0" (str)'),
+    (["-a", "ndt", "--params", '{"resolution": [4]}'], "resolution must be a number, got [4]"),
+    (["-a", "ndt", "--params", '{"resolution": null}'],
+     "resolution must be a number, got null (NoneType)"),
+    (["-a", "ndt", "--params", '{"resolution": true}'],
+     "resolution must be a number, got true (bool)"),
+    (["-a", "ndt", "--time-limit", "nan"], "time limit must be a number of seconds > 0, got nan"),
 ])
 def test_bad_input_fails_with_one_line(args: list[str], message: str, synthetic_seq: Seq,
                                        tmp_path: Path) -> None:
@@ -76,3 +87,34 @@ def test_missing_sequence_and_short_schedule(tmp_path: Path, synthetic_seq: Seq)
                                     str(synthetic_seq.path), "--out", str(out)])
     assert res.exit_code == 1 and "covers 3 frames, the sequence has 20" in res.output
     assert not out.exists()
+
+
+@pytest.mark.parametrize("dropped", ["frame", "stamp_ns"])
+def test_a_schedule_without_frame_or_stamp_fails_with_one_line(
+        dropped: str, synthetic_seq: Seq, tmp_path: Path) -> None:
+    import pyarrow.parquet as pq
+
+    path = tmp_path / "s.parquet"
+    Schedule.constant(get_adapter("ndt").space.defaults(), len(synthetic_seq)).write(path)
+    table = pq.read_table(path)
+    pq.write_table(table.drop_columns([dropped]), path)  # the schema version stays
+    out = tmp_path / "t.parquet"
+    res = CliRunner().invoke(main, ["run", "-a", "ndt", "--schedule", str(path),
+                                    str(synthetic_seq.path), "--out", str(out)])
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    assert res.output.strip() == (f"adaptune: error: {path}: a schedule needs the columns frame "
+                                  f"and stamp_ns, {dropped} missing")
+    assert not out.exists()
+
+
+def test_a_command_writing_a_non_utf8_trajectory_fails_with_one_line(
+        synthetic_seq: Seq, tmp_path: Path) -> None:
+    write = "import sys; open(sys.argv[1], 'wb').write(bytes([0xff, 0xfe, 0x31, 0x0a]))"
+    space = [{"name": "k", "low": 0.0, "high": 1.0, "default": 0.5}]
+    out = tmp_path / "t.parquet"
+    res = CliRunner().invoke(main, [
+        "run", "-a", "command", "-o", f"command={json.dumps(['{python}', '-c', write, '{out}'])}",
+        "-o", f"space={json.dumps(space)}", str(synthetic_seq.path), "--out", str(out)])
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    assert res.output.strip() == ("adaptune: error: command: trajectory.txt is not UTF-8 text "
+                                  "(byte 0xff at offset 0)")
