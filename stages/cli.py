@@ -110,6 +110,8 @@ def main(verbose: int) -> None:
     logging.basicConfig(
         level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr
     )
+    # progress lines of long stages (when stderr is no terminal) show at any verbosity
+    logging.getLogger("pipeline.progress").setLevel(logging.INFO)
 
 
 if __name__ == "__main__":

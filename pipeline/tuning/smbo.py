@@ -25,7 +25,6 @@ import logging
 import math
 import multiprocessing
 import os
-import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -39,8 +38,9 @@ from pipeline.config import Section
 from pipeline.errors import ConfigError, InfrastructureError, InputError
 from pipeline.io_utils import exclusive_folder
 from pipeline.odometry.base import Adapter, Params
-from pipeline.tuning.job import TrialJob, TrialResult, one_line, resolve_adapter
 from pipeline.tuning.fingerprint import check_fingerprint, study_fingerprint
+from pipeline.tuning.job import TrialJob, TrialResult, one_line, resolve_adapter
+from pipeline.tuning.progress import StudyProgress
 from pipeline.tuning.table import JOINT, read_study, read_trials, trials_path, write_trials
 from pipeline.tuning.tpe import TpeSearch, trial_seed
 from pipeline.tuning.worker import run_trial
@@ -133,6 +133,7 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
     summaries = []
     with exclusive_folder(out_dir, "another adaptune trials"), \
             TrialExecutor(settings, executor) as pool:
+        check_shared(pool.executor, [p for s in studies for _, p in s.sequences], out_dir)
         for study in studies:
             summaries.append(run_study(study, adapter, pool, Path(out_dir), settings, seed,
                                        progress, on_trial))
@@ -195,9 +196,8 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
     lag = told_lag(settings.workers)
     search = TpeSearch(space, seed, settings.startup_trials)
     attempts: dict[int, int] = {}
-    with _progress_bar(settings.iterations, len(done), f"{adapter.name} {study.name}",
-                       progress) as bar:
-        _show_best(bar, done)
+    with StudyProgress(f"trials {adapter.name} {study.name}", settings.iterations, len(done),
+                       progress) as shown:
         in_flight: dict[Future[TrialResult], TrialJob] = {}
         while todo or in_flight:
             while (todo and not lost and len(in_flight) < settings.workers
@@ -225,7 +225,9 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
                     done[job.trial] = result
                 write_trials(table, space, [*done.values(), *lost.values()], fingerprint)
                 ran += 1
-                _report(bar, done, result)
+                shown.update({**done, **lost})
+                if result.status == "failed":
+                    log.debug("trial %d failed: %s", result.trial, result.error)
                 if on_trial is not None:
                     on_trial(study, result)
     summary = summarize(adapter.name, study.name, done, ran, table)
@@ -328,10 +330,10 @@ class TrialExecutor:
 def open_executor(workers: int, dask: str | None = None) -> Iterator[Executor]:
     """A concurrent.futures Executor with ``workers`` processes, shut down on exit.
 
-    ``dask=None``: ProcessPoolExecutor (spawn context). ``"local"``: a Dask LocalCluster
-    (``workers`` processes, one thread each, non-daemonic so that trials can run in child
-    processes). An address: a client of that scheduler (its workers must be non-daemonic:
-    DASK_DISTRIBUTED__WORKER__DAEMON=False).
+    ``dask=None``: ProcessPoolExecutor (spawn context; its workers end with this process).
+    ``"local"``: a Dask LocalCluster (``workers`` processes, one thread each). An address: a
+    client of that scheduler, whose workers may be started the plain way (``dask worker
+    tcp://...``): trial servers are started with subprocess, which daemonic processes may do.
     """
     if dask is None:
         from pipeline.lifetime import become_pool_worker
@@ -349,18 +351,18 @@ def open_executor(workers: int, dask: str | None = None) -> Iterator[Executor]:
             pool.shutdown(wait=True, cancel_futures=True)
         return
     with _dask_client(workers, dask) as client:
-        yield client.get_executor()
+        # pure=False: a trial run again (lost) is a new task, never the stored result
+        yield client.get_executor(pure=False)
 
 
 @contextlib.contextmanager
 def _dask_client(workers: int, address: str) -> Iterator[Any]:
-    import dask
+    """A client of a new LocalCluster (``"local"``) or of the scheduler at ``address``."""
     from distributed import Client, LocalCluster
 
     if address == "local":
-        with dask.config.set({"distributed.worker.daemon": False}):
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
         client = Client(cluster)
         try:
             yield client
@@ -370,48 +372,36 @@ def _dask_client(workers: int, address: str) -> Iterator[Any]:
         return
     try:
         client = Client(address, timeout="10s")
-    except OSError as exc:
+    except (OSError, TimeoutError) as exc:
         raise ConfigError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
     try:
-        daemonic = [w for w, d in client.run(_is_daemon).items() if d]
-        if daemonic:
-            raise ConfigError(f"Dask worker {daemonic[0]} is daemonic and cannot run trials in "
-                              "child processes; start workers with "
-                              "DASK_DISTRIBUTED__WORKER__DAEMON=False")
         yield client
     finally:
         client.close()
 
 
-def _is_daemon() -> bool:
-    return bool(multiprocessing.current_process().daemon)
+def check_shared(executor: Executor, paths: Sequence[str | Path], out_dir: str | Path) -> None:
+    """ConfigError unless every worker of a Dask cluster reads ``paths`` and writes ``out_dir``
+    at the same paths (workers on other machines need a shared filesystem)."""
+    client = getattr(executor, "_client", None)
+    if client is None:
+        return
+    wanted = [str(Path(p).resolve()) for p in paths]
+    answers = client.run(_sees, wanted, str(Path(out_dir).resolve()))
+    for worker, missing in sorted(answers.items()):
+        if missing:
+            raise ConfigError(f"Dask worker {worker} cannot reach {missing}: workers must see "
+                              "the sequences and the output folder at the same paths (a "
+                              "shared filesystem)")
 
 
-# -- progress ------------------------------------------------------------------------------
-
-@contextlib.contextmanager
-def _progress_bar(total: int, initial: int, desc: str, enabled: bool) -> Iterator[Any]:
-    from tqdm import tqdm
-
-    bar = tqdm(total=total, initial=initial, desc=desc, unit="trial", file=sys.stderr,
-               disable=None if enabled else True, dynamic_ncols=True)
-    try:
-        yield bar
-    finally:
-        bar.close()
-
-
-def _show_best(bar: Any, done: dict[int, TrialResult]) -> None:
-    ok = [r.objective for r in done.values() if r.status == "ok"]
-    failed = sum(r.status != "ok" for r in done.values())
-    bar.set_postfix(best=f"{min(ok):.4g}%" if ok else "-", failed=failed, refresh=False)
-
-
-def _report(bar: Any, done: dict[int, TrialResult], result: TrialResult) -> None:
-    _show_best(bar, done)
-    bar.update(1)
-    if result.status != "ok":
-        log.debug("trial %d failed: %s", result.trial, result.error)
+def _sees(paths: list[str], out_dir: str) -> str:
+    """On a worker: the first of ``paths`` it cannot read or ``out_dir`` if it cannot write
+    there; "" when all is well."""
+    for p in paths:
+        if not os.access(p, os.R_OK):
+            return p
+    return "" if os.access(out_dir, os.W_OK) else out_dir
 
 
 def _result_of(fut: Future[TrialResult], job: TrialJob) -> TrialResult:
