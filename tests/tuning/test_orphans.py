@@ -68,9 +68,16 @@ def wait_for(predicate: object, timeout_s: float, what: str) -> None:
         time.sleep(0.05)
 
 
-def running_tool(record_dir: Path, timeout_s: float = 60.0) -> dict[str, object]:
-    """The record of the running tool (waits for it)."""
-    wait_for(lambda: any(record_dir.glob("*.json")), timeout_s, "the tool to start")
+def running_tool(record_dir: Path, main: subprocess.Popen[bytes] | None = None,
+                 timeout_s: float = 60.0) -> dict[str, object]:
+    """The record of the running tool (waits for it; fails at once if ``main`` ended)."""
+
+    def started() -> bool:
+        if main is not None and main.poll() is not None:
+            raise AssertionError(f"adaptune ended first: {main.stderr.read()!r}")  # type: ignore[union-attr]
+        return any(record_dir.glob("*.json"))
+
+    wait_for(started, timeout_s, "the tool to start")
     (record,) = record_dir.glob("*.json")
     return json.loads(record.read_text())  # type: ignore[no-any-return]
 
@@ -105,13 +112,13 @@ def test_killing_adaptune_trials_ends_every_process_it_started(
     """Pool worker, resource tracker, trial server, guard, tool and the tool's child."""
     record_dir, work_root = dirs
     params = tmp_path / "params.yaml"
-    params.write_text(json.dumps({"base": {"seed": 1}, "trials": {
-        "algorithm": "command", "iterations": 2, "workers": 1, "length_m": 5.0,
-        "time_limit_s": 120.0, "adapter_options": command_options(record_dir, work_root)}}))
+    params.write_text(json.dumps({"base": {"seed": 1, "length_m": 5.0}, "trials": {
+        "algorithm": "command", "iterations": 2, "workers": 1, "time_limit_s": 120.0,
+        "adapter_options": command_options(record_dir, work_root)}}))
     main = cli("trials", str(sequences[0]), "--out", str(tmp_path / "out"), "--params",
                str(params))
     try:
-        tool = running_tool(record_dir)
+        tool = running_tool(record_dir, main)
         below = descendants(main.pid)
         assert {tool["pid"], tool["child"]} <= below and len(below) >= 5
         os.kill(main.pid, sig)
@@ -132,7 +139,7 @@ def test_killing_adaptune_run_ends_the_tool_and_removes_its_work_directory(
                "-o", f"space={json.dumps(SPACE)}", "-o", f"workdir={work_root}",
                str(sequences[0]), "--out", str(tmp_path / "t.parquet"))
     try:
-        tool = running_tool(record_dir)
+        tool = running_tool(record_dir, main)
         below = descendants(main.pid)
         assert {tool["pid"], tool["child"]} <= below
         os.kill(main.pid, sig)
