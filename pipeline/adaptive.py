@@ -67,6 +67,7 @@ def run_one(model: Any, sequence_path: Path, out_dir: Path,
             time_limit_s: float | None = None) -> AdaptiveRun:
     """One sequence: schedule, run, write (module docstring)."""
     from pipeline.odometry import get_adapter, run_sequence
+    from pipeline.odometry.base import ParameterSpace, with_space
     from pipeline.runtime import Selector
     from pipeline.sequence import SequenceReader
     from pipeline.trajectory import write_trajectory
@@ -77,7 +78,8 @@ def run_one(model: Any, sequence_path: Path, out_dir: Path,
         schedule = selector.schedule(reader)
         frames = len(reader)
     select_s = time.perf_counter() - t0
-    adapter = get_adapter(model.algorithm, **dict(adapter_options or {}))
+    adapter = with_space(get_adapter(model.algorithm, **dict(adapter_options or {})),
+                         ParameterSpace.from_json(model.space))  # the space it was trained on
     t0 = time.perf_counter()
     traj = run_sequence(adapter, sequence_path, schedule, time_limit_s=time_limit_s)
     odometry_s = time.perf_counter() - t0

@@ -342,11 +342,12 @@ def run_live(
     This is the one place of the runtime that needs the full pipeline (odometry adapters, the
     MCAP writer): imported lazily, so ``import pipeline.runtime`` stays light.
     """
+    from pipeline.odometry.base import ParameterSpace, with_space
     from pipeline.odometry.registry import get_adapter
     from pipeline.sequence import SequenceReader, SequenceWriter
 
     selector = selector or Selector(model)
-    adapter = get_adapter(model.algorithm)
+    adapter = with_space(get_adapter(model.algorithm), ParameterSpace.from_json(model.space))
     schema = params_json_schema(model)
     odom = None
     selections = changes = 0

@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export": ("stages.export:export", "Export a trajectory as KITTI or TUM text."),
     "run": ("stages.run:run", "Run an odometry algorithm once (fixed params or a schedule)."),
     "trials": ("stages.trials:trials", "SMBO (hyperopt TPE) trials of an odometry algorithm."),
+    "params": ("stages.params:params", "The parameters an algorithm tunes: ranges, defaults."),
     "rte": ("stages.rte:rte", "Score trials into the DuckDB results database."),
     "descriptors": ("stages.descriptors:descriptors", "Environment descriptors of every frame."),
     "surrogate": (

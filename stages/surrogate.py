@@ -16,6 +16,9 @@ from stages.common import algorithm_option, dir_option, file_option, params_opti
 @file_option("--db", "db_path", help="results/adaptune.duckdb (surrogate_rows view).")
 @dir_option("--pca", "pca_dir", help="The PCA folder written by `adaptune descriptors`.")
 @dir_option("--out", help="The artifact folder (model/).")
+@dir_option("--trials", "trials_dir", required=False,
+            help="The trials output (results/trials), whose stored parameter space the model "
+                 "uses [default: the adapter's built-in ranges].")
 @algorithm_option("Algorithm of the rows (default: the only one).")
 @file_option("--metrics", "metrics_path", required=False, help="Write the CV error here (JSON).")
 def surrogate(
@@ -23,6 +26,7 @@ def surrogate(
     db_path: Path,
     pca_dir: Path,
     out: Path,
+    trials_dir: Path | None,
     algorithm: str | None,
     metrics_path: Path | None,
 ) -> None:
@@ -31,11 +35,15 @@ def surrogate(
     from pipeline.io_utils import atomic_write_text
     from pipeline.odometry.registry import get_adapter
     from pipeline.surrogates.fit import ModelInputs, SurrogateSection, build_model
+    from pipeline.tuning.table import read_space
 
     section = load_section(params_path, "surrogate", SurrogateSection)
     descriptors = load_section(params_path, "descriptors", DescriptorsSection)
-    manifest = build_model(ModelInputs(db_path, pca_dir), out, section, descriptors,
-                           lambda name: get_adapter(name).space, algorithm)
+    # the space the studies searched, stored with the trials (else the adapter's built-in one)
+    space_of = ((lambda name: read_space(trials_dir, name)) if trials_dir is not None
+                else (lambda name: get_adapter(name).space))
+    manifest = build_model(ModelInputs(db_path, pca_dir), out, section, descriptors, space_of,
+                           algorithm)
     algo, cv, training = manifest["algorithm"], manifest["cross_validation"], manifest["training"]
     if metrics_path is not None:
         atomic_write_text(metrics_path, json.dumps({"algorithm": algo, **cv}, indent=2))

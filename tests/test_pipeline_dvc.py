@@ -189,6 +189,9 @@ def test_pipeline_runs_on_a_kitti_root(kitti_root: Path,
     p["simulate"].update(train={"cave": 1}, train_frames=10, validation_count=0)
     p["ingest"].update(kitti_root=str(kitti_root), train=["01", "06"], validation=["04"])
     p["descriptors"]["range_bins"] = 10  # the default width here
+    # searched ranges from params.yaml, wider than ndt's built-in [1, 10] m: every later stage
+    # must take them from the trials output (the baseline runs at 11 m)
+    p["trials"]["space"] = {"resolution": {"high": 12.0, "default": 11.0}}
     root, log = reproduce(tmp_path_factory.mktemp("kitti"), p)
     assert "Running stage 'ingest'" in log
     for seq in ("01", "06", "04"):
@@ -196,6 +199,10 @@ def test_pipeline_runs_on_a_kitti_root(kitti_root: Path,
             assert len(reader) == 10 and reader.info.sensor != "unknown"
     metrics = json.loads((root / "metrics/evaluation.json").read_text())
     assert list(metrics["sequences"]) == ["04"]
+    assert metrics["params"]["baseline"]["resolution"] == 11.0
+    model = json.loads((root / "model/manifest.json").read_text())
+    (resolution,) = [s for s in model["parameter_space"] if s["name"] == "resolution"]
+    assert (resolution["high"], resolution["default"]) == (12.0, 11.0)
     assert all(0 < v < 50 for v in metrics["rte_pct"].values())
     lock = yaml.safe_load((root / "dvc.lock").read_text())["stages"]
     assert any(d["path"] == "data/kitti" for d in lock["trials"]["deps"])

@@ -69,6 +69,33 @@ class ParamSpec:
         return v
 
 
+def _changed(spec: ParamSpec, new: Mapping[str, object], what: str) -> ParamSpec:
+    """``spec`` with the fields of ``new`` replaced, checked (ConfigError naming ``what``)."""
+    from dataclasses import replace
+
+    for key in ("low", "high", "default"):
+        value = new.get(key, getattr(spec, key))
+        if not isinstance(value, numbers.Real) or isinstance(value, bool) \
+                or not math.isfinite(float(value)):
+            raise ConfigError(f"{what}.{key} must be a finite number, got {value!r}")
+    log = new.get("log", spec.log)
+    if not isinstance(log, bool):
+        raise ConfigError(f"{what}.log must be true or false, got {log!r}")
+    low, high = float(new.get("low", spec.low)), float(new.get("high", spec.high))  # type: ignore[arg-type]
+    default = float(new.get("default", spec.default))  # type: ignore[arg-type]
+    if not low < high:
+        raise ConfigError(f"{what}: high must be > low, got (low={low:g}, high={high:g})")
+    if spec.kind == "int" and not all(v == round(v) for v in (low, high, default)):
+        raise ConfigError(f"{what}: an integer parameter needs integral low, high and default, "
+                          f"got (low={low:g}, high={high:g}, default={default:g})")
+    if not low <= default <= high:
+        raise ConfigError(f"{what}: default must be in [low, high], got (low={low:g}, "
+                          f"high={high:g}, default={default:g})")
+    if log and low <= 0:
+        raise ConfigError(f"{what}: log scale needs low > 0, got low={low:g}")
+    return replace(spec, low=low, high=high, default=default, log=log)
+
+
 @dataclass(frozen=True)
 class ParameterSpace:
     """The ordered parameters of an adapter."""
@@ -119,6 +146,39 @@ class ParameterSpace:
         """Plain description (for manifests and reports)."""
         return [dict(name=s.name, low=s.low, high=s.high, default=s.default, kind=s.kind,
                      log=s.log, unit=s.unit) for s in self.specs]
+
+    @classmethod
+    def from_json(cls, items: Iterable[Mapping[str, object]], what: str = "space"
+                  ) -> ParameterSpace:
+        """The inverse of ``to_json``; ConfigError naming ``what`` when an item is malformed."""
+        specs = []
+        for i, item in enumerate(items):
+            try:
+                specs.append(ParamSpec(**item))  # type: ignore[arg-type]
+            except TypeError as exc:
+                raise ConfigError(f"{what}: parameter {i} is malformed ({exc})") from None
+        return cls(tuple(specs))
+
+    def override(self, changes: Mapping[str, Mapping[str, object]],
+                 what: str = "trials.space") -> ParameterSpace:
+        """This space with some ranges changed: ``changes`` maps a parameter name to any of
+        ``low``, ``high``, ``default``, ``log`` (the rest is kept). ConfigError, naming
+        ``what``, the parameter and the rule, for an unknown name or a range that breaks a
+        rule (low < high, low <= default <= high, log needs low > 0, integral bounds and
+        default for ints)."""
+        unknown = sorted(set(changes) - set(self.names))
+        if unknown:
+            raise ConfigError(f"{what}: unknown parameter {unknown[0]!r} (known: "
+                              f"{', '.join(self.names)})")
+        specs = []
+        for spec in self.specs:
+            new = {k: v for k, v in (changes.get(spec.name) or {}).items() if v is not None}
+            bad = sorted(set(new) - {"low", "high", "default", "log"})
+            if bad:
+                raise ConfigError(f"{what}.{spec.name}: {bad[0]!r} cannot be set (low, high, "
+                                  "default, log)")
+            specs.append(_changed(spec, new, f"{what}.{spec.name}"))
+        return ParameterSpace(tuple(specs))
 
 
 @dataclass
@@ -234,6 +294,17 @@ class Adapter(Protocol):
     def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
         """Run over ``scans`` (frames 0..N-1) with parameters per frame; a Trajectory of N poses."""
         ...
+
+
+def with_space(adapter: Adapter, space: ParameterSpace) -> Adapter:
+    """``adapter`` searching and accepting ``space`` instead of its built-in ranges (the one a
+    study used, ``trials.space``): same names, order and kinds; ConfigError otherwise."""
+    built_in = adapter.space
+    if [(s.name, s.kind) for s in space.specs] != [(s.name, s.kind) for s in built_in.specs]:
+        raise ConfigError(f"{adapter.name}: the parameter space {space.names} does not match "
+                          f"the adapter's {built_in.names}")
+    adapter.space = space
+    return adapter
 
 
 def run_streaming(

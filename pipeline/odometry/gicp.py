@@ -54,9 +54,11 @@ class GicpOptions(Section):
 class GicpOdometry:
     """Streaming keyframe GICP: ``step`` one scan at a time, ``set_params`` between scans."""
 
-    def __init__(self, params: Params, options: GicpOptions | None = None) -> None:
+    def __init__(self, params: Params, options: GicpOptions | None = None,
+                 space: ParameterSpace = SPACE) -> None:
         self.options = options or GicpOptions()
-        self.params = SPACE.validate(params)
+        self.space = space
+        self.params = self.space.validate(params)
         self.poses: list[F64] = []
         self.travelled_m = 0.0
         self.keyframe_raw: F64 | None = None  # (M, 3) keyframe points in its own frame
@@ -65,7 +67,7 @@ class GicpOdometry:
 
     def set_params(self, params: Params) -> None:
         """In place; a new downsampling resolution rebuilds the keyframe cloud from raw points."""
-        new = SPACE.validate(params)
+        new = self.space.validate(params)
         redo = new["downsampling_resolution"] != self.params["downsampling_resolution"]
         self.params = new
         if redo and self.keyframe_raw is not None:
@@ -122,7 +124,7 @@ class GicpAdapter:
 
     def start(self, params: Params) -> GicpOdometry:
         """A streaming odometry with ``params`` (validated; missing ones take defaults)."""
-        return GicpOdometry(params, self.options)
+        return GicpOdometry(params, self.options, self.space)
 
     def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
         """Run over ``scans`` with the per-frame ``schedule``."""

@@ -82,11 +82,13 @@ def kiss_config(params: Params, options: KissOptions) -> Any:
 class KissOdometry:
     """Streaming KISS-ICP: ``step`` one scan at a time, ``set_params`` between scans."""
 
-    def __init__(self, params: Params, options: KissOptions | None = None) -> None:
+    def __init__(self, params: Params, options: KissOptions | None = None,
+                 space: ParameterSpace = SPACE) -> None:
         from kiss_icp.kiss_icp import KissICP
 
         self.options = options or KissOptions()
-        self.params = SPACE.validate(params)
+        self.space = space
+        self.params = self.space.validate(params)
         self.kiss = KissICP(kiss_config(self.params, self.options))
         self.deviations: list[F64] = []  # model deviation of every frame, for the handover
 
@@ -94,7 +96,7 @@ class KissOdometry:
         """Rebuild KissICP with the new parameters; pose, motion, map and threshold handed over."""
         from kiss_icp.kiss_icp import KissICP
 
-        new = SPACE.validate(params)
+        new = self.space.validate(params)
         if new == self.params:
             return
         old = self.kiss
@@ -129,7 +131,7 @@ class KissIcpAdapter:
 
     def start(self, params: Params) -> KissOdometry:
         """A streaming odometry with ``params`` (validated; missing ones take defaults)."""
-        return KissOdometry(params, self.options)
+        return KissOdometry(params, self.options, self.space)
 
     def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
         """Run over ``scans`` with the per-frame ``schedule``."""

@@ -213,10 +213,11 @@ class NdtOdometry:
     """Streaming keyframe NDT: ``step`` one scan at a time, ``set_params`` between scans."""
 
     def __init__(self, params: Params, options: NdtOptions | None = None,
-                 sources: DownsampleCache | None = None) -> None:
+                 sources: DownsampleCache | None = None, space: ParameterSpace = SPACE) -> None:
         self.options = options or NdtOptions()
+        self.space = space
         self.sources = sources if sources is not None else DownsampleCache()
-        self.params = SPACE.validate(params)
+        self.params = self.space.validate(params)
         self.poses: list[F64] = []
         self.keyframe_world: F64 | None = None
         self.voxels: VoxelMap | None = None
@@ -229,7 +230,7 @@ class NdtOdometry:
 
     def set_params(self, params: Params) -> None:
         """In place: a new resolution rebuilds the keyframe's voxel map; the rest is kept."""
-        new = SPACE.validate(params)
+        new = self.space.validate(params)
         rebuild = new["resolution"] != self.params["resolution"]
         self.params = new
         if rebuild:
@@ -308,7 +309,7 @@ class NdtAdapter:
 
     def start(self, params: Params) -> NdtOdometry:
         """A streaming odometry with ``params`` (validated; missing ones take defaults)."""
-        return NdtOdometry(params, self.options, self.sources)
+        return NdtOdometry(params, self.options, self.sources, self.space)
 
     def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
         """Run over ``scans`` with the per-frame ``schedule``."""
@@ -320,7 +321,7 @@ class NdtAdapter:
         two-frame run loads the compiled kernel into this process."""
         self.sources.fill([scan.xyz for scan in scans], self.options.source_voxel_m)
         if len(scans) >= 2:
-            self.run(scans[:2], Schedule.constant(SPACE.defaults(), 2))
+            self.run(scans[:2], Schedule.constant(self.space.defaults(), 2))
 
 
 _: type[Adapter] = NdtAdapter

@@ -134,14 +134,23 @@ def best_fixed_params(trials_dir: Path,
 
 def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, float],
              adaptive_dir: Path, out_dir: Path, settings: EvaluateSection,
-             adapter_options: Mapping[str, object] | None = None) -> Evaluation:
+             adapter_options: Mapping[str, object] | None = None,
+             fixed_dir: Path | None = None) -> Evaluation:
     """Run baseline and fixed, load adaptive, score all three on every sequence.
+
+    ``fixed_dir``: the joint study's output, whose stored parameter space (its defaults: the
+    baseline) is used; None: the adapter's built-in space.
 
     The baseline and fixed trajectories go to ``out_dir/<sequence>/<setting>.parquet``.
     """
     from pipeline.odometry import get_adapter
+    from pipeline.odometry.base import with_space
+    from pipeline.tuning.table import read_space
 
+    # the space the studies searched (its defaults are the baseline), from the trials output
     adapter = get_adapter(algorithm, **dict(adapter_options or {}))
+    if fixed_dir is not None:
+        adapter = with_space(adapter, read_space(fixed_dir, algorithm))
     result = Evaluation(algorithm, settings.length_m, adapter.space.validate(fixed_params),
                         adapter.space.defaults())
     for path in sequences:

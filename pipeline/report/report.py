@@ -55,7 +55,7 @@ def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection,
     algorithm, fixed = best_fixed_params(paths.fixed)
     sequences = read_index(paths.sequences).paths(settings.split)
     ev = evaluate(sequences, algorithm, fixed, paths.adaptive, paths.runs, settings,
-                  adapter_options)
+                  adapter_options, paths.fixed)
     result = metrics(ev, trials_summary({"trials": paths.trials, "fixed": paths.fixed}))
     atomic_write_text(paths.metrics, json.dumps(json_safe(result), indent=2) + "\n")
     write_plot_data(ev, paths.plots)

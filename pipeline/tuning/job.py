@@ -41,6 +41,7 @@ class TrialJob:
     """Everything a worker needs for one trial (plain data, picklable).
 
     adapter: a registry name (``ndt``) or ``module:factory`` (``(**options) -> Adapter``).
+    space: the parameter space the study searches (``trials.space`` applied), None = built-in.
     algorithm: the name used in output paths (the adapter's ``name``).
     sequences: ((sequence name, MCAP path), ...); more than one for a joint trial.
     """
@@ -57,6 +58,7 @@ class TrialJob:
     jump_limit_m: float
     time_limit_s: float | None = None
     adapter_options: dict[str, Any] = field(default_factory=dict)
+    space: list[dict[str, Any]] | None = None  # the study's space (ParameterSpace.to_json)
 
 
 @dataclass(frozen=True)
@@ -74,17 +76,25 @@ class TrialResult:
     odometry_s: float = 0.0
 
 
-def resolve_adapter(ref: str, options: Mapping[str, Any] | None = None) -> Adapter:
-    """The adapter named ``ref`` in the registry, or built by the factory ``module:attr``."""
+def resolve_adapter(ref: str, options: Mapping[str, Any] | None = None,
+                    space: list[dict[str, Any]] | None = None) -> Adapter:
+    """The adapter named ``ref`` in the registry, or built by the factory ``module:attr``, with
+    ``space`` (``ParameterSpace.to_json``) in place of its built-in one when given."""
     options = dict(options or {})
     if ":" in ref:
         import importlib
 
         module, attr = ref.split(":", 1)
-        return getattr(importlib.import_module(module), attr)(**options)  # type: ignore[no-any-return]
-    from pipeline.odometry.registry import get_adapter
+        adapter: Adapter = getattr(importlib.import_module(module), attr)(**options)
+    else:
+        from pipeline.odometry.registry import get_adapter
 
-    return get_adapter(ref, **options)
+        adapter = get_adapter(ref, **options)
+    if space is not None:
+        from pipeline.odometry.base import ParameterSpace, with_space
+
+        adapter = with_space(adapter, ParameterSpace.from_json(space))
+    return adapter
 
 
 def trajectory_path(out_dir: str | Path, algorithm: str, sequence: str, trial: int) -> Path:

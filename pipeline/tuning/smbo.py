@@ -37,7 +37,7 @@ from pydantic import Field, field_validator
 from pipeline.config import Section
 from pipeline.errors import ConfigError, InfrastructureError, InputError
 from pipeline.io_utils import exclusive_folder
-from pipeline.odometry.base import Adapter, Params
+from pipeline.odometry.base import Adapter, Params, with_space
 from pipeline.tuning.fingerprint import check_fingerprint, study_fingerprint
 from pipeline.tuning.job import TrialJob, TrialResult, one_line, resolve_adapter
 from pipeline.tuning.progress import StudyProgress
@@ -46,6 +46,15 @@ from pipeline.tuning.tpe import TpeSearch, trial_seed
 from pipeline.tuning.worker import run_trial
 
 log = logging.getLogger(__name__)
+
+
+class SpaceRange(Section):
+    """One parameter's search range in ``trials.space``; unset fields keep the adapter's."""
+
+    low: float | None = Field(None, strict=True, allow_inf_nan=False)
+    high: float | None = Field(None, strict=True, allow_inf_nan=False)
+    default: float | None = Field(None, strict=True, allow_inf_nan=False)
+    log: bool | None = Field(None, strict=True)
 
 
 class TrialsSection(Section):
@@ -58,6 +67,9 @@ class TrialsSection(Section):
     startup_trials: random proposals before TPE (hyperopt's n_startup_jobs).
     retries: times a lost trial (process killed from outside, executor broken) is run again
     before the run gives up on it (a resume runs it again).
+    space: search ranges that replace the adapter's built-in ones, by parameter name
+    (``{resolution: {low: 0.5, high: 8}}``; ``adaptune params ALGO`` lists them). The space a
+    study used is stored with its trials table, where the later stages read it.
     dask: null = process pool; "local" = a Dask LocalCluster of ``workers`` processes;
     "tcp://host:port" = an existing Dask scheduler.
     """
@@ -74,6 +86,7 @@ class TrialsSection(Section):
     retries: int = Field(2, ge=0)
     split: str = "train"
     adapter_options: dict[str, Any] = Field(default_factory=dict)
+    space: dict[str, SpaceRange] = Field(default_factory=dict)
 
     @field_validator("dask")
     @classmethod
@@ -125,7 +138,7 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
     ``on_trial(study, result)`` is called after each finished trial is saved.
     InfrastructureError when trials were lost beyond ``settings.retries`` (all others saved).
     """
-    adapter = resolve_adapter(settings.algorithm, settings.adapter_options)
+    adapter = study_adapter(settings)
     studies = make_studies(sequence_paths, joint)
     for study in studies:
         for _, path in study.sequences:
@@ -145,6 +158,15 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
             f"{s.sequence} trial {r.trial}: {r.error}; finished trials are saved, run again to "
             "resume")
     return summaries
+
+
+def study_adapter(settings: TrialsSection) -> Adapter:
+    """The adapter of ``settings`` searching its space with ``settings.space`` applied."""
+    adapter = resolve_adapter(settings.algorithm, settings.adapter_options)
+    if not settings.space:
+        return adapter
+    changes = {name: r.model_dump(exclude_none=True) for name, r in settings.space.items()}
+    return with_space(adapter, adapter.space.override(changes, "trials.space"))
 
 
 def make_studies(sequence_paths: Sequence[str | Path], joint: bool) -> list[Study]:
@@ -274,7 +296,8 @@ def make_job(study: Study, adapter: Adapter, tid: int, seed: int, params: Params
                     trial=tid, seed=seed, params=dict(params), out_dir=str(out_dir),
                     length_m=settings.length_m, penalty_pct=settings.penalty_pct,
                     jump_limit_m=settings.jump_limit_m, time_limit_s=settings.time_limit_s,
-                    adapter_options=dict(settings.adapter_options))
+                    adapter_options=dict(settings.adapter_options),
+                    space=adapter.space.to_json() if settings.space else None)
 
 
 def summarize(algorithm: str, sequence: str, done: dict[int, TrialResult], ran: int,

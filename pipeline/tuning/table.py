@@ -80,6 +80,28 @@ def read_study(path: str | Path) -> dict[str, Any] | None:
     return study if isinstance(study, dict) else None
 
 
+def read_space(out_dir: str | Path, algorithm: str) -> ParameterSpace:
+    """The parameter space the studies of ``algorithm`` in the trials folder ``out_dir``
+    searched (from their fingerprints); InputError when there is none, or they disagree."""
+    out_dir = Path(out_dir)
+    tables = sorted(trials_path(out_dir, algorithm, "*").parent.parent.glob(
+        "sequence=*/trials.parquet"))
+    spaces = {}
+    for table in tables:
+        study = read_study(table)
+        if study is None or not isinstance(study.get("space"), list):
+            raise InputError(f"{table}: no parameter space stored with it (written by an older "
+                             "adaptune); run the trials again")
+        spaces[table] = study["space"]
+    if not spaces:
+        raise InputError(f"{out_dir}: no trials of {algorithm!r} to read the parameter space of")
+    first, *rest = spaces.items()
+    for table, space in rest:
+        if space != first[1]:
+            raise InputError(f"{table}: searched another parameter space than {first[0]}")
+    return ParameterSpace.from_json(first[1], str(first[0]))
+
+
 def read_trials(path: str | Path, space: ParameterSpace) -> list[TrialResult]:
     """Finished trials of an earlier run ([] when there is no table yet).
 

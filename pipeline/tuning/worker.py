@@ -57,9 +57,11 @@ SCAN_CACHE_LIMIT_BYTES = _scan_cache_limit_bytes()
 
 
 def study_key(job: TrialJob) -> tuple[Any, ...]:
-    """What a cache, a warmed adapter and a trial server serve: sequences, adapter, options."""
+    """What a cache, a warmed adapter and a trial server serve: sequences, adapter, options,
+    space."""
     return (tuple(p for _, p in job.sequences), job.adapter,
-            json.dumps(job.adapter_options, sort_keys=True, default=str))
+            json.dumps(job.adapter_options, sort_keys=True, default=str),
+            json.dumps(job.space, sort_keys=True))
 
 
 class WorkerState:
@@ -159,7 +161,7 @@ class WorkerState:
         with self._lock:
             if self.adapter is not None and self.adapter[0] == key:
                 return self.adapter[1]
-            adapter = resolve_adapter(job.adapter, job.adapter_options)
+            adapter = resolve_adapter(job.adapter, job.adapter_options, job.space)
             paths = list(key[0])
             self._fill_cache(paths)
             warm = getattr(adapter, "warm", None)

@@ -1,0 +1,57 @@
+"""``adaptune params ALGO``: the parameters an adapter tunes, with their ranges and defaults.
+
+Without ``--params`` the adapter's built-in ranges; with it, the ranges a trials run with that
+params file searches (its ``trials.space`` applied, when its ``trials.algorithm`` is ALGO).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from stages.common import FILE, json_option
+
+
+@click.command("params")
+@click.argument("algorithm")
+@click.option("--option", "-o", "options", multiple=True,
+              help="Adapter option key=value (repeatable; the command adapter's space).")
+@click.option("--params", "params_path", type=FILE, default=None,
+              help="A params file: show the ranges its trials section searches.")
+@json_option
+def params(algorithm: str, options: tuple[str, ...], params_path: Path | None,
+           as_json: bool) -> None:
+    """List the parameters ALGORITHM tunes: range, default, kind, scale, unit."""
+    from pipeline.config import load_section, validate_section
+    from pipeline.tuning.job import resolve_adapter
+    from pipeline.tuning.smbo import TrialsSection, study_adapter
+    from stages.run import parse_options
+
+    given = parse_options(options)
+    source = "built-in"
+    if params_path is not None:
+        trials = load_section(params_path, "trials", TrialsSection)
+        if trials.algorithm == algorithm:
+            settings = validate_section(TrialsSection, "trials", {
+                **trials.model_dump(), "adapter_options": {**trials.adapter_options, **given}})
+            adapter = study_adapter(settings)
+            source = f"{params_path} trials.space" if trials.space else source
+        else:
+            adapter = resolve_adapter(algorithm, given)
+    else:
+        adapter = resolve_adapter(algorithm, given)
+    specs = adapter.space.to_json()
+    if as_json:
+        click.echo(json.dumps({"algorithm": adapter.name, "source": source,
+                               "parameters": specs}, indent=2))
+        return
+    head = ("name", "low", "high", "default", "kind", "scale", "unit")
+    rows = [head] + [(str(s["name"]), f"{s['low']:g}", f"{s['high']:g}", f"{s['default']:g}",
+                      str(s["kind"]), "log" if s["log"] else "linear", str(s["unit"]))
+                     for s in specs]
+    widths = [max(len(r[i]) for r in rows) for i in range(len(head))]
+    click.echo(f"{adapter.name}: {len(specs)} parameters ({source} ranges)")
+    for row in rows:
+        click.echo("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip())
