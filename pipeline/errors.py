@@ -19,6 +19,11 @@ class InputError(AdaptuneError):
     """An input file (scans, poses, bag, MCAP, Parquet) is missing, malformed or inconsistent."""
 
 
+class OutputError(AdaptuneError):
+    """An output path cannot be written: empty, a folder, a file in the way of its folder, no
+    permission, a full disk; or it names one of the command's own inputs."""
+
+
 class SchemaError(InputError):
     """A file follows another schema or schema version than the one expected."""
 

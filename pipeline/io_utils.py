@@ -1,36 +1,165 @@
-"""Atomic writes (a failure never leaves a half-written file behind) and read-ahead."""
+"""Atomic writes and read-ahead.
+
+Every output adaptune writes goes through ``atomic_path`` (a file) or ``atomic_dir`` (a folder):
+on any error the previous output stays byte-identical and no temporary remains; a killed
+writer's temporary (``.<name>.<pid>.<hex>.tmp``) is removed by the next write of the same
+output; files and folders get the umask's permissions.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import glob
+import logging
 import os
 import queue
+import re
+import secrets
 import shutil
-import tempfile
 import threading
 from collections.abc import Generator, Iterable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
+from pipeline.errors import OutputError
+
 T = TypeVar("T")
+log = logging.getLogger(__name__)
+
+
+TEMP_SUFFIX = ".tmp"
+OLD_SUFFIX = ".old"  # atomic_dir: the previous folder, set aside during the swap
+_WRITE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM)
+
+
+def output_path(final: str | os.PathLike[str]) -> Path:
+    """``final`` checked as a file to write: not empty, not a folder; its folder is created.
+
+    Raises OutputError naming the path and the rule.
+    """
+    if not os.fspath(final).strip():
+        raise OutputError("the output path is empty")
+    path = Path(final)
+    if path.is_dir():
+        raise OutputError(f"{path}: is a folder; the output must be a file path")
+    _make_parent(path)
+    return path
+
+
+def _make_parent(path: Path) -> None:
+    """Create the folder of ``path``; OutputError naming the file in the way, or the reason."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        blocker = next((p for p in [path.parent, *path.parent.parents] if p.is_file()), None)
+        raise OutputError(f"{path}: cannot create its folder, {blocker or path.parent} "
+                          "is a file") from None
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot create its folder ({exc.strerror})") from None
+
+
+def refuse_input_as_output(out: str | os.PathLike[str],
+                           inputs: Iterable[str | os.PathLike[str] | None]) -> None:
+    """OutputError when ``out`` is one of ``inputs`` (the same file, by any path to it)."""
+    out_path = Path(out)
+    for item in inputs:
+        if item is None:
+            continue
+        inp = Path(item)
+        same = (os.path.samefile(out_path, inp) if out_path.exists() and inp.exists()
+                else out_path.resolve() == inp.resolve())
+        if same:
+            raise OutputError(f"{out_path}: the output is also an input ({inp}); "
+                              "write to another path")
+
+
+def _temp_pattern(final: Path, suffix: str = TEMP_SUFFIX) -> re.Pattern[str]:
+    """Names of the temporaries of ``final``: ``.<name>.<pid>.<8 hex><suffix>`` (this version)
+    or ``.<name>.<8 chars>.tmp`` (mkstemp, earlier versions)."""
+    legacy = "|[a-z0-9_]{8}" if suffix == TEMP_SUFFIX else ""
+    return re.compile(rf"\.{re.escape(final.name)}\.(?:(\d+)\.[0-9a-f]{{8}}{legacy})"
+                      rf"{re.escape(suffix)}(?:\.[a-z]+)?")  # + a library's own (DuckDB .wal)
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def remove_stale_temps(final: str | os.PathLike[str]) -> list[Path]:
+    """Remove what killed writers of ``final`` left beside it: temporaries whose process is
+    gone (or of earlier versions, which did not record it). Returns the paths removed."""
+    final = Path(final)
+    try:
+        candidates = sorted(final.parent.iterdir())
+    except OSError:
+        return []
+    removed = []
+    for suffix in (OLD_SUFFIX, TEMP_SUFFIX):
+        pattern = _temp_pattern(final, suffix)
+        for p in candidates:
+            m = pattern.fullmatch(p.name)
+            if m is None or (m.group(1) is not None and _alive(int(m.group(1)))):
+                continue
+            with contextlib.suppress(OSError):
+                if suffix == OLD_SUFFIX and not final.exists():
+                    os.replace(p, final)  # killed between the two renames of atomic_dir
+                    continue
+                shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+                removed.append(p)
+    if removed:
+        log.info("%s: removed %d temporary file(s) of an interrupted earlier write",
+                 final, len(removed))
+    return removed
+
+
+def _temp_beside(final: Path, suffix: str = TEMP_SUFFIX) -> Path:
+    return final.with_name(f".{final.name}.{os.getpid()}.{secrets.token_hex(4)}{suffix}")
+
+
+@contextlib.contextmanager
+def _as_output_error(final: Path, tmp: Path) -> Iterator[None]:
+    """OSErrors of writing ``tmp`` (or of the disk) -> OutputError naming ``final``."""
+    try:
+        yield
+    except OSError as exc:
+        names = {os.fspath(tmp), str(tmp)}
+        if getattr(exc, "filename", None) in names or exc.errno in _WRITE_ERRNOS:
+            raise OutputError(f"{final}: cannot write ({exc.strerror or exc})") from None
+        raise
 
 
 @contextlib.contextmanager
 def atomic_path(final: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path beside ``final``; rename it onto ``final`` on success.
 
-    On any exception the temporary file is removed and ``final`` is left untouched.
+    On any exception the temporary file is removed and ``final`` is left byte-identical.
+    The file is created with the umask's permissions (as ``open`` would). Temporaries that a
+    killed writer of ``final`` left are removed first. OSErrors of the output (no permission,
+    a folder or a file in the way, disk full) become one OutputError naming ``final``.
     """
-    final = Path(final)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
+    final = output_path(final)
+    remove_stale_temps(final)
+    tmp = _temp_beside(final)
     try:
-        yield tmp_path
-        os.replace(tmp_path, final)
+        with _as_output_error(final, tmp):
+            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))  # umask applies
+        with _as_output_error(final, tmp):
+            yield tmp
+        with _as_output_error(final, tmp):
+            os.replace(tmp, final)
     except BaseException:
-        tmp_path.unlink(missing_ok=True)
+        for p in [tmp, *tmp.parent.glob(glob.escape(tmp.name) + ".*")]:  # + DuckDB's .wal
+            with contextlib.suppress(OSError):
+                p.unlink()
         raise
 
 
@@ -39,21 +168,37 @@ def atomic_dir(final: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary folder beside ``final``; on success it replaces ``final``.
 
     On any exception the temporary folder is removed and ``final`` is left untouched. The
-    swap is two renames (the old folder aside, the new one in), then the old one is deleted.
+    swap is two renames (the old folder aside, the new one in; the old one back if the second
+    fails), then the old one is deleted. Permissions and stale temporaries as ``atomic_path``.
     """
     final = Path(final)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent))
+    if not os.fspath(final).strip():
+        raise OutputError("the output path is empty")
+    if final.exists() and not final.is_dir():
+        raise OutputError(f"{final}: is a file; the output must be a folder")
+    _make_parent(final)
+    remove_stale_temps(final)
+    tmp = _temp_beside(final)
     try:
-        yield tmp
+        with _as_output_error(final, tmp):
+            tmp.mkdir(0o777)  # umask applies
+        with _as_output_error(final, tmp):
+            yield tmp
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     old = None
-    if final.exists():
-        old = final.with_name(f".{final.name}.old.{os.getpid()}")
-        os.replace(final, old)
-    os.replace(tmp, final)
+    with _as_output_error(final, tmp):
+        try:
+            if final.exists():
+                old = _temp_beside(final, OLD_SUFFIX)
+                os.replace(final, old)
+            os.replace(tmp, final)
+        except BaseException:
+            if old is not None and not final.exists():
+                os.replace(old, final)
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
 

@@ -15,6 +15,7 @@ their own, so reading the ground truth never decompresses a scan.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 from collections.abc import Iterator
@@ -150,16 +151,19 @@ class SequenceWriter:
     def __enter__(self) -> SequenceWriter:
         from mcap.writer import CompressionType, Writer
 
-        self._atomic = atomic_path(self.path)
-        self._tmp = self._atomic.__enter__()
-        self._fh = open(self._tmp, "wb")  # closed in __exit__
-        self._w = Writer(self._fh, chunk_size=self.chunk_size, compression=CompressionType.ZSTD)
-        self._w.start(profile="ros2", library="adaptune")
-        self._schemas = {
-            t: self._w.register_schema(t, "ros2msg", schema_text(t).encode())
-            for t in (POINTCLOUD2, POSE_STAMPED, TF_MESSAGE)
-        }
-        self._points_ch = self._w.register_channel(POINTS_TOPIC, "cdr", self._schemas[POINTCLOUD2])
+        with contextlib.ExitStack() as stack:  # on an error here: file closed, temp removed
+            self._tmp = stack.enter_context(atomic_path(self.path))
+            self._fh = stack.enter_context(open(self._tmp, "wb"))
+            self._w = Writer(self._fh, chunk_size=self.chunk_size,
+                             compression=CompressionType.ZSTD)
+            self._w.start(profile="ros2", library="adaptune")
+            self._schemas = {
+                t: self._w.register_schema(t, "ros2msg", schema_text(t).encode())
+                for t in (POINTCLOUD2, POSE_STAMPED, TF_MESSAGE)
+            }
+            self._points_ch = self._w.register_channel(POINTS_TOPIC, "cdr",
+                                                       self._schemas[POINTCLOUD2])
+            self._outputs = stack.pop_all()
         return self
 
     def add(self, stamp_ns: int, points_lidar: NDArray[np.float32],
@@ -211,12 +215,13 @@ class SequenceWriter:
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
-        try:
-            if exc_type is None:
-                self._finish()
-        finally:
-            self._fh.close()
-            self._atomic.__exit__(exc_type, exc, tb)
+        """Finish the file and move it onto ``path``; on any error, in the ``with`` block or in
+        finishing, the temporary file is removed and ``path`` stays as it was."""
+        if exc_type is not None:
+            self._outputs.__exit__(exc_type, exc, tb)
+            return
+        with self._outputs:  # sees an exception of _finish: then the temporary file goes
+            self._finish()
 
     def _finish(self) -> None:
         if not self.stamps_ns:

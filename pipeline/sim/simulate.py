@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.io_utils import refuse_input_as_output
 from pipeline.sequence import EnvLabel, Scan, SequenceInfo, SequenceWriter
 from pipeline.sim.raycast import Raycaster
 from pipeline.sim.sensors import SENSOR_TITLES, SensorModel, get_sensor
@@ -100,6 +101,7 @@ def simulate_sequence(
     """Simulate ``spec`` and write the sequence MCAP at ``out_path`` (atomically)."""
     from tqdm import tqdm
 
+    refuse_input_as_output(out_path, [spec.kitti_trajectory])
     world = make_world(spec)
     sensor = spec.sensor_model()
     name = name or Path(out_path).stem

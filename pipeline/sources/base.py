@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
+from pipeline.io_utils import refuse_input_as_output
 from pipeline.sequence import SequenceInfo, SequenceWriter
 
 log = logging.getLogger(__name__)
@@ -45,6 +46,8 @@ class Source(Protocol):
     """An ingest source. ``name`` is its registry key (``adaptune ingest <name>``)."""
 
     name: ClassVar[str]
+    inputs: tuple[Path, ...]
+    """Every file it reads (scans, pose, times and calibration files): never the output."""
 
     def sequence_info(self) -> SequenceInfo:
         """Name, sensor and source description of the sequence it produces."""
@@ -78,6 +81,7 @@ def write_sequence(source: Source, out: str | Path) -> IngestReport:
 
     t0 = time.perf_counter()
     out = Path(out)
+    refuse_input_as_output(out, source.inputs)
     info = source.sequence_info()
     points = dropped = 0
     with_gt: bool | None = None

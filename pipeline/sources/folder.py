@@ -61,6 +61,7 @@ class FolderSource:
         self.stamps_ns, self.T_world_lidar = self._stamps_and_poses(
             poses, poses_format, times, calib, rate_hz
         )
+        self.inputs = tuple(Path(p) for p in (*self.files, poses, times, calib) if p is not None)
 
     def _stamps_and_poses(
         self,

@@ -73,6 +73,8 @@ class KittiSource:
         self.stamps_ns = read_times(self.dir / "times.txt", n)[self.start : self.end + 1]
         self.Tr = read_kitti_calib(self.dir / "calib.txt")
         self.T_world_lidar = self._ground_truth(n)
+        self.inputs = (*all_bins, self.dir / "times.txt", self.dir / "calib.txt",
+                       self.root / "poses" / f"{self.seq}.txt")
 
     def _ground_truth(self, n: int) -> NDArray[np.float64] | None:
         path = self.root / "poses" / f"{self.seq}.txt"

@@ -116,6 +116,7 @@ class McapSource:
         if gt_topic is not None and poses is not None:
             raise ConfigError("give either --gt-topic or --poses, not both")
         self.path = Path(path)
+        self.inputs = tuple(Path(p) for p in (path, poses) if p is not None)
         self.seq_name = name or self.path.stem
         self.sensor = sensor
         self.gt: GroundTruth | None = None

@@ -154,6 +154,8 @@ class RosbagSource:
         if gt_topic is not None and poses is not None:
             raise ConfigError("give either --gt-topic or --poses, not both")
         self.bag = bag_path(bag)
+        bag_files = sorted(self.bag.iterdir()) if self.bag.is_dir() else [self.bag]
+        self.inputs = tuple(Path(p) for p in (*bag_files, poses, calib) if p is not None)
         self.seq_name = name or self.bag.stem
         self.sensor = sensor
         with open_bag(self.bag) as reader:

@@ -1,0 +1,176 @@
+"""Writes are atomic (issue 13, item 1; issue 18, item 5): on any error the previous output stays
+byte-identical and no temporary remains; a killed writer's temporary is removed by the next
+write; outputs get the umask's permissions; bad output paths are one line, exit 1."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from pipeline.errors import InputError, OutputError
+from pipeline.io_utils import atomic_dir, atomic_path, atomic_write_text
+from pipeline.sequence import SequenceInfo, SequenceReader, SequenceWriter
+from stages.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def leftovers(folder: Path, name: str) -> list[Path]:
+    return sorted(folder.glob(f".{name}.*"))
+
+
+def write_sequence(path: Path, frames: int = 2) -> None:
+    with SequenceWriter(path, SequenceInfo(name="s")) as w:
+        for k in range(frames):
+            w.add(10 + k, np.ones((5, 3), np.float32) * k)
+
+
+@pytest.fixture
+def umask_022() -> Iterator[None]:
+    old = os.umask(0o022)
+    yield
+    os.umask(old)
+
+
+def empty_pointcloud_mcap(path: Path) -> None:
+    """An MCAP with a PointCloud2 channel and no messages (the issue's reproduction)."""
+    from mcap.writer import Writer
+
+    from pipeline.ros2_cdr import POINTCLOUD2, schema_text
+
+    with open(path, "wb") as fh:
+        w = Writer(fh)
+        w.start(profile="ros2", library="test")
+        sid = w.register_schema(POINTCLOUD2, "ros2msg", schema_text(POINTCLOUD2).encode())
+        w.register_channel("/points", "cdr", sid)
+        w.finish()
+
+
+def test_failed_finish_keeps_the_previous_output(tmp_path: Path) -> None:
+    """`ingest mcap X --out good.mcap` with no frames in X: exit 1 and good.mcap unchanged
+    (SequenceWriter.__exit__ used to report success to the atomic write when _finish raised)."""
+    good = tmp_path / "good.mcap"
+    write_sequence(good)
+    before = good.read_bytes()
+    empty = tmp_path / "x.mcap"
+    empty_pointcloud_mcap(empty)
+    result = CliRunner().invoke(main, ["ingest", "mcap", str(empty), "--out", str(good)])
+    assert result.exit_code == 1 and "no frames to write" in result.stderr, result.output
+    assert good.read_bytes() == before
+    assert leftovers(tmp_path, "good.mcap") == []
+    with pytest.raises(InputError, match="no frames"), SequenceWriter(good, SequenceInfo("e")):
+        pass
+    assert good.read_bytes() == before and leftovers(tmp_path, "good.mcap") == []
+
+
+def test_error_in_the_block_keeps_the_previous_output(tmp_path: Path) -> None:
+    out = tmp_path / "a.txt"
+    atomic_write_text(out, "old")
+    with pytest.raises(RuntimeError), atomic_path(out) as tmp:
+        tmp.write_text("half")
+        raise RuntimeError("boom")
+    assert out.read_text() == "old" and leftovers(tmp_path, "a.txt") == []
+    folder = tmp_path / "model"
+    with atomic_dir(folder) as tmp:
+        (tmp / "f").write_text("v1")
+    with pytest.raises(RuntimeError), atomic_dir(folder) as tmp:
+        (tmp / "f").write_text("v2")
+        raise RuntimeError("boom")
+    assert (folder / "f").read_text() == "v1" and leftovers(tmp_path, "model") == []
+
+
+def test_a_killed_writers_temporary_is_removed_by_the_next_write(tmp_path: Path) -> None:
+    """SIGKILL during a write leaves `.<name>.<pid>.<hex>.tmp`; the next write of the same
+    output removes it (a live writer's temporary is kept)."""
+    out = tmp_path / "big.mcap"
+    script = textwrap.dedent(f"""
+        import sys, time
+        from pipeline.io_utils import atomic_path
+        with atomic_path({str(out)!r}) as tmp:
+            tmp.write_bytes(b"x" * 1_000_000)
+            print("writing", flush=True)
+            time.sleep(60)
+    """)
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True,
+                             cwd=REPO)
+    try:
+        assert child.stdout is not None and child.stdout.readline().strip() == "writing"
+        live = leftovers(tmp_path, "big.mcap")
+        assert len(live) == 1 and f".{child.pid}." in live[0].name
+        write_sequence(tmp_path / "other.mcap")  # another output: not touched
+        assert leftovers(tmp_path, "big.mcap") == live
+    finally:
+        child.send_signal(signal.SIGKILL)
+        child.wait()
+    assert leftovers(tmp_path, "big.mcap") == live and not out.exists()
+    legacy = tmp_path / ".big.mcap.k2j4_x9q.tmp"  # mkstemp's name (earlier versions)
+    legacy.write_bytes(b"old")
+    write_sequence(out)
+    assert leftovers(tmp_path, "big.mcap") == []
+    with SequenceReader(out) as r:
+        assert len(r) == 2
+
+
+def test_outputs_follow_the_umask(tmp_path: Path, umask_022: None) -> None:
+    """Files 0644 and folders 0755 under umask 022 (mkstemp made them 0600 / 0700)."""
+    write_sequence(tmp_path / "s.mcap")
+    atomic_write_text(tmp_path / "a.txt", "x")
+    with atomic_dir(tmp_path / "d") as tmp:
+        (tmp / "f").write_text("x")
+    assert (tmp_path / "s.mcap").stat().st_mode & 0o777 == 0o644
+    assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o644
+    assert (tmp_path / "d").stat().st_mode & 0o777 == 0o755
+    os.umask(0o077)
+    atomic_write_text(tmp_path / "b.txt", "x")
+    assert (tmp_path / "b.txt").stat().st_mode & 0o777 == 0o600
+
+
+def test_output_paths_that_cannot_be_written(tmp_path: Path) -> None:
+    (tmp_path / "file").write_text("x")
+    cases = {
+        "": "the output path is empty",
+        str(tmp_path): "is a folder",
+        str(tmp_path / "file" / "s.txt"): f"{tmp_path / 'file'} is a file",
+        "/sys/adaptune-test.txt": "cannot write (Permission denied)",
+    }
+    for path, message in cases.items():
+        with pytest.raises(OutputError, match=message.replace("(", r"\(").replace(")", r"\)")):
+            atomic_write_text(path, "x")
+    with pytest.raises(OutputError, match="is a file; the output must be a folder"):
+        atomic_dir(tmp_path / "file").__enter__()
+
+
+@pytest.mark.parametrize("out, message", [
+    ("", "is a folder"),  # click turns an empty --out into "."
+    ("{tmp}/file/s.mcap", "is a file"),
+    ("/sys/adaptune-test.mcap", "Permission denied"),
+])
+def test_bad_out_is_one_line(tmp_path: Path, out: str, message: str) -> None:
+    (tmp_path / "file").write_text("x")
+    seq = tmp_path / "s.mcap"
+    write_sequence(seq)
+    result = CliRunner().invoke(main, ["ingest", "mcap", str(seq), "--out",
+                                       out.format(tmp=tmp_path)])
+    assert result.exit_code == 1, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("adaptune: error: ") and message in lines[0]
+
+
+def test_out_equal_to_an_input_is_refused(tmp_path: Path) -> None:
+    """`ingest mcap X --out X` used to rewrite X (and drop its ground truth)."""
+    seq = tmp_path / "s.mcap"
+    write_sequence(seq)
+    before = seq.read_bytes()
+    for out in (seq, tmp_path / "." / "s.mcap"):
+        result = CliRunner().invoke(main, ["ingest", "mcap", str(seq), "--out", str(out)])
+        assert result.exit_code == 1 and "the output is also an input" in result.stderr
+    assert seq.read_bytes() == before
