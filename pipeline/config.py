@@ -29,7 +29,7 @@ class BaseSection(Section):
     ``trials``, ``rte`` and ``evaluate`` sections take from here (``FROM_BASE``); and the
     sequence folder every stage after ``simulate`` / ``ingest`` reads (dvc.yaml ``${...}``)."""
 
-    seed: int = 0
+    seed: int = Field(0, ge=0)
     length_m: float = Field(25.0, gt=0)
     sequences: Literal["data/sequences", "data/kitti"] = "data/sequences"
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.errors import InputError
+
 F64 = NDArray[np.float64]
 
 
@@ -53,6 +55,31 @@ def pose_from_xyz_quat(xyz: F64, q_xyzw: F64) -> F64:
     T[..., :3, 3] = xyz
     T[..., 3, 3] = 1.0
     return T
+
+
+def refuse_non_rotations(R: F64, what: str, lines: list[int] | None = None) -> None:
+    """InputError naming the first (3, 3) block of ``R`` (M, 3, 3) that is not a rotation
+    (R^T R = I and det R = +1 within 1e-3): a zero, scaled, sheared or reflected matrix."""
+    bad = not_rotations(R)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        where = f"line {lines[k]}" if lines is not None else f"pose {k}"
+        raise InputError(f"{what} {where}: the rotation is not a rotation matrix (R^T R = I and "
+                         f"det R = +1 within 1e-3; det = {np.linalg.det(R[k]):.6g})")
+
+
+def poses_from_quaternions(xyz: F64, q_xyzw: F64, what: str,
+                           lines: list[int] | None = None) -> F64:
+    """(M, 4, 4) poses of translations (M, 3) and quaternions (M, 4) x, y, z, w; InputError
+    naming the first quaternion whose norm is not 1 within 1e-2 (zero included)."""
+    norm = np.linalg.norm(q_xyzw, axis=1)
+    bad = np.abs(norm - 1.0) > 1e-2
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        where = f"line {lines[k]}" if lines is not None else f"pose {k}"
+        raise InputError(f"{what} {where}: the quaternion has norm {norm[k]:.6g}, a rotation "
+                         "needs a unit quaternion (norm 1 within 1e-2)")
+    return pose_from_xyz_quat(xyz, q_xyzw)
 
 
 def rot_z(yaw_rad: float) -> F64:

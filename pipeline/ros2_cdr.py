@@ -14,7 +14,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,6 +48,9 @@ XYZI_FIELDS = (
     PointField("x", 0, 7), PointField("y", 4, 7), PointField("z", 8, 7),
     PointField("intensity", 12, 7),
 )
+TIME_FIELD = PointField("time", 16, 7)
+"""Per-point time of a sequence MCAP scan: float32 seconds relative to the header stamp (the
+Velodyne driver's convention), present when the input had per-point time."""
 
 
 def schema_text(msgtype: str) -> str:
@@ -97,20 +100,29 @@ def header_stamp_ns(msg: Any) -> int:
 
 
 def encode_pointcloud2(
-    stamp_ns: int, points_xyzi: NDArray[np.float32], frame_id: str = "lidar"
+    stamp_ns: int, points_xyzi: NDArray[np.float32], frame_id: str = "lidar",
+    time_s: NDArray[np.float32] | None = None,
 ) -> bytes:
-    """CDR bytes of an unorganised PointCloud2 with float32 x, y, z, intensity.
+    """CDR bytes of an unorganised PointCloud2 with float32 x, y, z, intensity (and time).
 
-    ``points_xyzi``: (N, 4) float32 in the sensor frame [m] and intensity (any unit).
+    ``points_xyzi``: (N, 4) float32 in the sensor frame [m] and intensity (any unit);
+    ``time_s``: (N,) per-point time [s] relative to ``stamp_ns``, or None.
     """
     pts = np.ascontiguousarray(points_xyzi, dtype="<f4")
     if pts.ndim != 2 or pts.shape[1] != 4:
         raise InputError(f"points must be (N, 4) x, y, z, intensity, got shape {pts.shape}")
+    fields = list(XYZI_FIELDS)
+    if time_s is not None:
+        if np.shape(time_s) != (len(pts),):
+            raise InputError(f"time_s must be ({len(pts)},), got shape {np.shape(time_s)}")
+        pts = np.concatenate([pts, np.asarray(time_s, "<f4")[:, None]], axis=1)
+        fields.append(TIME_FIELD)
+    step = 4 * pts.shape[1]
     return encode(POINTCLOUD2, {
         "header": header(stamp_ns, frame_id),
         "height": 1, "width": len(pts),
-        "fields": [vars(f) for f in XYZI_FIELDS],
-        "is_bigendian": False, "point_step": 16, "row_step": 16 * len(pts),
+        "fields": [vars(f) for f in fields],
+        "is_bigendian": False, "point_step": step, "row_step": step * len(pts),
         "data": pts.tobytes(), "is_dense": True,
     })
 
@@ -120,12 +132,53 @@ def decode_pointcloud2(buf: bytes | memoryview, what: str = "PointCloud2") -> An
     return decode(POINTCLOUD2, buf, what)
 
 
+def _layout(msg: Any) -> tuple[int, int, list[Any], bool, int, int, Any]:
+    return (int(msg.height), int(msg.width), list(msg.fields), bool(msg.is_bigendian),
+            int(msg.point_step), int(msg.row_step), msg.data)
+
+
 def cloud_to_xyzi(msg: Any, what: str) -> NDArray[np.float32]:
     """(N, 4) float32 x, y, z, intensity of a decoded PointCloud2 (any layout; a message as
     mcap_ros2 or rosbags deserialises it, ROS 1 or ROS 2)."""
-    return pointcloud2_to_xyzi(int(msg.height), int(msg.width), list(msg.fields),
-                               bool(msg.is_bigendian), int(msg.point_step), int(msg.row_step),
-                               msg.data, what)
+    return pointcloud2_to_xyzi(*_layout(msg), what)
+
+
+def cloud_field(msg: Any, names: tuple[str, ...], what: str) -> tuple[str, NDArray] | None:
+    """(name, (N,) values in the field's own dtype) of the first of ``names`` the decoded
+    PointCloud2 has, or None."""
+    height, width, fields, big, step, row_step, data = _layout(msg)
+    by_name = {f.name: f for f in fields}
+    name = next((n for n in names if n in by_name), None)
+    if name is None:
+        return None
+    rows = _rows(height, width, step, row_step, data, what)
+    return name, _column(rows, by_name[name], big, step, what)
+
+
+def _rows(height: int, width: int, point_step: int, row_step: int,
+          data: bytes | memoryview | NDArray[np.uint8], what: str) -> NDArray[np.uint8]:
+    """(N, point_step) bytes of the points, rows padding removed; InputError on a bad size."""
+    n = int(height) * int(width)
+    buf = np.frombuffer(bytes(data), dtype=np.uint8)
+    needed = row_step * (height - 1) + width * point_step if n else 0
+    if point_step <= 0 or row_step < width * point_step or buf.size < needed:
+        raise InputError(f"{what}: PointCloud2 data is {buf.size} bytes, expected {needed} "
+                         f"({height}x{width} points, point_step {point_step}, row_step {row_step})")
+    padded = np.zeros(row_step * height, dtype=np.uint8)
+    padded[: min(buf.size, padded.size)] = buf[: padded.size]
+    return padded.reshape(height, row_step)[:, : width * point_step].reshape(n, point_step)
+
+
+def _column(rows: NDArray[np.uint8], f: Any, big: bool, point_step: int, what: str) -> NDArray:
+    """(N,) values of the PointField ``f`` (its first element) from ``rows``."""
+    dt = POINTFIELD_DTYPES.get(int(f.datatype))
+    if dt is None:
+        raise InputError(f"{what}: field {f.name!r} has unknown datatype {f.datatype}")
+    if f.offset + dt.itemsize > point_step:
+        raise InputError(f"{what}: field {f.name!r} at offset {f.offset} overruns "
+                         f"point_step {point_step}")
+    raw = rows[:, f.offset : f.offset + dt.itemsize].copy()
+    return raw.view(dt.newbyteorder(">" if big else "<"))[:, 0]
 
 
 def pointcloud2_to_xyzi(
@@ -135,49 +188,41 @@ def pointcloud2_to_xyzi(
     """(N, 4) float32 x, y, z, intensity from any PointCloud2 layout.
 
     x, y, z must be float32 or float64; intensity (or ``reflectance``/``i``) is optional
-    (zeros when absent). Raises InputError naming ``what`` for an unknown layout.
+    (zeros when absent), of any datatype. Raises InputError naming ``what`` for an unknown
+    layout.
     """
     by_name = {f.name: f for f in fields}
     missing = [a for a in ("x", "y", "z") if a not in by_name]
     if missing:
         raise InputError(f"{what}: PointCloud2 has no field {', '.join(missing)} "
                          f"(fields: {', '.join(by_name) or 'none'})")
-    order: Literal[">", "<"] = ">" if is_bigendian else "<"
+    for a in ("x", "y", "z"):
+        if int(by_name[a].datatype) not in (7, 8):
+            raise InputError(f"{what}: unsupported PointField layout: field {a!r} has datatype "
+                             f"{by_name[a].datatype} (x, y, z must be FLOAT32=7 or FLOAT64=8)")
     n = int(height) * int(width)
-    buf = np.frombuffer(bytes(data), dtype=np.uint8)
-    needed = row_step * (height - 1) + width * point_step if n else 0
-    if point_step <= 0 or row_step < width * point_step or buf.size < needed:
-        raise InputError(f"{what}: PointCloud2 data is {buf.size} bytes, expected {needed} "
-                         f"({height}x{width} points, point_step {point_step}, row_step {row_step})")
     inten = next((k for k in ("intensity", "reflectance", "i") if k in by_name), None)
     if _packed_xyzi_float32(by_name, inten, is_bigendian, point_step, row_step, width):
-        return np.frombuffer(buf, "<f4", count=4 * n).reshape(n, 4).copy()  # the common case
+        buf = np.frombuffer(bytes(data), np.uint8)
+        if buf.size < point_step * n:
+            raise InputError(f"{what}: PointCloud2 data is {buf.size} bytes, expected "
+                             f"{point_step * n}")
+        flat = np.frombuffer(buf, "<f4", count=n * point_step // 4)
+        return flat.reshape(n, point_step // 4)[:, :4].copy()  # the common case: one copy
+    rows = _rows(height, width, point_step, row_step, data, what)
     out = np.zeros((n, 4), dtype=np.float32)
-    names = [("x", 0), ("y", 1), ("z", 2)]
-    if inten is not None:
-        names.append((inten, 3))
-    padded = np.zeros(row_step * height, dtype=np.uint8)
-    padded[: min(buf.size, padded.size)] = buf[: padded.size]
-    rows = padded.reshape(height, row_step)[:, : width * point_step].reshape(n, point_step)
-    for name, col in names:
-        f = by_name[name]
-        dt = POINTFIELD_DTYPES.get(f.datatype)
-        if dt is None or (col < 3 and dt.kind != "f"):
-            raise InputError(f"{what}: unsupported PointField layout: field {name!r} has "
-                             f"datatype {f.datatype} (x, y, z must be FLOAT32=7 or FLOAT64=8)")
-        if f.offset + dt.itemsize > point_step:
-            raise InputError(f"{what}: field {name!r} at offset {f.offset} overruns "
-                             f"point_step {point_step}")
-        raw = rows[:, f.offset : f.offset + dt.itemsize].copy().view(dt.newbyteorder(order))
-        out[:, col] = raw[:, 0].astype(np.float32)
+    for col, name in enumerate(("x", "y", "z", inten)):
+        if name is not None:
+            out[:, col] = _column(rows, by_name[name], is_bigendian, point_step, what)
     return out
 
 
 def _packed_xyzi_float32(by_name: dict[str, Any], inten: str | None, is_bigendian: bool,
                          point_step: int, row_step: int, width: int) -> bool:
-    """True for the layout adaptune writes (and most drivers): little-endian float32 x, y, z,
-    intensity at offsets 0, 4, 8, 12, 16 bytes a point, rows without padding."""
-    if is_bigendian or inten is None or point_step != 16 or row_step != 16 * width:
+    """True for the layouts adaptune writes (and most drivers): little-endian float32 x, y, z,
+    intensity at offsets 0, 4, 8, 12, a point a whole number of floats, rows without padding."""
+    if is_bigendian or inten is None or point_step < 16 or point_step % 4 or \
+            row_step != point_step * width:
         return False
     return all(by_name[name].offset == 4 * k and by_name[name].datatype == 7
                and by_name[name].count == 1 for k, name in enumerate(("x", "y", "z", inten)))
@@ -193,14 +238,16 @@ def pose_dict(T_a_b: NDArray[np.float64]) -> dict[str, dict[str, float]]:
             "orientation": {"x": qx, "y": qy, "z": qz, "w": qw}}
 
 
-def pose_matrix(position: Any, orientation: Any) -> NDArray[np.float64]:
-    """(4, 4) transform of a Point/Vector3 ``position`` and a Quaternion ``orientation``."""
-    from pipeline.geometry import pose_from_xyz_quat
+def pose_matrix(position: Any, orientation: Any, what: str) -> NDArray[np.float64]:
+    """(4, 4) transform of a Point/Vector3 ``position`` and a Quaternion ``orientation``;
+    InputError naming ``what`` when the quaternion is not a unit one (zero included)."""
+    from pipeline.geometry import poses_from_quaternions
 
-    return pose_from_xyz_quat(
-        np.array([position.x, position.y, position.z], np.float64),
-        np.array([orientation.x, orientation.y, orientation.z, orientation.w], np.float64),
-    )
+    return poses_from_quaternions(
+        np.array([[position.x, position.y, position.z]], np.float64),
+        np.array([[orientation.x, orientation.y, orientation.z, orientation.w]], np.float64),
+        what,
+    )[0]
 
 
 def encode_pose_stamped(
@@ -216,7 +263,7 @@ def decode_pose_stamped(
 ) -> tuple[int, NDArray[np.float64]]:
     """(stamp_ns, (4, 4) pose) from CDR bytes of a geometry_msgs/msg/PoseStamped."""
     msg = decode(POSE_STAMPED, buf, what)
-    return header_stamp_ns(msg), pose_matrix(msg.pose.position, msg.pose.orientation)
+    return header_stamp_ns(msg), pose_matrix(msg.pose.position, msg.pose.orientation, what)
 
 
 def encode_tf(stamp_ns: int, parent: str, child: str, T_parent_child: NDArray[np.float64]) -> bytes:
@@ -238,4 +285,5 @@ def decode_tf(
     """(stamp_ns, parent, child, (4, 4) T_parent_child) of every transform of a TFMessage."""
     msg = decode(TF_MESSAGE, buf, what)
     return [(header_stamp_ns(t), str(t.header.frame_id), str(t.child_frame_id),
-             pose_matrix(t.transform.translation, t.transform.rotation)) for t in msg.transforms]
+             pose_matrix(t.transform.translation, t.transform.rotation, what))
+            for t in msg.transforms]

@@ -28,11 +28,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError, SchemaError
+from pipeline.geometry import refuse_non_rotations
 from pipeline.io_utils import atomic_path
 from pipeline.ros2_cdr import (
     POINTCLOUD2,
     POSE_STAMPED,
     TF_MESSAGE,
+    TIME_FIELD,
+    cloud_field,
     cloud_to_xyzi,
     decode_pointcloud2,
     decode_pose_stamped,
@@ -41,6 +44,7 @@ from pipeline.ros2_cdr import (
     encode_tf,
     schema_text,
 )
+from pipeline.stamps import check_stamp_ns
 from schemas import SCHEMA_VERSION
 
 log = logging.getLogger(__name__)
@@ -60,12 +64,15 @@ class Scan:
 
     points_lidar: (N, 4) float32 x, y, z [m] in the sensor frame and intensity.
     T_world_lidar: (4, 4) float64 ground-truth pose, or None where unknown.
+    time_s: (N,) float32 per-point time [s] relative to ``stamp_ns``, or None (no per-point
+    time: an instantaneous scan, or a recording without it).
     """
 
     frame: int
     stamp_ns: int
     points_lidar: NDArray[np.float32]
     T_world_lidar: NDArray[np.float64] | None = None
+    time_s: NDArray[np.float32] | None = None
 
     @property
     def xyz(self) -> NDArray[np.float32]:
@@ -123,16 +130,27 @@ class SequenceInfo:
         return None
 
 
-def drop_non_finite(points: NDArray[np.float32], what: str) -> tuple[NDArray[np.float32], int]:
-    """Remove points with a NaN or infinite coordinate; (kept points, dropped count).
+MAX_COORDINATE_M = 10_000.0
+"""A LiDAR return farther than 10 km from the sensor is not a measurement: the file is not
+what it claims to be (random bytes read as float32 reach 3e38 m)."""
 
-    Raises InputError naming ``what`` when nothing finite is left.
+
+def finite_points(points: NDArray[np.float32], what: str) -> NDArray[np.bool_]:
+    """(N,) mask of the points with finite coordinates.
+
+    Raises InputError naming ``what`` when nothing finite is left, or when a coordinate is
+    beyond MAX_COORDINATE_M (not a LiDAR scan).
     """
     ok = np.isfinite(points[:, :3]).all(axis=1)
-    dropped = int(points.shape[0] - ok.sum())
     if not ok.any():
         raise InputError(f"{what}: empty scan (no finite points of {points.shape[0]})")
-    return (points if dropped == 0 else points[ok]), dropped
+    far_mask = (np.abs(np.where(ok[:, None], points[:, :3], 0)) > MAX_COORDINATE_M).any(axis=1)
+    if far_mask.any():
+        far = float(np.abs(points[far_mask, :3]).max())
+        raise InputError(f"{what}: {int(far_mask.sum())} points have a coordinate beyond "
+                         f"{MAX_COORDINATE_M:g} m (up to {far:.3g} m): not a LiDAR scan in "
+                         "metres (wrong format or random bytes?)")
+    return ok
 
 
 class SequenceWriter:
@@ -167,14 +185,16 @@ class SequenceWriter:
         return self
 
     def add(self, stamp_ns: int, points_lidar: NDArray[np.float32],
-            T_world_lidar: NDArray[np.float64] | None = None) -> int:
+            T_world_lidar: NDArray[np.float64] | None = None,
+            time_s: NDArray[np.float32] | None = None) -> int:
         """Append one frame; returns its index. Non-finite points are dropped and counted.
 
-        points_lidar: (N, 3) or (N, 4) float [m]; T_world_lidar: (4, 4) or None.
+        points_lidar: (N, 3) or (N, 4) float [m]; T_world_lidar: (4, 4) or None; time_s: (N,)
+        per-point time [s] relative to ``stamp_ns``, or None.
         """
         frame = len(self.stamps_ns)
         what = f"{self.info.name} frame {frame}"
-        stamp_ns = int(stamp_ns)
+        stamp_ns = check_stamp_ns(stamp_ns, what)
         if self.stamps_ns and stamp_ns <= self.stamps_ns[-1]:
             raise InputError(f"{what}: stamp {stamp_ns} ns is not after the previous "
                              f"{self.stamps_ns[-1]} ns (frames must be in time order)")
@@ -183,14 +203,25 @@ class SequenceWriter:
             raise InputError(f"{what}: points must be (N, 3) or (N, 4), got {pts.shape}")
         if pts.shape[1] == 3:
             pts = np.concatenate([pts, np.zeros((len(pts), 1), np.float32)], axis=1)
-        pts, dropped = drop_non_finite(pts, what)
+        ok = finite_points(pts, what)
+        if time_s is not None:
+            time_s = np.asarray(time_s, np.float32)
+            if time_s.shape != (len(pts),) or not np.isfinite(time_s[ok]).all():
+                raise InputError(f"{what}: per-point times must be {len(pts)} finite values, "
+                                 f"got shape {time_s.shape}")
+        dropped = int(len(pts) - ok.sum())
+        if dropped:
+            pts = pts[ok]
+            time_s = None if time_s is None else time_s[ok]
         self.dropped_points += dropped
         self._w.add_message(self._points_ch, log_time=stamp_ns, publish_time=stamp_ns,
-                            data=encode_pointcloud2(stamp_ns, pts), sequence=frame)
+                            data=encode_pointcloud2(stamp_ns, pts, time_s=time_s),
+                            sequence=frame)
         if T_world_lidar is not None:
             T = np.asarray(T_world_lidar, dtype=np.float64)
             if T.shape != (4, 4) or not np.isfinite(T).all():
                 raise InputError(f"{what}: ground-truth pose is not a finite 4x4 matrix")
+            refuse_non_rotations(T[None, :3, :3], f"{what}: ground truth")
             self.add_pose(GT_TOPIC, stamp_ns, T)
             self.add_tf(stamp_ns, WORLD_FRAME, LIDAR_FRAME, T)
         self.stamps_ns.append(stamp_ns)
@@ -286,10 +317,26 @@ class SequenceReader:
             self.close()
             raise SchemaError(f"{self.path}: schema version {self.info.schema_version}, "
                               f"this adaptune reads {SCHEMA_VERSION}")
-        stamps = meta[META_FRAMES]["stamps_ns"].split()
-        self.stamps_ns = np.array([int(s) for s in stamps], np.int64)
+        self.stamps_ns = self._frame_stamps(meta[META_FRAMES])
         self.topics = {ch.topic for ch in summary.channels.values()}
         self._gt: NDArray[np.float64] | bool | None = False
+
+    def _frame_stamps(self, record: dict[str, str]) -> NDArray[np.int64]:
+        """The frame stamps [ns] of the ``adaptune.frames`` metadata, checked: integers in
+        range, strictly increasing, one per frame of ``adaptune.sequence``."""
+        try:
+            stamps = [check_stamp_ns(int(s), "") for s in record["stamps_ns"].split()]
+        except (KeyError, ValueError, InputError) as exc:
+            self.close()
+            raise SchemaError(f"{self.path}: malformed '{META_FRAMES}' metadata (stamps_ns "
+                              f"must be integer ns in [0, 2^31) s: {exc})") from None
+        out = np.array(stamps, np.int64)
+        if len(out) != self.info.frame_count or np.any(np.diff(out) <= 0):
+            self.close()
+            raise SchemaError(f"{self.path}: malformed '{META_FRAMES}' metadata ({len(out)} "
+                              f"stamps for {self.info.frame_count} frames, must be strictly "
+                              "increasing)")
+        return out
 
     def __len__(self) -> int:
         return len(self.stamps_ns)
@@ -316,9 +363,14 @@ class SequenceReader:
                 f"{self.path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})"
             ) from exc
 
-    def _decode_points(self, data: bytes, frame: int) -> NDArray[np.float32]:
+    def _scan(self, frame: int, stamp_ns: int, data: bytes,
+              gt: NDArray[np.float64] | None) -> Scan:
         what = f"{self.path} frame {frame}"
-        return cloud_to_xyzi(decode_pointcloud2(data, what), what)
+        msg = decode_pointcloud2(data, what)
+        t = cloud_field(msg, (TIME_FIELD.name,), what)
+        return Scan(frame, stamp_ns, cloud_to_xyzi(msg, what),
+                    None if gt is None else gt[frame],
+                    None if t is None else t[1].astype(np.float32))
 
     @property
     def has_ground_truth(self) -> bool:
@@ -348,9 +400,7 @@ class SequenceReader:
         frame %= n
         t = int(self.stamps_ns[frame])
         for _, _, msg in self._messages([POINTS_TOPIC], t, t + 1):
-            gt = self.ground_truth()
-            return Scan(frame, t, self._decode_points(msg.data, frame),
-                        None if gt is None else gt[frame])
+            return self._scan(frame, t, msg.data, self.ground_truth())
         raise InputError(f"{self.path}: frame {frame} (stamp {t} ns) has no point cloud")
 
     def __iter__(self) -> Iterator[Scan]:
@@ -364,8 +414,7 @@ class SequenceReader:
                     f"{self.path}: point cloud at {msg.log_time} ns is not a listed frame"
                 )
             count += 1
-            yield Scan(frame, msg.log_time, self._decode_points(msg.data, frame),
-                       None if gt is None else gt[frame])
+            yield self._scan(frame, msg.log_time, msg.data, gt)
         if count != len(self):
             raise InputError(f"{self.path}: {count} point clouds for {len(self)} frames")
 

@@ -13,17 +13,34 @@ out_option = file_option("--out", help="The sequence MCAP to write (atomically).
 name_option = click.option("--name", default=None, help="Sequence name (default: from the input).")
 poses_option = click.option(
     "--poses", type=click.Path(path_type=Path), default=None,
-    help="Ground-truth pose file: KITTI (12 numbers a line, line k = scan k) "
-    "or TUM (stamp tx ty tz qx qy qz qw, matched by time).",
+    help="Ground-truth pose file: KITTI (12 numbers a line, line k = scan k), TUM (stamp tx ty "
+    "tz qx qy qz qw), EuRoC/ASL CSV with its header, or a 4x4 matrix a pose on 4 lines "
+    "(element (3,3): 1 or the stamp [s]). Stamped poses are matched by time.",
 )
+POSE_FORMATS = ("auto", "kitti", "tum", "euroc", "matrix4")
+"""pipeline.evaluation.posefile.POSE_FORMATS (kept here so that --help imports no numpy)."""
 format_option = click.option(
-    "--poses-format", type=click.Choice(["auto", "kitti", "tum"]), default="auto",
-    show_default=True, help="Format of --poses (auto: by numbers a line).",
+    "--poses-format", type=click.Choice(POSE_FORMATS),
+    default="auto", show_default=True,
+    help="Format of --poses (auto: from the content, where that is unambiguous).",
 )
-calib_option = click.option(
-    "--calib", type=click.Path(path_type=Path), default=None,
-    help="KITTI calib.txt: its Tr turns KITTI camera poses into lidar poses.",
+extrinsic_option = click.option(
+    "--extrinsic", "--calib", "extrinsic", default=None,
+    help="T_x_lidar, LiDAR -> the frame the poses describe (KITTI's Tr): 12 or 16 numbers "
+    "(row-major), a file of them, or a KITTI calib.txt. The poses become inv(E) P E. Without "
+    "it, poses that move along the sensor's z axis (a camera's) get a warning.",
 )
+source_options = compose(
+    extrinsic_option,
+    name_option,
+    click.option("--sensor", default="unknown", show_default=True,
+                 help="Sensor name recorded in the sequence (e.g. os1_64, hdl32, vlp16)."),
+    click.option("--intensity", type=click.Choice(["auto", "keep"]), default="auto",
+                 show_default=True,
+                 help="auto: scale 0-255 or 0-65535 intensities to 0-1 (as KITTI's); keep: as "
+                 "recorded. The sequence's metadata says which."),
+)
+"""The options every recorded source takes: extrinsic, name, sensor, intensity."""
 recording_options = compose(
     out_option,
     click.option("--topic", default=None,
@@ -75,8 +92,7 @@ def kitti(
 @ingest.command("rosbag")
 @click.argument("bag", type=click.Path(path_type=Path))
 @recording_options
-@calib_option
-@name_option
+@source_options
 def rosbag(bag: Path, **options: Any) -> None:
     """ROS 1 .bag file or ROS 2 bag folder (sqlite3 or mcap storage)."""
     from pipeline.sources import ingest_rosbag
@@ -90,13 +106,14 @@ def rosbag(bag: Path, **options: Any) -> None:
 @poses_option
 @format_option
 @click.option("--times", type=click.Path(path_type=Path), default=None,
-              help="Stamps file (seconds, one a line); default: TUM stamps, else frame / --rate.")
+              help="Stamps file (seconds, one a line); default: file names that are stamps, "
+              "else the pose file's stamps, else frame / --rate.")
 @click.option("--rate", "rate_hz", type=float, default=10.0, show_default=True,
               help="Scan rate [Hz].")
-@calib_option
-@name_option
+@source_options
 def folder(folder: Path, **options: Any) -> None:
-    """Scan files (.bin / .pcd / .ply) of FOLDER in name order, one per frame."""
+    """Scan files (.bin / .pcd / .ply) of FOLDER, one a frame, in the order of the numbers in
+    their names (full2 before full10); names that allow no one order are refused."""
     from pipeline.sources import ingest_folder
 
     _done(ingest_folder(folder, **options))
@@ -105,7 +122,7 @@ def folder(folder: Path, **options: Any) -> None:
 @ingest.command("mcap")
 @click.argument("path", type=FILE)
 @recording_options
-@name_option
+@source_options
 def mcap(path: Path, **options: Any) -> None:
     """Any MCAP with PointCloud2 messages (cdr or ros1 encoding), e.g. a ROS 2 recording."""
     from pipeline.sources import ingest_mcap

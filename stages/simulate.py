@@ -37,14 +37,16 @@ _world_options = compose(
 
 def _spec(world: str, seed: int, frames: int, sensor: str, segments: str,
           kitti_trajectory: Path | None, noise: float | None = None,
-          dropout: float | None = None):  # type: ignore[no-untyped-def]
+          dropout: float | None = None,
+          motion_distortion: bool = False):  # type: ignore[no-untyped-def]
     """The SimSpec of the ``_world_options`` (and noise / dropout), checked."""
     from pipeline.sim.simulate import SimSpec
 
     if kitti_trajectory is not None and world == "cave":  # the default: switch to street
         world = "street"
     segs = tuple(s.strip() for s in segments.split(",") if s.strip())
-    spec = SimSpec(world, seed, frames, sensor, segs, kitti_trajectory, noise, dropout)
+    spec = SimSpec(world, seed, frames, sensor, segs, kitti_trajectory, noise, dropout,
+                   motion_distortion)
     spec.check()
     return spec
 
@@ -55,6 +57,9 @@ def _spec(world: str, seed: int, frames: int, sensor: str, segments: str,
 @click.option(
     "--dropout", type=float, default=None, help="Return dropout probability (default 0.01)."
 )
+@click.option("--motion-distortion", is_flag=True,
+              help="Sweep each scan over 1/rate s from the moving sensor (distorted, as real "
+              "scans) and store per-point time; default: instantaneous scans.")
 @click.option("--name", default=None, help="Sequence name (default: the file stem of --out).")
 @file_option("--out", help="Sequence MCAP to write (atomically).")
 def simulate(name: str | None, out: Path, **world: Any) -> None:

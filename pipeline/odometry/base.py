@@ -320,7 +320,10 @@ def run_streaming(
             odom = make(schedule.at(i))
         elif i in changes:
             odom.set_params(schedule.at(i))
-        poses.append(odom.step(scan.xyz, scan.stamp_ns))
+        if scan.time_s is not None and getattr(odom, "deskews", False):  # kiss_icp: per-point time
+            poses.append(odom.step(scan.xyz, scan.stamp_ns, time_s=scan.time_s))  # type: ignore[call-arg]
+        else:
+            poses.append(odom.step(scan.xyz, scan.stamp_ns))
         frames.append(scan.frame)
         stamps.append(scan.stamp_ns)
     if odom is None:

@@ -4,7 +4,10 @@ Parameters and baseline = KISS-ICP's own defaults (kiss_icp.config): ``max_range
 ``min_range`` 0 m, ``voxel_size`` = max_range / 100 = 1.0 m (KISS-ICP derives it from
 max_range when unset; we fix it at that value so the baseline is one point of the space),
 ``initial_threshold`` 2.0 m, ``min_motion_th`` 0.1 m, ``max_points_per_voxel`` 20.
-Not tuned (options): ``deskew`` (False: the sequence MCAP has no per-point times),
+Not tuned (options): ``deskew`` (False; True: KISS-ICP corrects each scan's motion distortion
+with its per-point times, where the sequence MCAP has them: the PointCloud2 field ``time``,
+kept by ``ingest`` from the drivers' ``t`` / ``time`` / ``timestamp`` / ``offset_time``, or
+written by ``simulate --motion-distortion``; a scan without them is registered as it is),
 ``max_num_threads`` (1), ``max_num_iterations`` (500), ``convergence_criterion`` (1e-4).
 
 Parameter changes (``set_params``) rebuild the KissICP object with the new configuration and
@@ -110,11 +113,18 @@ class KissOdometry:
             kiss.adaptive_threshold.update_model_deviation(dev)
         self.kiss, self.params = kiss, new
 
-    def step(self, points_lidar: NDArray[np.float32], stamp_ns: int) -> F64:
-        """Register one scan ((N, 3) float32 [m]); T_world_lidar (4, 4), the first is identity."""
+    deskews = True
+    """``run_streaming`` hands this odometry each scan's per-point times (``time_s``)."""
+
+    def step(self, points_lidar: NDArray[np.float32], stamp_ns: int,
+             time_s: NDArray[np.float32] | None = None) -> F64:
+        """Register one scan ((N, 3) float32 [m]; ``time_s`` (N,) per-point time [s], used
+        when the ``deskew`` option is on); T_world_lidar (4, 4), the first is identity."""
         pts = np.ascontiguousarray(np.asarray(points_lidar, dtype=np.float64)[:, :3])
         guess = self.kiss.last_pose @ self.kiss.last_delta
-        self.kiss.register_frame(pts, np.zeros(0))
+        use_time = self.options.deskew and time_s is not None and len(time_s) == len(pts)
+        times = np.asarray(time_s, np.float64) if use_time else np.zeros(0)
+        self.kiss.register_frame(pts, times)
         T = np.array(self.kiss.last_pose, dtype=np.float64)
         self.deviations.append(np.linalg.solve(guess, T))
         return T

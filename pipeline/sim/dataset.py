@@ -21,10 +21,11 @@ class SimulateSection(Section):
     """params.yaml section ``simulate``. Seeds derive from ``base.seed`` and the sequence name
     unless ``seed`` is given here."""
 
-    seed: int | None = None
+    seed: int | None = Field(None, ge=0)
     sensor: Literal["hdl32", "hdl64", "vlp16"] = "hdl32"
     range_noise_m: float = Field(0.02, ge=0.0, le=0.5)
     dropout: float = Field(0.01, ge=0.0, lt=1.0)
+    motion_distortion: bool = False
     train: dict[str, int] = Field(default_factory=lambda: {"cave": 4, "street": 4})
     train_frames: int = Field(350, ge=10)
     validation_count: int = Field(1, ge=0)
@@ -66,6 +67,7 @@ def dataset_specs(section: SimulateSection, base_seed: int) -> dict[str, tuple[s
             None,
             section.range_noise_m,
             section.dropout,
+            section.motion_distortion,
         )
 
     out: dict[str, tuple[str, SimSpec]] = {}

@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.errors import ConfigError
+from pipeline.geometry import inv_se3
 from pipeline.io_utils import refuse_input_as_output
 from pipeline.sequence import EnvLabel, Scan, SequenceInfo, SequenceWriter
 from pipeline.sim.raycast import Raycaster
@@ -32,12 +34,17 @@ class SimSpec:
     kitti_trajectory: Path | None = None
     range_noise_m: float | None = None
     dropout: float | None = None
+    motion_distortion: bool = False
+    """True: every scan is a sweep over 1 / rate_hz s from its stamp, points measured from the
+    moving sensor, with per-point time (Raycaster.sweep); False: instantaneous scans."""
 
     def sensor_model(self) -> SensorModel:
         return get_sensor(self.sensor).with_noise(self.range_noise_m, self.dropout)
 
     def check(self) -> None:
-        """ConfigError for an unknown world / sensor / segment or a bad frame count."""
+        """ConfigError for an unknown world / sensor / segment, a bad frame count or seed."""
+        if not 0 <= self.seed < 2**63:
+            raise ConfigError(f"seed must be an integer in [0, 2^63), got {self.seed}")
         self.sensor_model()
         check_world_args(self.world, self.frames, self.segments, self.kitti_trajectory)
 
@@ -84,15 +91,24 @@ def make_world(spec: SimSpec) -> World:
 
 
 def iter_scans(
-    world: World, sensor: SensorModel, seed: int, frames: range | None = None
+    world: World, sensor: SensorModel, seed: int, frames: range | None = None,
+    motion_distortion: bool = False,
 ) -> Iterator[Scan]:
     """Ray-cast scans of ``world``; frame k's noise comes from the seed (seed, 1, k) alone,
-    so any frame can be reproduced without the ones before it."""
+    so any frame can be reproduced without the ones before it. With ``motion_distortion``
+    each scan is a sweep from pose k to pose k + 1 (the last one continues the motion before
+    it), with per-point time; the ground truth is the pose at the stamp, the sweep's start."""
     caster = Raycaster(world.vertices, world.triangles, sensor)
+    T_all = world.poses.T_world_lidar
     for k in frames if frames is not None else range(world.frames):
-        T = world.poses.T_world_lidar[k]
-        pts = caster.scan(T, np.random.default_rng([seed, 1, k]))
-        yield Scan(k, int(world.poses.stamps_ns[k]), pts, T)
+        T = T_all[k]
+        rng = np.random.default_rng([seed, 1, k])
+        if not motion_distortion:
+            yield Scan(k, int(world.poses.stamps_ns[k]), caster.scan(T, rng), T)
+            continue
+        T_end = T_all[k + 1] if k + 1 < len(T_all) else T @ inv_se3(T_all[k - 1]) @ T
+        pts, time_s = caster.sweep(T, T_end, rng)
+        yield Scan(k, int(world.poses.stamps_ns[k]), pts, T, time_s)
 
 
 def simulate_sequence(
@@ -120,9 +136,9 @@ def simulate_sequence(
     )
     points = 0
     with SequenceWriter(out_path, info) as w:
-        scans = iter_scans(world, sensor, spec.seed)
+        scans = iter_scans(world, sensor, spec.seed, motion_distortion=spec.motion_distortion)
         for scan in tqdm(scans, total=world.frames, desc=name, disable=not progress, leave=False):
-            w.add(scan.stamp_ns, scan.points_lidar, scan.T_world_lidar)
+            w.add(scan.stamp_ns, scan.points_lidar, scan.T_world_lidar, scan.time_s)
             points += len(scan.points_lidar)
     length = float(
         np.linalg.norm(np.diff(world.poses.T_world_lidar[:, :3, 3], axis=0), axis=1).sum()
@@ -140,7 +156,10 @@ def _extra(spec: SimSpec, world: World) -> dict[str, str]:
         "range_noise_m": str(spec.sensor_model().range_noise_m),
         "dropout": str(spec.sensor_model().dropout),
         "mesh_triangles": str(len(world.triangles)),
-        "motion_distortion": "none (instantaneous scans)",
+        "motion_distortion": (
+            f"sweep: points fired over 1/{spec.sensor_model().rate_hz:g} s from the stamp, "
+            "per-point time [s] in the PointCloud2 field 'time'"
+            if spec.motion_distortion else "none (instantaneous scans)"),
     }
 
 
@@ -155,7 +174,8 @@ def spec_of(info: SequenceInfo) -> SimSpec | None:
     segments = tuple(s for s in extra.get("segments", "").split(",") if s) or DEFAULT_SEGMENTS
     return SimSpec(extra["world"], int(extra["seed"]), info.frame_count,
                    extra.get("sensor_model", "hdl32"), segments, None,
-                   float(extra["range_noise_m"]), float(extra["dropout"]))
+                   float(extra["range_noise_m"]), float(extra["dropout"]),
+                   extra.get("motion_distortion", "none").startswith("sweep"))
 
 
 def world_points(scan: Scan) -> NDArray[np.float64]:

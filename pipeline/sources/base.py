@@ -9,12 +9,13 @@ input file, and any error leaves no output file behind (the writer is atomic).
 
 from __future__ import annotations
 
+import itertools
 import logging
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar, Protocol, runtime_checkable
+from typing import ClassVar, Literal, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,13 +33,16 @@ class Frame:
 
     stamp_ns: sensor time [ns]; points_lidar: (N, 3) or (N, 4) float32 x, y, z [m] (+ intensity)
     in the sensor frame, possibly with non-finite rows; T_world_lidar: (4, 4) ground truth or
-    None; what: where it came from, for error messages (a file, or ``bag topic #k``).
+    None; what: where it came from, for error messages (a file, or ``bag topic #k``);
+    time_s: (N,) per-point time [s] relative to ``stamp_ns`` (pipeline.sources.pointtime), or
+    None.
     """
 
     stamp_ns: int
     points_lidar: NDArray[np.float32]
     T_world_lidar: NDArray[np.float64] | None
     what: str
+    time_s: NDArray[np.float32] | None = None
 
 
 @runtime_checkable
@@ -75,19 +79,57 @@ class IngestReport:
     seconds: float
 
 
-def write_sequence(source: Source, out: str | Path) -> IngestReport:
-    """Stream every frame of ``source`` into the sequence MCAP ``out`` (atomically)."""
+IntensityMode = Literal["auto", "keep"]
+
+
+def intensity_scale(first_points: NDArray[np.float32], what: str) -> tuple[float, str]:
+    """(factor, what was done) for the intensities of a sequence, from its first scan.
+
+    KITTI reflectance is 0-1; many drivers and PCD files give 0-255 (8 bit) or 0-65535
+    (16 bit). Those are scaled to 0-1, so every sequence has one intensity range.
+    """
+    finite = first_points[:, 3][np.isfinite(first_points[:, 3])]
+    top = float(finite.max()) if finite.size else 0.0
+    if finite.size and finite.min() < 0:
+        return 1.0, "kept as recorded (negative values: not a 0-1, 0-255 or 0-65535 range)"
+    if top <= 1.0:
+        return 1.0, "0-1 as recorded"
+    if top <= 255.0:
+        return 1 / 255, "0-255 scaled to 0-1 (x 1/255)"
+    if top <= 65535.0:
+        return 1 / 65535, "0-65535 scaled to 0-1 (x 1/65535)"
+    log.warning("%s: intensities up to %.3g, not a known range: kept as recorded", what, top)
+    return 1.0, f"kept as recorded (up to {top:.3g}, not a known range)"
+
+
+def write_sequence(source: Source, out: str | Path,
+                   intensity: IntensityMode = "auto") -> IngestReport:
+    """Stream every frame of ``source`` into the sequence MCAP ``out`` (atomically).
+
+    ``intensity``: "auto" scales 0-255 or 0-65535 intensities to 0-1 (``intensity_scale``,
+    decided on the first scan), "keep" writes them as recorded; the metadata says which
+    (``x.intensity``), and whether the scans carry per-point time (``x.point_time``).
+    """
     from tqdm import tqdm
 
     t0 = time.perf_counter()
     out = Path(out)
     refuse_input_as_output(out, source.inputs)
+    frames_iter = iter(source.frames())
+    first = next(frames_iter, None)
+    if first is None:
+        raise InputError(f"{source.sequence_info().name}: no frames to write")
     info = source.sequence_info()
+    scale, note = (intensity_scale(_as_points(first), first.what) if intensity == "auto"
+                   else (1.0, "kept as recorded (--intensity keep)"))
+    info.extra["intensity"] = note
+    info.extra["point_time"] = ("per-point time [s] in the PointCloud2 field 'time'"
+                                if first.time_s is not None else "none")
     points = dropped = 0
     with_gt: bool | None = None
     with SequenceWriter(out, info) as writer:
         bar = tqdm(
-            source.frames(),
+            itertools.chain([first], frames_iter),
             total=source.expected_frames(),
             unit="scan",
             desc=f"ingest {info.name}",
@@ -104,9 +146,15 @@ def write_sequence(source: Source, out: str | Path) -> IngestReport:
                     f"{frame.what}: has {'a' if has_gt else 'no'} ground-truth pose "
                     f"unlike the frames before it"
                 )
+            if (frame.time_s is None) != (first.time_s is None):
+                raise InputError(f"{frame.what}: has {'no ' if frame.time_s is None else ''}"
+                                 "per-point time unlike the frames before it")
+            if scale != 1.0 and pts.shape[1] == 4:
+                pts = pts.copy()
+                pts[:, 3] = np.minimum(pts[:, 3] * np.float32(scale), np.float32(1.0))
             before = writer.dropped_points
             try:  # the writer drops and counts non-finite points, refuses an empty scan
-                writer.add(frame.stamp_ns, pts, frame.T_world_lidar)
+                writer.add(frame.stamp_ns, pts, frame.T_world_lidar, frame.time_s)
             except InputError as exc:
                 raise InputError(f"{frame.what}: {exc}") from None
             n_bad = writer.dropped_points - before

@@ -1,13 +1,18 @@
-"""A folder of scan files (.bin / .pcd / .ply) in name order, with an optional pose file.
+"""A folder of scan files (.bin / .pcd / .ply), one a frame, with an optional pose file.
 
-Stamps: a TUM pose file gives them (one pose per scan, line k = scan k); else a times file
-(seconds, one a line, as KITTI's times.txt); else frame k is at k / rate_hz seconds.
-A KITTI pose file (no stamps) must hold one pose per scan; with ``calib`` (a KITTI calib.txt)
-its camera poses become lidar poses (inv(Tr) P Tr), without it they are T_world_lidar as is.
+Order: by the numbers in the file names (pipeline.sources.ordering; ambiguous names are
+refused). Stamps, the first that applies: a times file (seconds, one a line, as KITTI's
+times.txt); file names that are stamps; a stamped pose file (TUM, EuRoC, a 4x4 block with
+stamps), one pose per scan in order; else frame k is at k / rate_hz seconds.
+Ground truth: a pose file of any format pipeline.evaluation.posefile reads; with stamps it is
+matched by time when the scans' stamps come from elsewhere, without stamps pose k is scan k.
+``extrinsic`` (E = T_x_lidar, e.g. KITTI's Tr) turns poses of another frame into LiDAR poses;
+without it a ground truth that moves along the sensor's z axis gets a warning.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from pathlib import Path
 from typing import ClassVar
@@ -16,21 +21,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError, InputError
+from pipeline.evaluation.posefile import PoseFile, PoseFormat, read_pose_file
 from pipeline.sequence import SequenceInfo
-from pipeline.sources.base import Frame, IngestReport, write_sequence
-from pipeline.sources.kitti import read_times
-from pipeline.sources.poses import (
-    PoseFormat,
-    camera_to_lidar,
-    check_count,
-    read_kitti_calib,
-    read_pose_file,
-)
-from pipeline.sources.scanfiles import SCAN_SUFFIXES, read_scan
+from pipeline.sources.base import Frame, IngestReport, IntensityMode, write_sequence
+from pipeline.sources.ordering import name_stamps_ns, natural_order
+from pipeline.sources.pointtime import relative_times_s
+from pipeline.sources.poses import check_count, lidar_ground_truth
+from pipeline.sources.scanfiles import SCAN_SUFFIXES, read_scan, scan_files
+from pipeline.stamps import read_times
 
 
 class FolderSource:
-    """Scans of a folder, one file a frame, sorted by file name."""
+    """Scans of a folder, one file a frame, in the natural order of their names."""
 
     name: ClassVar[str] = "folder"
 
@@ -40,7 +42,7 @@ class FolderSource:
         poses: str | Path | None = None,
         poses_format: PoseFormat = "auto",
         times: str | Path | None = None,
-        calib: str | Path | None = None,
+        extrinsic: str | Path | None = None,
         rate_hz: float = 10.0,
         name: str | None = None,
         sensor: str = "unknown",
@@ -48,60 +50,54 @@ class FolderSource:
         self.folder = Path(folder)
         if not self.folder.is_dir():
             raise InputError(f"{self.folder}: no such folder")
-        self.files = sorted(p for p in self.folder.iterdir() if p.suffix.lower() in SCAN_SUFFIXES)
-        if not self.files:
-            raise InputError(f"{self.folder}: no scan files ({', '.join(SCAN_SUFFIXES)})")
-        kinds = {p.suffix.lower() for p in self.files}
+        files = scan_files(self.folder, SCAN_SUFFIXES)
+        kinds = {p.suffix.lower() for p in files}
         if len(kinds) > 1:
             raise InputError(f"{self.folder}: mixed scan file types {sorted(kinds)}; keep one kind")
-        if rate_hz <= 0:
-            raise ConfigError(f"rate must be > 0 Hz, got {rate_hz}")
+        self.files = natural_order(files, str(self.folder))
+        if not (math.isfinite(rate_hz) and rate_hz > 0):
+            raise ConfigError(f"--rate must be a finite number > 0 Hz, got {rate_hz}")
         self.seq_name = name or self.folder.name
         self.sensor = sensor
-        self.stamps_ns, self.T_world_lidar = self._stamps_and_poses(
-            poses, poses_format, times, calib, rate_hz
-        )
-        self.inputs = tuple(Path(p) for p in (*self.files, poses, times, calib) if p is not None)
+        pf = read_pose_file(poses, poses_format) if poses is not None else None
+        self.stamps_ns, self.stamps_from = self._stamps(pf, times, rate_hz)
+        gt = lidar_ground_truth(None, pf, extrinsic, len(self.files), str(self.folder))
+        self.T_world_lidar = None if gt is None else gt.all_at(self.stamps_ns)
+        self.inputs = tuple(Path(p) for p in (*self.files, poses, times, extrinsic)
+                            if p is not None and Path(p).exists())
 
-    def _stamps_and_poses(
-        self,
-        poses: str | Path | None,
-        fmt: PoseFormat,
-        times: str | Path | None,
-        calib: str | Path | None,
-        rate_hz: float,
-    ) -> tuple[NDArray[np.int64], NDArray[np.float64] | None]:
+    def _stamps(self, pf: PoseFile | None, times: str | Path | None,
+                rate_hz: float) -> tuple[NDArray[np.int64], str]:
         n = len(self.files)
-        pf = read_pose_file(poses, fmt) if poses is not None else None
-        if pf is not None:
-            check_count(pf, n, str(self.folder))
         if times is not None:
-            stamps = read_times(Path(times), n)
-        elif pf is not None and pf.stamps_ns is not None:
-            stamps = pf.stamps_ns
-        else:
-            stamps = np.round(np.arange(n) * (1e9 / rate_hz)).astype(np.int64)
-        if pf is None:
-            return stamps, None
-        T = pf.T_world_x
-        if calib is not None:
-            T = camera_to_lidar(T, read_kitti_calib(calib))
-        return stamps, T
+            return read_times(Path(times), n), f"times file {Path(times).name}"
+        from_names = name_stamps_ns(self.files)
+        if from_names is not None:
+            if np.any(np.diff(from_names) <= 0):
+                raise InputError(f"{self.folder}: two scan files have the same stamp name")
+            return from_names, "file names"
+        if pf is not None and pf.stamps_ns is not None:
+            check_count(pf, n, str(self.folder))
+            return pf.stamps_ns, f"pose file {pf.path.name}"
+        return np.round(np.arange(n) * (1e9 / rate_hz)).astype(np.int64), f"{rate_hz:g} Hz"
 
     def sequence_info(self) -> SequenceInfo:
-        return SequenceInfo(name=self.seq_name, sensor=self.sensor, source=f"folder:{self.folder}")
+        return SequenceInfo(name=self.seq_name, sensor=self.sensor,
+                            source=f"folder:{self.folder}",
+                            extra={"stamps": self.stamps_from, "order": "natural (file names)"})
 
     def expected_frames(self) -> int:
         return len(self.files)
 
     def frames(self) -> Iterator[Frame]:
         for k, path in enumerate(self.files):
-            yield Frame(
-                int(self.stamps_ns[k]),
-                read_scan(path),
-                None if self.T_world_lidar is None else self.T_world_lidar[k],
-                str(path),
-            )
+            scan = read_scan(path)
+            stamp = int(self.stamps_ns[k])
+            times = (None if scan.time is None or scan.time_field is None
+                     else relative_times_s(scan.time, scan.time_field, stamp, str(path)))
+            yield Frame(stamp, scan.points,
+                        None if self.T_world_lidar is None else self.T_world_lidar[k],
+                        str(path), times)
 
 
 def ingest_folder(
@@ -110,11 +106,14 @@ def ingest_folder(
     poses: str | Path | None = None,
     poses_format: PoseFormat = "auto",
     times: str | Path | None = None,
-    calib: str | Path | None = None,
+    extrinsic: str | Path | None = None,
     rate_hz: float = 10.0,
     name: str | None = None,
+    sensor: str = "unknown",
+    intensity: IntensityMode = "auto",
 ) -> IngestReport:
-    """Scan files of ``folder`` (name order) + optional pose file -> sequence MCAP ``out``."""
+    """Scan files of ``folder`` (natural name order) + optional pose file -> MCAP ``out``."""
     return write_sequence(
-        FolderSource(folder, poses, poses_format, times, calib, rate_hz, name), out
+        FolderSource(folder, poses, poses_format, times, extrinsic, rate_hz, name, sensor), out,
+        intensity,
     )

@@ -15,25 +15,24 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError, InputError
+from pipeline.evaluation.posefile import read_pose_file
 from pipeline.sequence import SequenceInfo
 from pipeline.sources.base import Frame, IngestReport, write_sequence
-from pipeline.sources.poses import camera_to_lidar, check_count, read_kitti_calib, read_pose_file
-from pipeline.sources.scanfiles import read_bin
+from pipeline.sources.ordering import natural_order
+from pipeline.sources.poses import check_count, read_kitti_calib, to_lidar_frame
+from pipeline.sources.scanfiles import read_bin, scan_files
+from pipeline.stamps import read_times
 
 
-def read_times(path: Path, n_scans: int) -> NDArray[np.int64]:
-    """(n_scans,) stamps [ns] from a KITTI times.txt (seconds, one a line)."""
-    if not path.is_file():
-        raise InputError(f"{path}: no such times file")
-    try:
-        t_s = np.loadtxt(path, dtype=np.float64, ndmin=1)
-    except ValueError as exc:
-        raise InputError(f"{path}: malformed times file ({exc})") from None
-    if len(t_s) != n_scans:
-        raise InputError(f"{path}: {len(t_s)} stamps for {n_scans} scans")
-    if not np.isfinite(t_s).all() or np.any(np.diff(t_s) <= 0):
-        raise InputError(f"{path}: stamps must be finite and strictly increasing")
-    return np.round(t_s * 1e9).astype(np.int64)
+def _check_numbering(velodyne: Path, bins: list[Path]) -> None:
+    """KITTI scans are 000000.bin .. N-1: line k of times.txt and of the pose file is scan k,
+    so a gap (or another name) would pair scans with the wrong stamps and poses."""
+    for k, path in enumerate(bins):
+        if not path.stem.isdigit() or int(path.stem) != k:
+            raise InputError(
+                f"{velodyne}: scan {k} is {path.name}, expected {k:06d}.bin (KITTI numbers "
+                "scans 0..N-1 without gaps: line k of times.txt and of the poses is scan k)"
+            )
 
 
 class KittiSource:
@@ -58,9 +57,8 @@ class KittiSource:
             raise InputError(
                 f"{velodyne}: no such folder (expected ROOT/sequences/{self.seq}/velodyne)"
             )
-        all_bins = sorted(velodyne.glob("*.bin"))
-        if not all_bins:
-            raise InputError(f"{velodyne}: no .bin scans")
+        all_bins = natural_order(scan_files(velodyne, (".bin",)), str(velodyne))
+        _check_numbering(velodyne, all_bins)
         n = len(all_bins)
         self.start = 0 if start is None else int(start)
         self.end = n - 1 if end is None else int(end)
@@ -82,7 +80,7 @@ class KittiSource:
             return None
         poses = read_pose_file(path, "kitti")
         check_count(poses, n, str(self.dir / "velodyne"))
-        return camera_to_lidar(poses.T_world_x[self.start : self.end + 1], self.Tr)
+        return to_lidar_frame(poses.T_world_x[self.start : self.end + 1], self.Tr)
 
     def sequence_info(self) -> SequenceInfo:
         return SequenceInfo(

@@ -14,18 +14,18 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from pipeline.errors import ConfigError, InputError
-from pipeline.ros2_cdr import cloud_to_xyzi
+from pipeline.evaluation.posefile import PoseFormat, read_pose_file
 from pipeline.sequence import SequenceInfo
-from pipeline.sources.base import Frame, IngestReport, write_sequence
-from pipeline.sources.poses import PoseFormat, check_count, read_pose_file
-from pipeline.sources.rosbag import GroundTruth, pick_topic
+from pipeline.sources.base import Frame, IngestReport, IntensityMode, write_sequence
+from pipeline.sources.poses import GroundTruth, lidar_ground_truth
+from pipeline.sources.rosbag import pick_topic
 from pipeline.sources.rosmsg import (
     POINTCLOUD2_TYPES,
     POSE_TYPES,
+    cloud_frame,
     collect_poses,
     normalise_type,
     poses_of,
-    stamp_ns,
 )
 
 ENCODINGS = ("cdr", "ros1")
@@ -87,14 +87,13 @@ class _Decoder:
             return self.store.deserialize_cdr(data, self.msgtype)
         return self.store.deserialize_ros1(data, self.msgtype)
 
-    def cloud(self, data: bytes, log_ns: int, what: str) -> tuple[int, Any]:
-        """(stamp_ns, (N, 4) float32 points) of a PointCloud2 message."""
+    def checked(self, data: bytes, what: str) -> Any:
+        """The deserialised message; InputError naming ``what`` for bytes that are not one."""
         try:
-            msg = self.message(data)
+            return self.message(data)
         except Exception as exc:
             raise InputError(f"{what}: not a valid {self.msgtype} message "
                              f"({type(exc).__name__}: {exc})") from None
-        return stamp_ns(msg, log_ns), cloud_to_xyzi(msg, what)
 
 
 class McapSource:
@@ -110,13 +109,15 @@ class McapSource:
         gt_child_frame: str | None = None,
         poses: str | Path | None = None,
         poses_format: PoseFormat = "auto",
+        extrinsic: str | Path | None = None,
         name: str | None = None,
         sensor: str = "unknown",
     ) -> None:
         if gt_topic is not None and poses is not None:
             raise ConfigError("give either --gt-topic or --poses, not both")
         self.path = Path(path)
-        self.inputs = tuple(Path(p) for p in (path, poses) if p is not None)
+        self.inputs = tuple(Path(p) for p in (path, poses, extrinsic)
+                            if p is not None and Path(p).exists())
         self.seq_name = name or self.path.stem
         self.sensor = sensor
         self.gt: GroundTruth | None = None
@@ -138,11 +139,9 @@ class McapSource:
                     available, gt_topic, POSE_TYPES, str(self.path), "a pose, odometry or TF"
                 )
                 self.gt = self._topic_poses(reader, summary, channels[gt_topic], gt_child_frame)
-        if poses is not None:
-            pf = read_pose_file(poses, poses_format)
-            if pf.stamps_ns is None:
-                check_count(pf, self.count or 0, f"{self.path} {self.topic}")
-            self.gt = GroundTruth.from_file(pf, None)
+        pf = read_pose_file(poses, poses_format) if poses is not None else None
+        self.gt = lidar_ground_truth(self.gt, pf, extrinsic, self.count or 0,
+                                     f"{self.path} {self.topic}")
 
     def _topic_poses(
         self, reader: Any, summary: Any, channel: Any, child_frame: str | None
@@ -169,8 +168,7 @@ class McapSource:
         with open_mcap(self.path) as (reader, _):
             for k, (_, _, msg) in enumerate(reader.iter_messages(topics=[self.topic])):
                 what = f"{self.path} {self.topic} message {k}"
-                stamp, pts = dec.cloud(msg.data, msg.log_time, what)
-                yield Frame(stamp, pts, None if self.gt is None else self.gt.at(k, stamp), what)
+                yield cloud_frame(dec.checked(msg.data, what), msg.log_time, k, self.gt, what)
 
 
 def ingest_mcap(
@@ -181,9 +179,13 @@ def ingest_mcap(
     gt_child_frame: str | None = None,
     poses: str | Path | None = None,
     poses_format: PoseFormat = "auto",
+    extrinsic: str | Path | None = None,
     name: str | None = None,
+    sensor: str = "unknown",
+    intensity: IntensityMode = "auto",
 ) -> IngestReport:
     """PointCloud2 scans of any MCAP + optional ground truth -> sequence MCAP ``out``."""
     return write_sequence(
-        McapSource(path, topic, gt_topic, gt_child_frame, poses, poses_format, name), out
+        McapSource(path, topic, gt_topic, gt_child_frame, poses, poses_format, extrinsic, name,
+                   sensor), out, intensity,
     )

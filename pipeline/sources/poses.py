@@ -1,90 +1,36 @@
-"""Ground-truth pose files and time matching.
+"""Ground truth for the scans: pose files in the LiDAR frame, time matching, a frame check.
 
-- KITTI pose file: one pose a line, 12 numbers (row-major 3x4), no time; line k = frame k.
-- TUM pose file: ``stamp_s tx ty tz qx qy qz qw`` a line, ``#`` comments; matched by time.
-- KITTI calib.txt: ``Tr`` (velodyne -> camera 0, 3x4); T_world_lidar = inv(Tr) @ P @ Tr.
-Stamped poses (TUM, or pose / odometry / TF topics) are interpolated to the scan stamps
-(linear in translation, slerp in rotation); a scan outside the poses' time span is an error.
+- Pose files (every format of pipeline.evaluation.posefile): without stamps pose k is scan k
+  (the counts must match); stamped poses are interpolated to the scan stamps (linear in
+  translation, slerp in rotation); a scan outside the poses' time span is an error.
+- The extrinsic E = T_x_lidar (LiDAR -> the frame x the poses describe; KITTI's ``Tr``:
+  velodyne -> camera 0) turns poses of x into LiDAR poses: T_world_lidar = inv(E) @ P @ E.
+  It is given as 12 or 16 numbers, a file of them, or a KITTI calib.txt (its ``Tr`` line).
+- ``warn_if_not_lidar_frame``: LiDAR frames are x forward, z up; when the ground truth moves
+  mostly along the sensor's z axis the poses are likely a camera's (z forward): one warning.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from decimal import Decimal
+import logging
+import re
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
-from pipeline.geometry import interpolate_rotations, inv_se3, pose_from_xyz_quat
+from pipeline.evaluation.posefile import PoseFile
+from pipeline.geometry import interpolate_rotations, inv_se3, refuse_non_rotations
 
-PoseFormat = Literal["kitti", "tum", "auto"]
+log = logging.getLogger(__name__)
+
 MATCH_TOLERANCE_NS = 10_000_000
 """A scan up to 10 ms outside the poses' time span takes the nearest end pose."""
 MAX_GAP_NS = 1_000_000_000
 """Two poses further apart than 1 s are not interpolated between."""
-
-
-@dataclass(frozen=True)
-class PoseFile:
-    """Poses read from a file: (M, 4, 4) ``T_world_x``, ``stamps_ns`` (M,) or None (KITTI)."""
-
-    path: Path
-    format: str
-    T_world_x: NDArray[np.float64]
-    stamps_ns: NDArray[np.int64] | None
-
-
-def _numbers(path: Path) -> list[tuple[int, list[float], str]]:
-    """(line number, values, first token) of the non-empty, non-comment lines of a text file."""
-    if not path.is_file():
-        raise InputError(f"{path}: no such pose file")
-    rows = []
-    for k, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
-        text = line.split("#", 1)[0].replace(",", " ").strip()
-        if not text:
-            continue
-        try:
-            rows.append((k, [float(v) for v in text.split()], text.split()[0]))
-        except ValueError:
-            raise InputError(
-                f"{path} line {k}: not a list of numbers: {line.strip()[:60]!r}"
-            ) from None
-    if not rows:
-        raise InputError(f"{path}: no poses in the file")
-    return rows
-
-
-def read_pose_file(path: str | Path, fmt: PoseFormat = "auto") -> PoseFile:
-    """Read a KITTI (12 numbers a line) or TUM (8 numbers a line) pose file."""
-    path = Path(path)
-    rows = _numbers(path)
-    kind = {12: "kitti", 8: "tum"}.get(len(rows[0][1]), "kitti") if fmt == "auto" else fmt
-    width = 12 if kind == "kitti" else 8
-    for k, vals, _ in rows:
-        if len(vals) != width:
-            raise InputError(
-                f"{path} line {k}: expected {width} numbers ({kind} pose file), got {len(vals)}"
-            )
-    arr = np.array([v for _, v, _ in rows], dtype=np.float64)
-    if not np.isfinite(arr).all():
-        k = rows[int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])][0]
-        raise InputError(f"{path} line {k}: pose is not finite")
-    if kind == "kitti":
-        T = np.tile(np.eye(4), (len(arr), 1, 1))
-        T[:, :3, :] = arr.reshape(-1, 3, 4)
-        return PoseFile(path, kind, T, None)
-    stamps = np.array([_seconds_to_ns(tok) for _, _, tok in rows], np.int64)
-    if np.any(np.diff(stamps) <= 0):
-        raise InputError(f"{path}: TUM stamps are not strictly increasing")
-    return PoseFile(path, kind, pose_from_xyz_quat(arr[:, 1:4], arr[:, 4:8]), stamps)
-
-
-def _seconds_to_ns(token: str) -> int:
-    """Exact ns of a decimal seconds string (a float64 would lose ~200 ns at epoch times)."""
-    return int((Decimal(token) * 1_000_000_000).to_integral_value())
+Z_MOTION_SHARE = 0.7
+"""Warn when more than this share of the path runs along the sensor's z axis."""
 
 
 def read_kitti_calib(path: str | Path) -> NDArray[np.float64]:
@@ -107,11 +53,59 @@ def read_kitti_calib(path: str | Path) -> NDArray[np.float64]:
     raise InputError(f"{path}: no 'Tr' (velodyne -> camera) line in the calibration file")
 
 
-def camera_to_lidar(
-    T_world_cam: NDArray[np.float64], Tr: NDArray[np.float64]
+def read_extrinsic(value: str | Path) -> NDArray[np.float64]:
+    """(4, 4) E = T_x_lidar from 12 or 16 numbers (row-major, space or comma separated), a file
+    holding them, or a KITTI calib.txt (its ``Tr`` line)."""
+    text = str(value)
+    source = "--extrinsic"
+    path = Path(text)
+    if not re.fullmatch(r"[\s,0-9eE.+-]+", text):
+        if not path.is_file():
+            raise InputError(f"{text}: --extrinsic is neither 12 or 16 numbers nor a file")
+        content = path.read_text(encoding="utf-8", errors="replace")
+        if re.search(r"^\s*(Tr|Tr_velo_to_cam)\s*:", content, re.MULTILINE):
+            return read_kitti_calib(path)
+        text, source = content, str(path)
+    try:
+        vals = [float(v) for v in re.split(r"[\s,]+", text.strip()) if v]
+    except ValueError:
+        raise InputError(f"{source}: an extrinsic is 12 or 16 numbers") from None
+    if len(vals) not in (12, 16) or not np.isfinite(vals).all():
+        raise InputError(f"{source}: an extrinsic is 12 or 16 finite numbers (row-major 3x4 "
+                         f"or 4x4), got {len(vals)}")
+    E = np.eye(4)
+    E[: len(vals) // 4] = np.reshape(vals, (-1, 4))
+    if len(vals) == 16 and not np.allclose(E[3], [0, 0, 0, 1]):
+        raise InputError(f"{source}: the last row of a 4x4 extrinsic must be 0 0 0 1")
+    refuse_non_rotations(E[None, :3, :3], f"{source}: extrinsic")
+    return E
+
+
+def to_lidar_frame(
+    T_world_x: NDArray[np.float64], E: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """KITTI ground truth in the lidar frame: inv(Tr) @ P @ Tr for (..., 4, 4) camera poses P."""
-    return inv_se3(Tr) @ T_world_cam @ Tr
+    """LiDAR poses inv(E) @ P @ E of (..., 4, 4) poses P of frame x, E = T_x_lidar (KITTI:
+    camera poses and Tr)."""
+    return inv_se3(E) @ T_world_x @ E
+
+
+def warn_if_not_lidar_frame(T_world_lidar: NDArray[np.float64], what: str) -> bool:
+    """Log one warning (and return True) when the ground truth moves mostly along the sensor's
+    z axis: more than Z_MOTION_SHARE of a path of 1 m or more."""
+    if len(T_world_lidar) < 2:
+        return False
+    step = np.diff(T_world_lidar[:, :3, 3], axis=0)
+    local = np.einsum("nji,nj->ni", T_world_lidar[:-1, :3, :3], step)  # R^T d: sensor frame
+    path = np.linalg.norm(local, axis=1).sum()
+    if path < 1.0:
+        return False
+    share = float(np.abs(local[:, 2]).sum() / np.abs(local).sum())
+    if share <= Z_MOTION_SHARE:
+        return False
+    log.warning("%s: the ground truth moves mostly along the sensor's z axis (%.0f %% of the "
+                "motion): camera-frame poses (z forward)? give the LiDAR extrinsic with "
+                "--extrinsic or --calib", what, 100 * share)
+    return True
 
 
 def check_count(poses: PoseFile, n_scans: int, scans_what: str) -> None:
@@ -120,6 +114,50 @@ def check_count(poses: PoseFile, n_scans: int, scans_what: str) -> None:
         raise InputError(
             f"{poses.path}: {len(poses.T_world_x)} poses for {n_scans} scans in {scans_what}"
         )
+
+
+class GroundTruth:
+    """Per-scan ground truth T_world_lidar from stamped poses (interpolated) or poses without
+    stamps (pose k = scan k)."""
+
+    def __init__(
+        self, what: str, stamps_ns: NDArray[np.int64] | None, T: NDArray[np.float64]
+    ) -> None:
+        self.what, self.stamps_ns, self.T = what, stamps_ns, T
+
+    def at(self, frame: int, stamp: int) -> NDArray[np.float64]:
+        if self.stamps_ns is None:
+            return self.T[frame]
+        return interpolate_poses(np.array([stamp], np.int64), self.stamps_ns, self.T, self.what)[0]
+
+    def all_at(self, stamps_ns: NDArray[np.int64]) -> NDArray[np.float64]:
+        """(N, 4, 4) poses of the scans at ``stamps_ns`` (N,)."""
+        if self.stamps_ns is None:
+            return self.T[: len(stamps_ns)]
+        return interpolate_poses(stamps_ns, self.stamps_ns, self.T, self.what)
+
+
+
+def lidar_ground_truth(
+    from_topic: GroundTruth | None, pose_file: PoseFile | None, extrinsic: str | Path | None,
+    n_scans: int | None, scans_what: str,
+) -> GroundTruth | None:
+    """The ground truth of a source in the LiDAR frame: a pose file's (checked against the
+    ``n_scans`` scans when it has no stamps), else a topic's; ``extrinsic``
+    (``read_extrinsic``) applied, or the camera-frame warning when there is none."""
+    gt = from_topic
+    if pose_file is not None:
+        if pose_file.stamps_ns is None and n_scans is not None:
+            check_count(pose_file, n_scans, scans_what)
+        gt = GroundTruth(str(pose_file.path), pose_file.stamps_ns, pose_file.T_world_x)
+    if extrinsic is not None:
+        E = read_extrinsic(extrinsic)
+        if gt is None:
+            raise InputError(f"{scans_what}: --extrinsic without a ground truth to apply it to")
+        return GroundTruth(gt.what, gt.stamps_ns, to_lidar_frame(gt.T, E))
+    if gt is not None:
+        warn_if_not_lidar_frame(gt.T, gt.what)
+    return gt
 
 
 def interpolate_poses(
@@ -170,24 +208,3 @@ def interpolate_poses(
     )
     out[exact] = T[hi[exact]]
     return out
-
-
-def ground_truth_for(
-    stamps_ns: list[int] | NDArray[np.int64],
-    poses: PoseFile,
-    scans_what: str,
-    Tr: NDArray[np.float64] | None = None,
-) -> NDArray[np.float64]:
-    """(N, 4, 4) T_world_lidar of the scans at ``stamps_ns`` from a pose file.
-
-    KITTI files: line k is scan k (the counts must match). TUM files: matched by time.
-    ``Tr`` (4, 4), when given, turns camera poses into lidar poses (inv(Tr) @ P @ Tr).
-    """
-    if poses.stamps_ns is None:
-        check_count(poses, len(stamps_ns), scans_what)
-        T = poses.T_world_x
-    else:
-        T = interpolate_poses(
-            np.asarray(stamps_ns, np.int64), poses.stamps_ns, poses.T_world_x, str(poses.path)
-        )
-    return camera_to_lidar(T, Tr) if Tr is not None else T

@@ -4,8 +4,9 @@ The PointCloud2 topic is found by itself when the bag has exactly one. Scan stam
 header stamps (the bag's record time where a header stamp is zero). Ground truth, optional:
 a PoseStamped / PoseWithCovarianceStamped / Odometry / TransformStamped topic, or a TF topic
 with ``gt_child_frame``, or a pose file (TUM: matched by time; KITTI: line k = scan k, the
-counts must match; ``calib`` turns KITTI camera poses into lidar poses). Stamped poses are
-interpolated to the scan stamps.
+counts must match). ``extrinsic`` (pipeline.sources.poses.read_extrinsic) turns poses of another
+frame into LiDAR poses. Stamped poses are interpolated to the scan stamps. Per-point time fields
+are kept (pipeline.sources.pointtime).
 """
 
 from __future__ import annotations
@@ -15,29 +16,18 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, ClassVar
 
-import numpy as np
-from numpy.typing import NDArray
-
 from pipeline.errors import ConfigError, InputError
-from pipeline.ros2_cdr import cloud_to_xyzi
+from pipeline.evaluation.posefile import PoseFormat, read_pose_file
 from pipeline.sequence import SequenceInfo
-from pipeline.sources.base import Frame, IngestReport, write_sequence
-from pipeline.sources.poses import (
-    PoseFile,
-    PoseFormat,
-    camera_to_lidar,
-    check_count,
-    interpolate_poses,
-    read_kitti_calib,
-    read_pose_file,
-)
+from pipeline.sources.base import Frame, IngestReport, IntensityMode, write_sequence
+from pipeline.sources.poses import GroundTruth, lidar_ground_truth
 from pipeline.sources.rosmsg import (
     POINTCLOUD2_TYPES,
     POSE_TYPES,
+    cloud_frame,
     collect_poses,
     normalise_type,
     poses_of,
-    stamp_ns,
 )
 
 
@@ -111,29 +101,6 @@ def pick_topic(
     return matching[0]
 
 
-class GroundTruth:
-    """Per-scan ground truth from stamped poses (interpolated) or a KITTI file (by index)."""
-
-    def __init__(
-        self, what: str, stamps_ns: NDArray[np.int64] | None, T: NDArray[np.float64]
-    ) -> None:
-        self.what, self.stamps_ns, self.T = what, stamps_ns, T
-
-    def at(self, frame: int, stamp: int) -> NDArray[np.float64]:
-        if self.stamps_ns is None:
-            return self.T[frame]
-        return interpolate_poses(np.array([stamp], np.int64), self.stamps_ns, self.T, self.what)[0]
-
-    @classmethod
-    def from_file(cls, pf: PoseFile, calib: str | Path | None) -> GroundTruth:
-        T = (
-            pf.T_world_x
-            if calib is None
-            else camera_to_lidar(pf.T_world_x, read_kitti_calib(calib))
-        )
-        return cls(str(pf.path), pf.stamps_ns, T)
-
-
 class RosbagSource:
     """PointCloud2 scans of a ROS 1 or ROS 2 bag."""
 
@@ -147,7 +114,7 @@ class RosbagSource:
         gt_child_frame: str | None = None,
         poses: str | Path | None = None,
         poses_format: PoseFormat = "auto",
-        calib: str | Path | None = None,
+        extrinsic: str | Path | None = None,
         name: str | None = None,
         sensor: str = "unknown",
     ) -> None:
@@ -155,7 +122,8 @@ class RosbagSource:
             raise ConfigError("give either --gt-topic or --poses, not both")
         self.bag = bag_path(bag)
         bag_files = sorted(self.bag.iterdir()) if self.bag.is_dir() else [self.bag]
-        self.inputs = tuple(Path(p) for p in (*bag_files, poses, calib) if p is not None)
+        self.inputs = tuple(Path(p) for p in (*bag_files, poses, extrinsic)
+                            if p is not None and Path(p).exists())
         self.seq_name = name or self.bag.stem
         self.sensor = sensor
         with open_bag(self.bag) as reader:
@@ -168,11 +136,9 @@ class RosbagSource:
             if gt_topic is not None:
                 pick_topic(available, gt_topic, POSE_TYPES, str(self.bag), "a pose, odometry or TF")
                 self.gt = self._topic_poses(reader, gt_topic, gt_child_frame)
-        if poses is not None:
-            pf = read_pose_file(poses, poses_format)
-            if pf.stamps_ns is None:
-                check_count(pf, self.count, f"{self.bag} {self.topic}")
-            self.gt = GroundTruth.from_file(pf, calib)
+        pf = read_pose_file(poses, poses_format) if poses is not None else None
+        self.gt = lidar_ground_truth(self.gt, pf, extrinsic, self.count,
+                                     f"{self.bag} {self.topic}")
 
     def _topic_poses(self, reader: Any, topic: str, child_frame: str | None) -> GroundTruth:
         what = f"{self.bag} {topic}"
@@ -198,14 +164,7 @@ class RosbagSource:
             conns = [c for c in reader.connections if c.topic == self.topic]
             for k, (conn, log_ns, raw) in enumerate(reader.messages(connections=conns)):
                 what = f"{self.bag} {self.topic} message {k}"
-                msg = reader.deserialize(raw, conn.msgtype)
-                stamp = stamp_ns(msg, log_ns)
-                yield Frame(
-                    stamp,
-                    cloud_to_xyzi(msg, what),
-                    None if self.gt is None else self.gt.at(k, stamp),
-                    what,
-                )
+                yield cloud_frame(reader.deserialize(raw, conn.msgtype), log_ns, k, self.gt, what)
 
 
 def ingest_rosbag(
@@ -216,10 +175,13 @@ def ingest_rosbag(
     gt_child_frame: str | None = None,
     poses: str | Path | None = None,
     poses_format: PoseFormat = "auto",
-    calib: str | Path | None = None,
+    extrinsic: str | Path | None = None,
     name: str | None = None,
+    sensor: str = "unknown",
+    intensity: IntensityMode = "auto",
 ) -> IngestReport:
     """PointCloud2 scans of a ROS 1/2 bag + optional ground truth -> sequence MCAP ``out``."""
     return write_sequence(
-        RosbagSource(bag, topic, gt_topic, gt_child_frame, poses, poses_format, calib, name), out
+        RosbagSource(bag, topic, gt_topic, gt_child_frame, poses, poses_format, extrinsic, name,
+                     sensor), out, intensity,
     )

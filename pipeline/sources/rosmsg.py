@@ -14,7 +14,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
-from pipeline.ros2_cdr import pose_matrix
+from pipeline.ros2_cdr import cloud_field, cloud_to_xyzi, pose_matrix
+from pipeline.sources.base import Frame
+from pipeline.sources.pointtime import relative_times_s
+from pipeline.sources.poses import GroundTruth
+from pipeline.sources.scanfiles import TIME_NAMES
 
 POINTCLOUD2_TYPES = ("sensor_msgs/msg/PointCloud2",)
 POSE_TYPES = (
@@ -40,12 +44,23 @@ def stamp_ns(msg: Any, fallback_ns: int) -> int:
     return ns if ns != 0 else int(fallback_ns)
 
 
-def _pose(p: Any) -> NDArray[np.float64]:
-    return pose_matrix(p.position, p.orientation)
+def cloud_frame(msg: Any, log_ns: int, k: int, gt: GroundTruth | None, what: str) -> Frame:
+    """The Frame of the k-th deserialised PointCloud2 ``msg``: header stamp (the log time
+    where zero), x, y, z, intensity, per-point time (``t``, ``time``, ``timestamp`` or
+    ``offset_time``) where the cloud has it, and the ground truth at the stamp."""
+    stamp = stamp_ns(msg, log_ns)
+    column = cloud_field(msg, TIME_NAMES, what)
+    times = None if column is None else relative_times_s(column[1], column[0], stamp, what)
+    return Frame(stamp, cloud_to_xyzi(msg, what), None if gt is None else gt.at(k, stamp),
+                 what, times)
 
 
-def _transform(t: Any) -> NDArray[np.float64]:
-    return pose_matrix(t.translation, t.rotation)
+def _pose(p: Any, what: str) -> NDArray[np.float64]:
+    return pose_matrix(p.position, p.orientation, what)
+
+
+def _transform(t: Any, what: str) -> NDArray[np.float64]:
+    return pose_matrix(t.translation, t.rotation, what)
 
 
 def poses_of(
@@ -58,16 +73,16 @@ def poses_of(
     """
     msgtype = normalise_type(msgtype)
     if msgtype == "geometry_msgs/msg/PoseStamped":
-        return [(stamp_ns(msg, log_ns), _pose(msg.pose), "")]
+        return [(stamp_ns(msg, log_ns), _pose(msg.pose, what), "")]
     if msgtype == "geometry_msgs/msg/PoseWithCovarianceStamped":
-        return [(stamp_ns(msg, log_ns), _pose(msg.pose.pose), "")]
+        return [(stamp_ns(msg, log_ns), _pose(msg.pose.pose, what), "")]
     if msgtype == "nav_msgs/msg/Odometry":
-        return [(stamp_ns(msg, log_ns), _pose(msg.pose.pose), str(msg.child_frame_id))]
+        return [(stamp_ns(msg, log_ns), _pose(msg.pose.pose, what), str(msg.child_frame_id))]
     if msgtype == "geometry_msgs/msg/TransformStamped":
-        return [(stamp_ns(msg, log_ns), _transform(msg.transform), str(msg.child_frame_id))]
+        return [(stamp_ns(msg, log_ns), _transform(msg.transform, what), str(msg.child_frame_id))]
     if msgtype == TF_TYPE:
         return [
-            (stamp_ns(t, log_ns), _transform(t.transform), str(t.child_frame_id))
+            (stamp_ns(t, log_ns), _transform(t.transform, what), str(t.child_frame_id))
             for t in msg.transforms
             if child_frame is None or t.child_frame_id == child_frame
         ]

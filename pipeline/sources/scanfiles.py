@@ -1,11 +1,18 @@
-"""Single-scan files: KITTI .bin, PCD (ascii / binary; binary_compressed via open3d), PLY.
+"""Single-scan files: KITTI .bin, PCD (ascii, binary; binary_compressed via open3d), PLY (open3d).
 
-Every reader returns (N, 4) float32 x, y, z [m] and intensity (zeros when the file has none),
-non-finite points included (the writer drops and counts them).
+Every reader returns a ``ScanFile``: (N, 4) float32 x, y, z [m] and intensity (zeros when the
+file has none), non-finite points included (the writer drops and counts them), and the raw
+per-point time column when the file has one (``t``, ``time``, ``timestamp``, ``offset_time``).
+
+The PCD parser is our own for ascii and binary data, open3d's for binary_compressed: measured in
+``make bench`` (bench/bench_pcd.py), open3d reads a binary 124k-point PCD ~100x slower and
+returns uninitialised memory, without an error, for a truncated or malformed ascii PCD. The
+header is always checked here, so a bad one is one line naming the file and the rule.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,13 +22,39 @@ from pipeline.errors import InputError
 
 SCAN_SUFFIXES = (".bin", ".pcd", ".ply")
 INTENSITY_NAMES = ("intensity", "reflectance", "i", "remission")
+TIME_NAMES = ("t", "time", "timestamp", "offset_time")
+"""Per-point time fields of common drivers (Ouster t [ns], Velodyne time [s], Hesai timestamp
+[s, absolute], Livox offset_time [ns])."""
 
 
-def read_scan(path: Path) -> NDArray[np.float32]:
-    """(N, 4) float32 points of a .bin, .pcd or .ply file."""
+@dataclass(frozen=True)
+class ScanFile:
+    """One scan file read: ``points`` (N, 4) float32 x, y, z [m], intensity (as stored);
+    ``time`` (N,) the per-point time column as stored (any dtype) and ``time_field`` its name,
+    or None."""
+
+    points: NDArray[np.float32]
+    time: NDArray | None = None
+    time_field: str | None = None
+
+
+def scan_files(folder: Path, suffixes: tuple[str, ...]) -> list[Path]:
+    """The files of ``folder`` with one of ``suffixes``, unsorted; InputError when there is
+    none, or when such a name is not a regular file (a folder named ``x.bin``)."""
+    found = [p for p in folder.iterdir() if p.suffix.lower() in suffixes]
+    for p in found:
+        if not p.is_file():
+            raise InputError(f"{p}: is not a regular file (a scan must be a file)")
+    if not found:
+        raise InputError(f"{folder}: no scan files ({', '.join(suffixes)})")
+    return found
+
+
+def read_scan(path: Path) -> ScanFile:
+    """The points (and per-point time) of a .bin, .pcd or .ply file."""
     suffix = path.suffix.lower()
     if suffix == ".bin":
-        return read_bin(path)
+        return ScanFile(read_bin(path))
     if suffix == ".pcd":
         return read_pcd(path)
     if suffix == ".ply":
@@ -41,124 +74,161 @@ def read_bin(path: Path) -> NDArray[np.float32]:
 
 
 _PCD_TYPES = {
-    ("F", 4): "f4",
-    ("F", 8): "f8",
-    ("I", 1): "i1",
-    ("I", 2): "i2",
-    ("I", 4): "i4",
-    ("I", 8): "i8",
-    ("U", 1): "u1",
-    ("U", 2): "u2",
-    ("U", 4): "u4",
-    ("U", 8): "u8",
+    ("F", 4): "f4", ("F", 8): "f8",
+    ("I", 1): "i1", ("I", 2): "i2", ("I", 4): "i4", ("I", 8): "i8",
+    ("U", 1): "u1", ("U", 2): "u2", ("U", 4): "u4", ("U", 8): "u8",
 }
+_PCD_DATA = ("ascii", "binary", "binary_compressed")
 
 
-def read_pcd(path: Path) -> NDArray[np.float32]:
-    """(N, 4) float32 of a PCD v0.7 file (DATA ascii or binary; binary_compressed via open3d)."""
+@dataclass(frozen=True)
+class PcdHeader:
+    """A checked PCD v0.7 header: field ``names``, record ``dtype``, ``points``, ``data``."""
+
+    names: list[str]
+    dtype: np.dtype
+    points: int
+    data: str
+
+
+def read_pcd(path: Path) -> ScanFile:
+    """The points of a PCD v0.7 file (module docstring: which parser reads which DATA)."""
     with open(path, "rb") as fh:
-        header: dict[str, list[str]] = {}
-        while True:
-            line = fh.readline()
-            if not line:
-                raise InputError(f"{path}: PCD header has no DATA line (truncated or not a PCD)")
-            text = line.decode("ascii", errors="replace").strip()
-            if not text or text.startswith("#"):
-                continue
-            key, *vals = text.split()
-            header[key.upper()] = vals
-            if key.upper() == "DATA":
-                break
+        header = _pcd_header(path, fh)
+        if header.data == "binary_compressed":
+            fh.close()
+            scan = read_open3d(path)
+            if len(scan.points) != header.points:
+                raise InputError(f"{path}: open3d read {len(scan.points)} points, the header "
+                                 f"says POINTS {header.points} (damaged compressed data?)")
+            return scan
         body = fh.read()
-    data = header["DATA"][0].lower() if header["DATA"] else ""
-    if data == "binary_compressed":
-        return read_open3d(path)
-    dtype, names = _pcd_dtype(path, header)
-    n = int(header.get("POINTS", [0])[0] or 0) or _pcd_width(header)
-    if data == "binary":
-        if len(body) < n * dtype.itemsize:
-            raise InputError(
-                f"{path}: PCD data is {len(body)} bytes, expected {n * dtype.itemsize} "
-                f"({n} points of {dtype.itemsize} bytes): truncated"
-            )
-        rec = np.frombuffer(body, dtype=dtype, count=n)
-    elif data == "ascii":
-        try:
-            table = np.loadtxt(body.decode("ascii").splitlines(), dtype=np.float64, ndmin=2)
-        except ValueError as exc:
-            raise InputError(f"{path}: malformed ascii PCD data ({exc})") from None
-        if table.shape[0] != n or table.shape[1] != len(dtype.names or ()):
-            raise InputError(
-                f"{path}: PCD has {table.shape[0]}x{table.shape[1]} values, header "
-                f"says {n} points x {len(dtype.names or ())} fields"
-            )
-        rec = np.zeros(n, dtype=dtype)
-        for k, name in enumerate(dtype.names or ()):
-            rec[name] = table[:, k]
+    if header.data == "binary":
+        need = header.points * header.dtype.itemsize
+        if len(body) < need:
+            raise InputError(f"{path}: PCD data is {len(body)} bytes, expected {need} "
+                             f"({header.points} points of {header.dtype.itemsize} bytes): "
+                             "truncated")
+        rec = np.frombuffer(body, dtype=header.dtype, count=header.points)
     else:
-        raise InputError(f"{path}: unsupported PCD DATA {data!r}")
-    return _xyzi(rec, names, path)
+        rec = _pcd_ascii(path, body, header)
+    return _scan_of_record(rec, header.names, path)
 
 
-def _pcd_width(header: dict[str, list[str]]) -> int:
-    w = int(header.get("WIDTH", ["0"])[0])
-    h = int(header.get("HEIGHT", ["1"])[0])
-    return w * h
-
-
-def _pcd_dtype(path: Path, header: dict[str, list[str]]) -> tuple[np.dtype, list[str]]:
+def _pcd_header(path: Path, fh) -> PcdHeader:  # type: ignore[no-untyped-def]
+    """Parse and check the header lines up to DATA; InputError naming the rule broken."""
+    fields: dict[str, list[str]] = {}
+    while True:
+        line = fh.readline()
+        if not line:
+            raise InputError(f"{path}: PCD header has no DATA line (truncated or not a PCD)")
+        text = line.decode("ascii", errors="replace").strip()
+        if not text or text.startswith("#"):
+            continue
+        key, *vals = text.split()
+        fields[key.upper()] = vals
+        if key.upper() == "DATA":
+            break
     try:
-        names = header["FIELDS"]
-        sizes = [int(s) for s in header["SIZE"]]
-        types = [t.upper() for t in header["TYPE"]]
-        counts = [int(c) for c in header.get("COUNT", ["1"] * len(names))]
-    except (KeyError, ValueError) as exc:
-        raise InputError(f"{path}: malformed PCD header ({exc})") from None
-    if not len(names) == len(sizes) == len(types) == len(counts):
+        names = fields["FIELDS"]
+        sizes, types = fields["SIZE"], [t.upper() for t in fields["TYPE"]]
+    except KeyError as exc:
+        raise InputError(f"{path}: PCD header has no {exc.args[0]} line") from None
+    counts = fields.get("COUNT", ["1"] * len(names))
+    sizes_i = [_header_int(path, "SIZE", s, 1) for s in sizes]
+    counts_i = [_header_int(path, "COUNT", c, 1) for c in counts]
+    if not len(names) == len(sizes_i) == len(types) == len(counts_i):
         raise InputError(f"{path}: PCD header FIELDS/SIZE/TYPE/COUNT lengths differ")
-    fields = []
-    for k, (name, size, typ, count) in enumerate(zip(names, sizes, types, counts, strict=True)):
+    width = _header_int(path, "WIDTH", (fields.get("WIDTH") or ["?"])[0], 0)
+    height = _header_int(path, "HEIGHT", (fields.get("HEIGHT") or ["1"])[0], 1)
+    points = _header_int(path, "POINTS", (fields.get("POINTS") or [str(width * height)])[0], 0)
+    if points != width * height:
+        raise InputError(f"{path}: PCD header says POINTS {points} but WIDTH x HEIGHT = "
+                         f"{width} x {height} = {width * height}")
+    data = (fields["DATA"] or [""])[0].lower()
+    if data not in _PCD_DATA:
+        raise InputError(f"{path}: unsupported PCD DATA {data!r} (known: {', '.join(_PCD_DATA)})")
+    dtype_fields = []
+    for k, (name, size, typ, count) in enumerate(zip(names, sizes_i, types, counts_i,
+                                                     strict=True)):
         code = _PCD_TYPES.get((typ, size))
         if code is None:
             raise InputError(f"{path}: PCD field {name!r} has unknown TYPE {typ} SIZE {size}")
-        fields.append(
-            (f"{name}#{k}", "<" + code, (count,)) if count > 1 else (f"{name}#{k}", "<" + code)
-        )
-    dtype = np.dtype(fields)
-    return dtype, [n.split("#")[0] for n in dtype.names or ()]
+        dtype_fields.append((f"{name}#{k}", "<" + code, (count,)) if count > 1
+                            else (f"{name}#{k}", "<" + code))
+    return PcdHeader(list(names), np.dtype(dtype_fields), points, data)
 
 
-def _xyzi(rec: NDArray, names: list[str], path: Path) -> NDArray[np.float32]:
+def _header_int(path: Path, key: str, value: str, low: int) -> int:
+    """An integer header value >= ``low``, or InputError naming the key and the value."""
+    try:
+        number = int(value)
+    except ValueError:
+        raise InputError(f"{path}: PCD header {key} must be an integer >= {low}, "
+                         f"got {value!r}") from None
+    if number < low:
+        raise InputError(f"{path}: PCD header {key} must be an integer >= {low}, got {number}")
+    return number
+
+
+def _pcd_ascii(path: Path, body: bytes, header: PcdHeader) -> NDArray:
+    """The records of an ascii PCD body, counted and parsed strictly."""
+    n_values = sum(int(np.prod(header.dtype[k].shape or (1,))) for k in range(len(header.names)))
+    try:
+        table = np.loadtxt(body.decode("ascii").splitlines(), dtype=np.float64, ndmin=2)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: malformed ascii PCD data ({exc})") from None
+    if len(table) == 0:
+        table = np.zeros((0, n_values))
+    if table.shape != (header.points, n_values):
+        raise InputError(f"{path}: PCD has {table.shape[0]}x{table.shape[1]} values, the "
+                         f"header says {header.points} points x {n_values} values")
+    rec = np.zeros(header.points, dtype=header.dtype)
+    col = 0
+    for name in header.dtype.names or ():
+        width = int(np.prod(header.dtype[name].shape or (1,)))
+        rec[name] = table[:, col : col + width].reshape(rec[name].shape)
+        col += width
+    return rec
+
+
+def _scan_of_record(rec: NDArray, names: list[str], path: Path) -> ScanFile:
     by_name = {n: full for n, full in zip(names, rec.dtype.names or (), strict=True)}
-    missing = [a for a in "xyz" if a not in by_name]
+    columns = {n: rec[full] for n, full in by_name.items() if rec[full].ndim == 1}
+    return _scan_of_columns(columns, path)
+
+
+def _scan_of_columns(columns: dict[str, NDArray], path: Path) -> ScanFile:
+    """ScanFile of named (N,) columns: x, y, z (float), intensity and time when present."""
+    missing = [a for a in "xyz" if a not in columns]
     if missing:
-        raise InputError(f"{path}: no field {', '.join(missing)} (fields: {', '.join(names)})")
-    out = np.zeros((len(rec), 4), np.float32)
+        raise InputError(f"{path}: no field {', '.join(missing)} "
+                         f"(fields: {', '.join(columns)})")
+    n = len(columns["x"])
+    out = np.zeros((n, 4), np.float32)
     for col, name in enumerate("xyz"):
-        field = rec[by_name[name]]
-        if field.dtype.kind != "f":
-            raise InputError(f"{path}: field {name!r} is {field.dtype}, x, y, z must be float")
-        out[:, col] = field
-    inten = next((by_name[n] for n in INTENSITY_NAMES if n in by_name), None)
-    if inten is not None and rec[inten].ndim == 1:
-        out[:, 3] = rec[inten]
-    return out
+        if columns[name].dtype.kind != "f":
+            raise InputError(f"{path}: field {name!r} is {columns[name].dtype}, "
+                             "x, y, z must be float")
+        out[:, col] = columns[name]
+    inten = next((n for n in INTENSITY_NAMES if n in columns), None)
+    if inten is not None:
+        out[:, 3] = columns[inten]
+    time_field = next((n for n in TIME_NAMES if n in columns), None)
+    return ScanFile(out, None if time_field is None else columns[time_field].copy(), time_field)
 
 
-def read_open3d(path: Path) -> NDArray[np.float32]:
-    """(N, 4) float32 of any point-cloud file open3d reads (.ply, compressed .pcd)."""
+def read_open3d(path: Path) -> ScanFile:
+    """The points of any point-cloud file open3d reads (.ply, compressed .pcd)."""
     import open3d as o3d  # heavy: only for the formats we do not parse ourselves
 
-    pcd = o3d.t.io.read_point_cloud(path)
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    pcd = o3d.t.io.read_point_cloud(str(path))
     if "positions" not in pcd.point or len(pcd.point.positions) == 0:
         raise InputError(f"{path}: open3d read no points (corrupt, empty or unsupported file)")
     xyz = pcd.point.positions.numpy()
-    if xyz.dtype.kind != "f":
-        raise InputError(f"{path}: positions are {xyz.dtype}, x, y, z must be float")
-    out = np.zeros((len(xyz), 4), np.float32)
-    out[:, :3] = xyz
-    for name in INTENSITY_NAMES:
+    columns = {name: xyz[:, k] for k, name in enumerate("xyz")}
+    for name in (*INTENSITY_NAMES, *TIME_NAMES):
         if name in pcd.point:
-            out[:, 3] = pcd.point[name].numpy().reshape(len(xyz), -1)[:, 0]
-            break
-    return out
+            columns[name] = pcd.point[name].numpy().reshape(len(xyz), -1)[:, 0]
+    return _scan_of_columns(columns, path)

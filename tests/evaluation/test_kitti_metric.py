@@ -130,9 +130,9 @@ def test_metric_cli_bad_inputs(tmp_path: Path, kitti_trajectories: Path) -> None
     nan = gt.copy()
     nan[100, 0, 3] = np.nan
     write_kitti_poses(tmp_path / "nan.txt", nan)
-    cli_fails(["metric", "kitti", str(gt_path), str(tmp_path / "nan.txt")], "nan.txt:101",
-              "non-finite")
+    cli_fails(["metric", "kitti", str(gt_path), str(tmp_path / "nan.txt")], "nan.txt line 101",
+              "not finite")
     (tmp_path / "bad.txt").write_text("1 2 3\n")
-    cli_fails(["metric", "kitti", str(gt_path), str(tmp_path / "bad.txt")], "bad.txt:1",
+    cli_fails(["metric", "kitti", str(gt_path), str(tmp_path / "bad.txt")], "bad.txt line 1",
               "expected 12")
     cli_fails(["metric", "kitti", str(gt_path), str(tmp_path / "missing.txt")], "missing.txt")

@@ -78,7 +78,7 @@ def _folder_pcd(tmp: Path, root: Path, kf: KittiFrames) -> Case:
         poses=tmp / "poses.txt",
         poses_format="kitti",
         times=tmp / "times.txt",
-        calib=root / "sequences" / SEQ / "calib.txt",
+        extrinsic=root / "sequences" / SEQ / "calib.txt",
     )
     return Case(src, kf.stamps_ns, kf.points, kf.T_world_lidar)
 

@@ -9,10 +9,11 @@ import pytest
 from source_inputs import write_pcd, write_tum
 
 from pipeline.errors import InputError
+from pipeline.evaluation.posefile import read_pose_file
 from pipeline.geometry import pose_from_xyz_quat, rot_z
 from pipeline.sequence import SequenceReader
 from pipeline.sources import ingest_folder
-from pipeline.sources.poses import interpolate_poses, read_pose_file
+from pipeline.sources.poses import interpolate_poses
 from pipeline.sources.scanfiles import read_scan
 
 
@@ -26,8 +27,8 @@ def cloud(rng: np.random.Generator) -> np.ndarray:
 def test_pcd_binary_and_ascii(tmp_path: Path, cloud: np.ndarray) -> None:
     write_pcd(tmp_path / "b.pcd", cloud)
     write_pcd(tmp_path / "a.pcd", cloud, ascii_data=True)
-    np.testing.assert_array_equal(read_scan(tmp_path / "b.pcd"), cloud)
-    np.testing.assert_array_equal(read_scan(tmp_path / "a.pcd"), cloud)
+    np.testing.assert_array_equal(read_scan(tmp_path / "b.pcd").points, cloud)
+    np.testing.assert_array_equal(read_scan(tmp_path / "a.pcd").points, cloud)
 
 
 def test_pcd_truncated(tmp_path: Path, cloud: np.ndarray) -> None:
@@ -47,7 +48,8 @@ def test_open3d_formats_ply_and_compressed_pcd(tmp_path: Path, cloud: np.ndarray
     o3d.t.io.write_point_cloud(str(tmp_path / "c.pcd"), pc, write_ascii=False, compressed=True)
     assert b"binary_compressed" in (tmp_path / "c.pcd").read_bytes()[:400]
     for name in ("s.ply", "c.pcd"):
-        np.testing.assert_allclose(read_scan(tmp_path / name), cloud, rtol=1e-6, err_msg=name)
+        np.testing.assert_allclose(read_scan(tmp_path / name).points, cloud, rtol=1e-6,
+                                   err_msg=name)
 
 
 def test_folder_without_poses_uses_the_rate(tmp_path: Path, cloud: np.ndarray) -> None:

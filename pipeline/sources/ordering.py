@@ -1,0 +1,71 @@
+"""The order of scan files in a folder: by the numbers in their names, never as plain strings.
+
+Plain string order puts ``full10`` before ``full2`` (issue 14: 175 of 177 scans got another
+scan's pose, without a word). Here the names must follow one pattern whose only varying parts
+are numbers (``full0 .. full176``, ``000000 .. 004540``, ``1317000000.123456``): they are
+sorted by those numbers. Names that differ in anything else, or two names with the same
+numbers (``scan1`` and ``scan01``), are refused, since no order can be trusted.
+
+Names that are stamps (a decimal number with a fraction, seconds; or an integer of 18 or more
+digits, ns) also give each scan its stamp (``name_stamps_ns``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import re
+from decimal import Decimal
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.errors import InputError
+from pipeline.stamps import decimal_seconds_to_ns
+
+_NUMBER = re.compile(r"\d+")
+_SECONDS = re.compile(r"\d+\.\d+")
+_NANOSECONDS = re.compile(r"\d{18,}")
+
+
+def natural_order(files: list[Path], what: str) -> list[Path]:
+    """``files`` sorted by the numbers in their stems (module docstring); InputError naming
+    ``what`` and two offending names when the names do not allow one order."""
+    if len(files) < 2:
+        return list(files)
+    keyed = []
+    decimal_stems = all(_SECONDS.fullmatch(p.stem) for p in files)  # stamps [s]: by value
+    for path in files:
+        template = _NUMBER.sub("#", path.stem)
+        numbers = ((Decimal(path.stem),) if decimal_stems
+                   else tuple(Decimal(n) for n in _NUMBER.findall(path.stem)))
+        keyed.append((template, numbers, path))
+    templates = {t for t, _, _ in keyed}
+    if len(templates) > 1:
+        a, b = sorted(templates)[:2]
+        ex_a = next(p.name for t, _, p in keyed if t == a)
+        ex_b = next(p.name for t, _, p in keyed if t == b)
+        raise InputError(f"{what}: cannot order the scans by name: {ex_a!r} and {ex_b!r} differ "
+                         "in more than their numbers (name them <prefix><number>, one pattern)")
+    if "#" not in templates.pop():
+        raise InputError(f"{what}: cannot order the scans by name: the names carry no number "
+                         f"({keyed[0][2].name!r}, {keyed[1][2].name!r}, ...)")
+    keyed.sort(key=lambda k: k[1])
+    for (_, n0, p0), (_, n1, p1) in itertools.pairwise(keyed):
+        if n0 == n1:
+            raise InputError(f"{what}: cannot order the scans by name: {p0.name!r} and "
+                             f"{p1.name!r} carry the same number")
+    return [p for _, _, p in keyed]
+
+
+def name_stamps_ns(files: list[Path]) -> NDArray[np.int64] | None:
+    """(N,) stamps [ns] when every stem is a stamp (``1317000000.123456`` seconds, or an integer
+    of 18+ digits in ns), else None."""
+    stems = [p.stem for p in files]
+    if all(_SECONDS.fullmatch(s) for s in stems):
+        return np.array([decimal_seconds_to_ns(s, str(p)) for s, p in zip(stems, files,
+                                                                           strict=True)], np.int64)
+    if all(_NANOSECONDS.fullmatch(s) for s in stems):
+        return np.array([decimal_seconds_to_ns(str(Decimal(s) / 10**9), str(p))
+                         for s, p in zip(stems, files, strict=True)], np.int64)
+    return None
