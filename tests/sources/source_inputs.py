@@ -78,19 +78,35 @@ LAYOUTS = {
         [("x", 8, 0), ("y", 8, 8), ("z", 8, 16), ("intensity", 8, 24), ("ring", 4, 32)],
         40,
     ),
+    "xyz64_i8_ring_time": (  # float64 x, y, z; uint8 intensity 0-255; uint16 ring; float32 time
+        [("x", 8, 0), ("y", 8, 8), ("z", 8, 16), ("intensity", 2, 24), ("ring", 4, 26),
+         ("time", 7, 28)],
+        32,
+    ),
     "x_int16": ([("x", 3, 0), ("y", 7, 4), ("z", 7, 8)], 12),
     "no_z": ([("x", 7, 0), ("y", 7, 4), ("intensity", 7, 8)], 12),
 }
+
+
+def point_times_s(points: NDArray[np.float32]) -> NDArray[np.float32]:
+    """Per-point time [s] of a 10 Hz sweep starting at azimuth -pi: its azimuth's share."""
+    az = np.arctan2(points[:, 1], points[:, 0]).astype(np.float64)
+    return ((az + np.pi) / (2 * np.pi) * 0.1).astype(np.float32)
 
 
 def cloud_bytes(points: NDArray[np.float32], layout: str) -> bytes:
     """Point bytes of ``points`` (N, 4) in one of LAYOUTS."""
     fields, step = LAYOUTS[layout]
     buf = np.zeros((len(points), step), np.uint8)
-    codes = {7: "<f4", 8: "<f8", 3: "<i2", 4: "<u2"}
+    codes = {7: "<f4", 8: "<f8", 2: "u1", 3: "<i2", 4: "<u2"}
     cols = {"x": 0, "y": 1, "z": 2, "intensity": 3}
     for name, dt, off in fields:
-        vals = points[:, cols[name]] if name in cols else np.arange(len(points)) % 64
+        if name == "time":  # a 10 Hz sweep: the azimuth's share of 0.1 s
+            vals = point_times_s(points)
+        elif name == "intensity" and dt == 2:  # 8-bit, as drivers give it
+            vals = np.round(points[:, 3] * 255.0)
+        else:
+            vals = points[:, cols[name]] if name in cols else np.arange(len(points)) % 64
         raw = np.ascontiguousarray(vals.astype(codes[dt])).view(np.uint8).reshape(len(points), -1)
         buf[:, off : off + raw.shape[1]] = raw
     return buf.tobytes()
