@@ -30,6 +30,8 @@ class SequenceSummary:
     source: str
     labels: list[list[Any]] = field(default_factory=list)
     schema_version: str = ""
+    details: dict[str, str] = field(default_factory=dict)
+    """The source's own records: intensity scaling, per-point time, stamps, simulation."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -58,6 +60,7 @@ def summarize_sequence(path: str | Path) -> SequenceSummary:
             sensor=info.sensor,
             source=info.source,
             labels=[[lab.start, lab.end, lab.label] for lab in info.labels],
+            details=dict(info.extra),
             schema_version=info.schema_version,
         )
 

@@ -33,6 +33,7 @@ def info(path: Path, as_json: bool) -> None:
         ("source", s.source),
         ("labels", ", ".join(f"{a}-{b}: {lab}" for a, b, lab in s.labels) or "none"),
         ("schema version", s.schema_version),
+        *((key.replace("_", " "), value) for key, value in sorted(s.details.items())),
     ]
     width = max(len(k) for k, _ in rows)
     for key, value in rows:

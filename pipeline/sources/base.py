@@ -66,6 +66,18 @@ class Source(Protocol):
         ...
 
 
+def input_files(*items: str | Path | None) -> tuple[Path, ...]:
+    """The items that name existing files or folders (an ``--extrinsic`` may be numbers)."""
+    found = []
+    for item in items:
+        try:
+            if item is not None and Path(item).exists():
+                found.append(Path(item))
+        except OSError:  # numbers too long for a file name
+            continue
+    return tuple(found)
+
+
 @dataclass(frozen=True)
 class IngestReport:
     """What an ingest wrote: ``frames`` scans with ``points`` points in total, after

@@ -23,7 +23,13 @@ from numpy.typing import NDArray
 from pipeline.errors import ConfigError, InputError
 from pipeline.evaluation.posefile import PoseFile, PoseFormat, read_pose_file
 from pipeline.sequence import SequenceInfo
-from pipeline.sources.base import Frame, IngestReport, IntensityMode, write_sequence
+from pipeline.sources.base import (
+    Frame,
+    IngestReport,
+    IntensityMode,
+    input_files,
+    write_sequence,
+)
 from pipeline.sources.ordering import name_stamps_ns, natural_order
 from pipeline.sources.pointtime import relative_times_s
 from pipeline.sources.poses import check_count, lidar_ground_truth
@@ -63,8 +69,7 @@ class FolderSource:
         self.stamps_ns, self.stamps_from = self._stamps(pf, times, rate_hz)
         gt = lidar_ground_truth(None, pf, extrinsic, len(self.files), str(self.folder))
         self.T_world_lidar = None if gt is None else gt.all_at(self.stamps_ns)
-        self.inputs = tuple(Path(p) for p in (*self.files, poses, times, extrinsic)
-                            if p is not None and Path(p).exists())
+        self.inputs = input_files(*self.files, poses, times, extrinsic)
 
     def _stamps(self, pf: PoseFile | None, times: str | Path | None,
                 rate_hz: float) -> tuple[NDArray[np.int64], str]:

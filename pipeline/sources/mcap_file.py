@@ -16,7 +16,13 @@ from typing import Any, ClassVar
 from pipeline.errors import ConfigError, InputError
 from pipeline.evaluation.posefile import PoseFormat, read_pose_file
 from pipeline.sequence import SequenceInfo
-from pipeline.sources.base import Frame, IngestReport, IntensityMode, write_sequence
+from pipeline.sources.base import (
+    Frame,
+    IngestReport,
+    IntensityMode,
+    input_files,
+    write_sequence,
+)
 from pipeline.sources.poses import GroundTruth, lidar_ground_truth
 from pipeline.sources.rosbag import pick_topic
 from pipeline.sources.rosmsg import (
@@ -116,8 +122,7 @@ class McapSource:
         if gt_topic is not None and poses is not None:
             raise ConfigError("give either --gt-topic or --poses, not both")
         self.path = Path(path)
-        self.inputs = tuple(Path(p) for p in (path, poses, extrinsic)
-                            if p is not None and Path(p).exists())
+        self.inputs = input_files(path, poses, extrinsic)
         self.seq_name = name or self.path.stem
         self.sensor = sensor
         self.gt: GroundTruth | None = None

@@ -60,8 +60,12 @@ def read_extrinsic(value: str | Path) -> NDArray[np.float64]:
     source = "--extrinsic"
     path = Path(text)
     if not re.fullmatch(r"[\s,0-9eE.+-]+", text):
-        if not path.is_file():
-            raise InputError(f"{text}: --extrinsic is neither 12 or 16 numbers nor a file")
+        try:
+            is_file = path.is_file()
+        except OSError:  # a name too long
+            is_file = False
+        if not is_file:
+            raise InputError(f"{text[:80]}: --extrinsic is neither 12 or 16 numbers nor a file")
         content = path.read_text(encoding="utf-8", errors="replace")
         if re.search(r"^\s*(Tr|Tr_velo_to_cam)\s*:", content, re.MULTILINE):
             return read_kitti_calib(path)

@@ -19,7 +19,13 @@ from typing import Any, ClassVar
 from pipeline.errors import ConfigError, InputError
 from pipeline.evaluation.posefile import PoseFormat, read_pose_file
 from pipeline.sequence import SequenceInfo
-from pipeline.sources.base import Frame, IngestReport, IntensityMode, write_sequence
+from pipeline.sources.base import (
+    Frame,
+    IngestReport,
+    IntensityMode,
+    input_files,
+    write_sequence,
+)
 from pipeline.sources.poses import GroundTruth, lidar_ground_truth
 from pipeline.sources.rosmsg import (
     POINTCLOUD2_TYPES,
@@ -122,8 +128,7 @@ class RosbagSource:
             raise ConfigError("give either --gt-topic or --poses, not both")
         self.bag = bag_path(bag)
         bag_files = sorted(self.bag.iterdir()) if self.bag.is_dir() else [self.bag]
-        self.inputs = tuple(Path(p) for p in (*bag_files, poses, extrinsic)
-                            if p is not None and Path(p).exists())
+        self.inputs = input_files(*bag_files, poses, extrinsic)
         self.seq_name = name or self.bag.stem
         self.sensor = sensor
         with open_bag(self.bag) as reader:
