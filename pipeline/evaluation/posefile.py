@@ -60,7 +60,10 @@ class _Rows:
 def _rows(path: Path) -> _Rows:
     if not path.is_file():
         raise InputError(f"{path}: no such pose file")
-    lines, tokens, values, header = [], [], [], []
+    lines: list[int] = []
+    tokens: list[list[str]] = []
+    values: list[list[float]] = []
+    header: list[str] = []
     commas = False
     text = path.read_text(encoding="utf-8", errors="replace")
     for k, line in enumerate(text.splitlines(), 1):

@@ -223,7 +223,7 @@ def read_open3d(path: Path) -> ScanFile:
     import open3d as o3d  # heavy: only for the formats we do not parse ourselves
 
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-    pcd = o3d.t.io.read_point_cloud(str(path))
+    pcd = o3d.t.io.read_point_cloud(str(path))  # type: ignore[arg-type]
     if "positions" not in pcd.point or len(pcd.point.positions) == 0:
         raise InputError(f"{path}: open3d read no points (corrupt, empty or unsupported file)")
     xyz = pcd.point.positions.numpy()
