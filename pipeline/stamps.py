@@ -49,8 +49,9 @@ def decimal_seconds_to_ns(token: str, what: str) -> int:
     return int((value * 1_000_000_000).to_integral_value())
 
 
-def read_times(path: Path, n_scans: int) -> NDArray[np.int64]:
-    """(n_scans,) stamps [ns] from a times file: one number a line, seconds (KITTI times.txt).
+def read_times(path: Path, n_scans: int | None) -> NDArray[np.int64]:
+    """(n_scans,) stamps [ns] from a times file: one number a line, seconds (KITTI times.txt);
+    every line's when ``n_scans`` is None.
 
     InputError names the file and line for anything else: two columns, a word, a negative or
     too large time, a count that does not match, stamps that do not increase.
@@ -68,7 +69,7 @@ def read_times(path: Path, n_scans: int) -> NDArray[np.int64]:
             raise InputError(f"{path} line {lineno}: {len(fields)} values, a times file has one "
                              "number a line (seconds)")
         stamps.append(decimal_seconds_to_ns(fields[0], f"{path} line {lineno}"))
-    if len(stamps) != n_scans:
+    if n_scans is not None and len(stamps) != n_scans:
         raise InputError(f"{path}: {len(stamps)} stamps for {n_scans} scans")
     out = np.array(stamps, np.int64)
     if np.any(np.diff(out) <= 0):

@@ -3,7 +3,10 @@
 Order: by the numbers in the file names (pipeline.sources.ordering; ambiguous names are
 refused). Stamps, the first that applies: a times file (seconds, one a line, as KITTI's
 times.txt); file names that are stamps; a stamped pose file (TUM, EuRoC, a 4x4 block with
-stamps), one pose per scan in order; else frame k is at k / rate_hz seconds.
+stamps), one pose per scan in order; else frame k is at k / rate_hz seconds. Scans named by
+frame number (``000123.pcd``) take row 123 of a times file or of a pose file without stamps
+that is longer than the folder (a slice of a KITTI sequence needs no hand-cut files);
+otherwise row k is scan k.
 Ground truth: a pose file of any format pipeline.evaluation.posefile reads; with stamps it is
 matched by time when the scans' stamps come from elsewhere, without stamps pose k is scan k.
 ``extrinsic`` (E = T_x_lidar, e.g. KITTI's Tr) turns poses of another frame into LiDAR poses;
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import ClassVar
 
@@ -30,7 +34,7 @@ from pipeline.sources.base import (
     input_files,
     write_sequence,
 )
-from pipeline.sources.ordering import name_stamps_ns, natural_order
+from pipeline.sources.ordering import frame_numbers, name_stamps_ns, natural_order, rows_for_scans
 from pipeline.sources.pointtime import relative_times_s
 from pipeline.sources.poses import check_count, lidar_ground_truth
 from pipeline.sources.scanfiles import SCAN_SUFFIXES, read_scan, scan_files
@@ -61,11 +65,16 @@ class FolderSource:
         if len(kinds) > 1:
             raise InputError(f"{self.folder}: mixed scan file types {sorted(kinds)}; keep one kind")
         self.files = natural_order(files, str(self.folder))
+        self.numbers = frame_numbers(self.files)
         if not (math.isfinite(rate_hz) and rate_hz > 0):
             raise ConfigError(f"--rate must be a finite number > 0 Hz, got {rate_hz}")
         self.seq_name = name or self.folder.name
         self.sensor = sensor
         pf = read_pose_file(poses, poses_format) if poses is not None else None
+        if pf is not None and pf.stamps_ns is None:  # one pose a frame: the scans' rows
+            rows = rows_for_scans(len(pf.T_world_x), len(self.files), self.numbers,
+                                  str(pf.path), "poses")
+            pf = replace(pf, T_world_x=pf.T_world_x[rows])
         self.stamps_ns, self.stamps_from = self._stamps(pf, times, rate_hz)
         gt = lidar_ground_truth(None, pf, extrinsic, len(self.files), str(self.folder))
         self.T_world_lidar = None if gt is None else gt.all_at(self.stamps_ns)
@@ -75,7 +84,9 @@ class FolderSource:
                 rate_hz: float) -> tuple[NDArray[np.int64], str]:
         n = len(self.files)
         if times is not None:
-            return read_times(Path(times), n), f"times file {Path(times).name}"
+            every = read_times(Path(times), None)
+            rows = rows_for_scans(len(every), n, self.numbers, str(times), "stamps")
+            return every[rows], f"times file {Path(times).name}"
         from_names = name_stamps_ns(self.files)
         if from_names is not None:
             if np.any(np.diff(from_names) <= 0):

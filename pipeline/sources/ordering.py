@@ -58,6 +58,31 @@ def natural_order(files: list[Path], what: str) -> list[Path]:
     return [p for _, _, p in keyed]
 
 
+def frame_numbers(files: list[Path]) -> NDArray[np.int64] | None:
+    """(N,) the frame numbers of scans named by them (``000123.pcd``, KITTI's way), or None."""
+    if not files or not all(p.stem.isdigit() for p in files):
+        return None
+    return np.array([int(p.stem) for p in files], np.int64)
+
+
+def rows_for_scans(rows: int, n_scans: int, numbers: NDArray[np.int64] | None, what: str,
+                   kind: str) -> NDArray[np.int64]:
+    """Which rows of a file with one row a frame (a times file, poses without stamps) belong to
+    the scans: row k to scan k when the counts match; for scans named by frame number and a
+    longer file (a slice of a KITTI sequence with its full times.txt and poses), row n to
+    ``n.pcd``. InputError naming ``what`` otherwise."""
+    if rows == n_scans:
+        return np.arange(n_scans, dtype=np.int64)
+    if numbers is not None and rows > int(numbers.max()):
+        return numbers
+    raise InputError(f"{what}: {rows} {kind} for {n_scans} scans in {what_of(numbers)}")
+
+
+def what_of(numbers: NDArray[np.int64] | None) -> str:
+    return ("the folder" if numbers is None
+            else f"the folder (scans numbered {numbers.min()}..{numbers.max()})")
+
+
 def name_stamps_ns(files: list[Path]) -> NDArray[np.int64] | None:
     """(N,) stamps [ns] when every stem is a stamp (``1317000000.123456`` seconds, or an integer
     of 18+ digits in ns), else None."""

@@ -217,3 +217,23 @@ def test_read_only_logging_is_one_line(caplog: pytest.LogCaptureFixture) -> None
     assert len(caplog.records) == 1 and "100 % of the motion" in caplog.records[0].message
     T[:, 2, 3], T[:, 0, 3] = 0.0, np.arange(20) * 1.0
     assert not warn_if_not_lidar_frame(T, "poses.txt")
+
+
+def test_a_kitti_slice_as_pcds_with_the_full_times_poses_and_calib(frames: KittiFrames,
+                                                                   kitti_root: Path,
+                                                                   tmp_path: Path) -> None:
+    """Frames 000004..000007 of KITTI 04 as PCD files with KITTI's own times.txt, poses/04.txt
+    and calib.txt, uncut: each scan takes its own line (the issue needed hand-cut files)."""
+    d = tmp_path / "slice"
+    d.mkdir()
+    for k in range(4, 8):
+        write_pcd(d / f"{k:06d}.pcd", frames.points[k])
+    seq = kitti_root / "sequences" / "04"
+    out = tmp_path / "s.mcap"
+    code, _, err = ingest(d, "--poses", kitti_root / "poses" / "04.txt", "--times",
+                          seq / "times.txt", "--calib", seq / "calib.txt", "--out", out)
+    assert code == 0, err
+    with SequenceReader(out) as r:
+        np.testing.assert_array_equal(r.stamps_ns, frames.stamps_ns[4:8])
+        np.testing.assert_allclose(r.ground_truth(), frames.T_world_lidar[4:8], atol=1e-6)
+        np.testing.assert_array_equal(r[0].points_lidar, frames.points[4])
