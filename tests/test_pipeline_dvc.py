@@ -1,13 +1,17 @@
-"""The whole pipeline through DVC itself, on a tiny params file, in a temporary copy.
+"""The whole pipeline through DVC itself, on a tiny params file, in a temporary git repository.
 
 Every stage of dvc.yaml runs (`dvc repro`), every output exists and follows its schema, and a
-second `dvc repro` does nothing.
+second `dvc repro` does nothing. Then the README's variation lines run as DVC experiments on the
+same project (`dvc exp run -S ...`), and `dvc exp show`, `dvc exp diff` and `dvc metrics diff`
+compare them: the metrics and plot data are committed to git (``cache: false``), as DVC's
+example-get-started does.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -45,15 +49,29 @@ def dvc(cwd: Path, *args: str) -> str:
     return done.stdout + done.stderr
 
 
+def git(cwd: Path, *args: str) -> str:
+    done = subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, f"git {' '.join(args)} failed:\n{done.stdout}\n{done.stderr}"
+    return done.stdout
+
+
 def reproduce(root: Path, params: dict[str, Any]) -> tuple[Path, str]:
-    """A DVC project in ``root`` with the repository's dvc.yaml and ``params``, reproduced."""
-    shutil.copy(REPO / "dvc.yaml", root / "dvc.yaml")
-    shutil.copy(REPO / ".dvcignore", root / ".dvcignore")
+    """A git + DVC project in ``root`` with the repository's dvc.yaml, .gitignore and ``params``,
+    reproduced and committed on branch ``main`` (what `git status` shows: nothing)."""
+    for name in ("dvc.yaml", ".dvcignore", ".gitignore"):
+        shutil.copy(REPO / name, root / name)
     for code in ("pipeline", "schemas"):  # the stages' code dependencies
         (root / code).symlink_to(REPO / code, target_is_directory=True)
     (root / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
-    dvc(root, "init", "--no-scm", "-q")
-    return root, dvc(root, "repro")
+    git(root, "init", "-q", "-b", "main")
+    git(root, "config", "user.name", "adaptune tests")
+    git(root, "config", "user.email", "tests@adaptune.invalid")
+    dvc(root, "init", "-q")
+    dvc(root, "config", "cache.type", "hardlink,symlink")  # experiments check out in no time
+    log = dvc(root, "repro")
+    git(root, "add", "-A")
+    git(root, "commit", "-q", "-m", "tiny pipeline")
+    return root, log
 
 
 @pytest.fixture(scope="module")
@@ -179,30 +197,124 @@ def test_metrics_and_plots_commands_read_the_outputs(repro: tuple[Path, str]) ->
     assert len(list((root / "dvc_plots" / "static").glob("*.png"))) == 5
 
 
-def test_pipeline_runs_on_a_kitti_root(kitti_root: Path,
-                                       tmp_path_factory: pytest.TempPathFactory) -> None:
-    """Pointing the ingest params at a KITTI root runs the same stages on real scans."""
+def test_metrics_and_plot_data_are_committed(repro: tuple[Path, str]) -> None:
+    """metrics/ and plots/ are in git, not ignored, not in the DVC cache: nothing left over."""
+    root, _ = repro
+    tracked = git(root, "ls-files", "metrics", "plots").split()
+    assert {"metrics/evaluation.json", "metrics/surrogate.json", "plots/rte_frames.csv",
+            "plots/schedule/resolution.csv"} <= set(tracked)
+    assert git(root, "status", "--porcelain") == ""
+
+
+def readme_variations() -> dict[str, list[str]]:
+    """The README's `dvc exp run` lines (its "Variations" block), keyed by what they set."""
+    text = (REPO / "README.md").read_text()
+    block = text.split("Variations:", 1)[1].split("```sh", 1)[1].split("```", 1)[0]
+    lines = {}
+    for line in block.replace("\\\n", " ").splitlines():
+        words = shlex.split(line, comments=True)
+        if words[:3] == ["dvc", "exp", "run"]:
+            sets = dict(w.split("=", 1) for w in words[4::2])
+            assert words[3::2] == ["-S"] * len(sets), line
+            key = "kitti" if "ingest.kitti_root" in sets else ",".join(
+                f"{k}={v}" for k, v in sets.items())
+            lines[key] = words[3:]
+    return lines
+
+
+def tiny(args: list[str], **values: str) -> list[str]:
+    """A variation line's ``-S key=value`` arguments with the values of ``values`` replaced."""
+    out = []
+    for word in args:
+        key, _, _ = word.partition("=")
+        out.append(f"{key}={values[key]}" if key in values else word)
+    return out
+
+
+def exp_run(root: Path, name: str, *args: str, temp: bool = True) -> str:
+    """``dvc exp run -n NAME ARGS`` (in a temporary copy unless ``temp`` is False)."""
+    return dvc(root, "exp", "run", *(["--temp"] if temp else []), "-n", name, *args)
+
+
+def exp_metrics(root: Path) -> dict[str, dict[str, Any]]:
+    """``dvc exp show --json``: the evaluation metrics of every experiment, by name."""
+    shown = json.loads(dvc(root, "exp", "show", "--json"))
+    out = {}
+    for commit in shown:
+        for exp in commit.get("experiments") or []:
+            for rev in exp["revs"]:
+                data = rev["data"]
+                out[rev["name"]] = data["metrics"]["metrics/evaluation.json"]["data"]
+    return out
+
+
+def test_readme_variations_are_the_ones_tested() -> None:
+    assert set(readme_variations()) == {"trials.algorithm=gicp", "trials.algorithm=kiss_icp",
+                                        "trials.dask=local", "kitti"}
+
+
+def test_gicp_on_dask_experiment(repro: tuple[Path, str]) -> None:
+    """The README's gicp and Dask lines as one experiment (to keep the suite short), in a
+    temporary copy: `dvc exp show` sees its metrics, the workspace stays as committed."""
+    root, _ = repro
+    lines = readme_variations()
+    exp_run(root, "gicp-dask", *lines["trials.algorithm=gicp"], *lines["trials.dask=local"])
+    metrics = exp_metrics(root)["gicp-dask"]
+    assert metrics["algorithm"] == "gicp" and metrics["length_m"] == TINY_L_M
+    assert all(0 < v < 100 for v in metrics["rte_pct"].values()), metrics
+    assert git(root, "status", "--porcelain") == ""
+
+
+def test_kitti_and_kiss_icp_experiment_with_a_new_length(repro: tuple[Path, str],
+                                                         kitti_root: Path) -> None:
+    """The README's KITTI line (the kitti_mini slices, L shrunk to fit their 10 frames) with its
+    kiss_icp line, the default descriptor width and a widened search range, in the workspace:
+    ingest runs, every stage reads the new L, and `dvc metrics diff main` and `dvc exp diff`
+    compare the experiments' metrics."""
+    import duckdb
+
     from pipeline.sequence import SequenceReader
 
-    p = tiny_params()
-    p["base"]["sequences"] = "data/kitti"
-    p["simulate"].update(train={"cave": 1}, train_frames=10, validation_count=0)
-    p["ingest"].update(kitti_root=str(kitti_root), train=["01", "06"], validation=["04"])
-    p["descriptors"]["range_bins"] = 10  # the default width here
-    # searched ranges from params.yaml, wider than ndt's built-in [1, 10] m: every later stage
-    # must take them from the trials output (the baseline runs at 11 m)
-    p["trials"]["space"] = {"resolution": {"high": 12.0, "default": 11.0}}
-    root, log = reproduce(tmp_path_factory.mktemp("kitti"), p)
-    assert "Running stage 'ingest'" in log
+    root, _ = repro
+    new_l = TINY_L_M + 1
+    lines = readme_variations()
+    args = tiny(lines["kitti"], **{
+        "base.length_m": str(new_l), "ingest.kitti_root": str(kitti_root),
+        "ingest.train": '["01","06"]', "ingest.validation": '["04"]'})
+    log = exp_run(root, "kitti-kiss", *args, *lines["trials.algorithm=kiss_icp"],
+                  "-S", "descriptors.range_bins=10",  # the default descriptor width here
+                  # searched ranges wider than kiss_icp's built-in max_range [20, 200] m: every
+                  # later stage must take them from the trials output (the baseline runs at 220)
+                  "-S", 'trials.space={"max_range": {"high": 250.0, "default": 220.0}}',
+                  temp=False)
+    for stage in ("ingest", "descriptors", "trials", "fixed", "rte", "surrogate", "adaptive",
+                  "evaluate"):
+        assert f"Running stage '{stage}'" in log
     for seq in ("01", "06", "04"):
         with SequenceReader(root / f"data/kitti/{seq}.mcap") as reader:
             assert len(reader) == 10 and reader.info.sensor != "unknown"
     metrics = json.loads((root / "metrics/evaluation.json").read_text())
-    assert list(metrics["sequences"]) == ["04"]
-    assert metrics["params"]["baseline"]["resolution"] == 11.0
+    assert metrics["algorithm"] == "kiss_icp" and list(metrics["sequences"]) == ["04"]
+    assert metrics["length_m"] == new_l
+    assert metrics["params"]["baseline"]["max_range"] == 220.0
     model = json.loads((root / "model/manifest.json").read_text())
-    (resolution,) = [s for s in model["parameter_space"] if s["name"] == "resolution"]
-    assert (resolution["high"], resolution["default"]) == (12.0, 11.0)
+    (max_range,) = [s for s in model["parameter_space"] if s["name"] == "max_range"]
+    assert (max_range["high"], max_range["default"]) == (250.0, 220.0)
     assert all(0 < v < 50 for v in metrics["rte_pct"].values())
+    con = duckdb.connect(str(root / "results/adaptune.duckdb"), read_only=True)
+    try:
+        lengths = con.execute("SELECT DISTINCT length_m FROM rte_frames").fetchall()
+    finally:
+        con.close()
+    assert lengths == [(new_l,)]
     lock = yaml.safe_load((root / "dvc.lock").read_text())["stages"]
     assert any(d["path"] == "data/kitti" for d in lock["trials"]["deps"])
+    for stage in ("trials", "fixed", "rte", "evaluate"):
+        assert lock[stage]["params"]["params.yaml"]["base.length_m"] == new_l
+    diff = json.loads(dvc(root, "metrics", "diff", "main", "--json"))["metrics/evaluation.json"]
+    assert diff["length_m"] == {"old": TINY_L_M, "new": new_l, "diff": new_l - TINY_L_M}
+    assert {"gicp-dask", "kitti-kiss"} <= set(exp_metrics(root))
+    diff = json.loads(dvc(root, "exp", "diff", "gicp-dask", "kitti-kiss", "--json"))
+    assert diff["params"]["params.yaml"]["trials.algorithm"] == {"old": "gicp", "new": "kiss_icp"}
+    assert {f"rte_pct.{s}" for s in ("baseline", "fixed", "adaptive")} <= set(
+        diff["metrics"]["metrics/evaluation.json"])
