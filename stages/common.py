@@ -7,6 +7,7 @@ that differ only in their help text are built by ``file_option`` / ``dir_option`
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -48,9 +49,18 @@ def compose(*decorators: Callable[[F], F]) -> Callable[[F], F]:
     return apply
 
 
-params_option = file_option(
-    "--params", "params_path", default=Path("params.yaml"), show_default=True,
-    help="The params file (one section per stage).",
+def _params_path(ctx: click.Context, param: click.Parameter, value: Path | None) -> Path | None:
+    """--params as given; without it ./params.yaml where there is one, else None (defaults)."""
+    if value is not None:
+        return value
+    default = Path("params.yaml")
+    return default if default.exists() else None
+
+
+params_option = click.option(
+    "--params", "params_path", type=FILE, default=None, callback=_params_path,
+    help="The params file, one section per stage [default: ./params.yaml if there is one, "
+    "else every section at its defaults].",
 )
 sequences_option = dir_option(
     "--sequences", "sequence_dir", help="Sequence folder with index.json."
@@ -65,3 +75,32 @@ json_option = click.option(
 def algorithm_option(help: str, required: bool = False) -> Callable[[F], F]:
     """``--algorithm NAME`` (an adapter name of the registry)."""
     return click.option("--algorithm", "-a", required=required, default=None, help=help)
+
+
+def read_text_argument(value: str, what: str) -> str:
+    """``value`` itself, or all of stdin when it is ``-`` (ConfigError when that is empty)."""
+    if value != "-":
+        return value
+    from pipeline.errors import ConfigError
+
+    text = sys.stdin.read()
+    if not text.strip():
+        raise ConfigError(f"{what} from stdin (-): got nothing")
+    return text
+
+
+def write_output(data: bytes) -> None:
+    """Write a command's data (the result, not a summary) to stdout."""
+    sys.stdout.flush()
+    sys.stdout.buffer.write(data)
+    sys.stdout.buffer.flush()
+
+
+def report(summary: dict[str, Any], line: str, as_json: bool) -> None:
+    """A command's summary: JSON on stdout with ``--json``, else ``line`` on stderr."""
+    if as_json:
+        import json
+
+        click.echo(json.dumps(summary, indent=1, default=str))
+    else:
+        click.echo(line, err=True)

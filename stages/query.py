@@ -1,10 +1,13 @@
-"""`adaptune query "SQL"`: read-only SQL against the results database."""
+"""`adaptune query "SQL"`: read-only, sandboxed SQL against the results database."""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import click
+
+from stages.common import file_option, read_text_argument, write_output
 
 FORMATS = ["table", "csv", "json", "parquet"]
 
@@ -18,20 +21,48 @@ Examples:
   adaptune query "SELECT round(p_keyframe_interval) AS kf, avg(mean_rte_pct) AS rte_pct
     FROM trials WHERE algorithm = 'gicp' AND status = 'ok' GROUP BY 1 ORDER BY 1"
   adaptune query "SELECT * FROM surrogate_rows" --format parquet --out rows.parquet
+  adaptune query - < report.sql
+  adaptune query "SELECT r.* FROM rows r JOIN sequences USING (sequence)" --table rows=rows.parquet
+
+\b
+The SQL cannot read or write files (COPY, EXPORT DATABASE, read_csv, ATTACH, INSTALL fail):
+--table exposes a local Parquet file as a read-only view, --out writes the result.
 """
+
+
+def _tables(pairs: tuple[str, ...]) -> dict[str, Path]:
+    from pipeline.errors import ConfigError
+
+    tables: dict[str, Path] = {}
+    for pair in pairs:
+        name, sep, path = pair.partition("=")
+        if not sep or not name or not path:
+            raise ConfigError(f"--table must be NAME=FILE.parquet, got {pair!r}")
+        tables[name] = Path(path)
+    return tables
 
 
 @click.command(epilog=EXAMPLES)
 @click.argument("sql")
-@click.option("--db", type=click.Path(dir_okay=False, path_type=Path),
-              default=Path("results/adaptune.duckdb"), show_default=True, help="The database.")
+@file_option("--db", default=Path("results/adaptune.duckdb"), show_default=True,
+             help="The database.")
 @click.option("--format", "fmt", type=click.Choice(FORMATS), default="table", show_default=True)
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Write the result to this file instead of stdout (needed for parquet).")
-def query(sql: str, db: Path, fmt: str, out: Path | None) -> None:
-    """Run SQL on the results database (opened read-only) and print or write the result."""
+@click.option("--out", type=click.Path(dir_okay=False, allow_dash=True, path_type=Path),
+              default=None, help="Write the result to this file (- or none: stdout).")
+@click.option("--table", "table_pairs", multiple=True, metavar="NAME=FILE",
+              help="Let the SQL read a local Parquet file (or folder) as the view NAME "
+              "(repeatable).")
+def query(sql: str, db: Path, fmt: str, out: Path | None, table_pairs: tuple[str, ...]) -> None:
+    """Run SQL (or - to read it from stdin) on the results database, opened read-only and
+    sandboxed, and print or write the result."""
     from pipeline.evaluation.query import query_database
 
-    text = query_database(db, sql, fmt, out)
-    if text:
-        click.echo(text, nl=not text.endswith("\n"))
+    to_stdout = out is None or str(out) == "-"
+    if to_stdout and fmt == "parquet" and sys.stdout.isatty():
+        from pipeline.errors import ConfigError
+
+        raise ConfigError("--format parquet is binary: give --out FILE (or pipe stdout)")
+    data = query_database(db, read_text_argument(sql, "SQL"), fmt,
+                          None if to_stdout else out, _tables(table_pairs))
+    if to_stdout:
+        write_output(data)

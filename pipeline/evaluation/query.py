@@ -1,64 +1,135 @@
-"""Read-only SQL against the results database, rendered as a text table, CSV, JSON or Parquet."""
+"""Read-only, sandboxed SQL against the results database, rendered as a text table, CSV, JSON
+or Parquet.
+
+The SQL runs on a read-only connection whose external access is off and whose configuration is
+locked (DuckDB's ``enable_external_access = false``, ``lock_configuration = true``): it cannot
+read or write any file but the database (``COPY ... TO``, ``EXPORT DATABASE``, ``read_csv``,
+``glob``, ``ATTACH``, ``INSTALL`` / ``LOAD`` all fail), nor turn that off again. Local Parquet
+files the user names (``tables``) are read by pyarrow and shown to the SQL as read-only views;
+writing the result is the caller's ``out`` path, never the SQL's.
+"""
 
 from __future__ import annotations
 
 import io
 import json
 import math
+import re
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pyarrow as pa
 
-from pipeline.errors import InputError, QueryError
-from pipeline.io_utils import atomic_path, atomic_write_text
+from pipeline.errors import ConfigError, InputError, QueryError
+from pipeline.io_utils import atomic_path
+
+if TYPE_CHECKING:
+    import duckdb
 
 QUERY_FORMATS = ("table", "csv", "json", "parquet")
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_FILES_HINT = ("the SQL cannot open files: give --table NAME=FILE.parquet to query a local "
+               "Parquet file as NAME, and --out FILE to write the result")
 
 
 def query_database(db_path: str | Path, sql: str, fmt: str = "table",
-                   out: str | Path | None = None) -> str:
-    """Run ``sql`` on a read-only connection; return the text to print ('' when written to ``out``).
+                   out: str | Path | None = None,
+                   tables: Mapping[str, str | Path] | None = None) -> bytes:
+    """Run ``sql`` in the sandbox; write the result to ``out`` (atomically) and return b"", or
+    return it rendered (UTF-8 text, or Parquet bytes) when ``out`` is None.
 
-    ``parquet`` needs ``out``; the other formats go to ``out`` when given, else are returned.
+    ``tables``: view name -> local Parquet file (or folder of them) the SQL may read.
     """
     if fmt not in QUERY_FORMATS:
         raise InputError(f"unknown format '{fmt}', known: {list(QUERY_FORMATS)}")
-    if fmt == "parquet" and out is None:
-        raise InputError("--format parquet needs --out FILE")
-    table = run_query(db_path, sql)
-    if fmt == "parquet":
-        import pyarrow.parquet as pq
-
-        with atomic_path(out) as tmp:  # type: ignore[arg-type]
-            pq.write_table(table, tmp, compression="zstd")
-        return ""
-    text = {"table": format_table, "csv": format_csv, "json": format_json}[fmt](table)
     if out is not None:
-        atomic_write_text(out, text)
-        return ""
-    return text
+        _check_out(Path(out), Path(db_path), tables or {})
+    data = render(run_query(db_path, sql, tables), fmt)
+    if out is None:
+        return data
+    with atomic_path(out) as tmp:
+        tmp.write_bytes(data)
+    return b""
 
 
-def run_query(db_path: str | Path, sql: str) -> pa.Table:
+def run_query(db_path: str | Path, sql: str,
+              tables: Mapping[str, str | Path] | None = None) -> pa.Table:
     """Result of ``sql`` as an Arrow table (empty when the statement returns nothing)."""
     import duckdb
 
     db_path = Path(db_path)
     if not db_path.is_file():
         raise InputError(f"{db_path}: no such database (build it with `adaptune rte`)")
-    try:
-        con = duckdb.connect(str(db_path), read_only=True)
-    except duckdb.Error as exc:
-        raise InputError(f"{db_path}: not a readable DuckDB database "
-                         f"({_first_line(exc)})") from None
+    con = open_sandbox(db_path, tables or {})
     try:
         rel = con.sql(sql)
         return rel.to_arrow_table() if rel is not None else pa.table({})
+    except duckdb.PermissionException as exc:
+        raise QueryError(f"{db_path}: {_first_line(exc)} ({_FILES_HINT})") from None
     except duckdb.Error as exc:
         raise QueryError(f"{db_path}: {_first_line(exc)}") from None
     finally:
         con.close()
+
+
+def open_sandbox(db_path: Path, tables: Mapping[str, str | Path]) -> duckdb.DuckDBPyConnection:
+    """A read-only connection to ``db_path`` with the ``tables`` views, external access off and
+    the configuration locked (no SQL can turn either back on)."""
+    import duckdb
+
+    try:
+        con = duckdb.connect(str(db_path), read_only=True, config={
+            "autoinstall_known_extensions": False, "autoload_known_extensions": False})
+    except duckdb.Error as exc:
+        raise InputError(f"{db_path}: not a readable DuckDB database "
+                         f"({_first_line(exc)})") from None
+    try:
+        existing = {r[0] for r in con.execute(
+            "SELECT table_name FROM information_schema.tables").fetchall()}
+        for name, path in tables.items():
+            if not _NAME.fullmatch(name) or name.lower() in {e.lower() for e in existing}:
+                raise ConfigError(f"--table {name}={path}: the name must be a new SQL identifier "
+                                  f"(not one of the database's tables or views)")
+            con.register(name, _parquet_dataset(Path(path)))
+        con.execute("SET enable_external_access = false")
+        con.execute("SET lock_configuration = true")
+    except BaseException:
+        con.close()
+        raise
+    return con
+
+
+def _parquet_dataset(path: Path) -> Any:
+    """A pyarrow dataset over a Parquet file or folder; InputError names the file."""
+    import pyarrow.dataset as ds
+
+    if not path.exists():
+        raise InputError(f"{path}: no such Parquet file")
+    try:
+        return ds.dataset(path, format="parquet")
+    except (pa.ArrowException, OSError) as exc:
+        raise InputError(f"{path}: not a readable Parquet file ({_first_line(exc)})") from None
+
+
+def _check_out(out: Path, db_path: Path, tables: Mapping[str, str | Path]) -> None:
+    """ConfigError when ``out`` would replace the database or an input table."""
+    for source in (db_path, *map(Path, tables.values())):
+        if out.resolve() == source.resolve():
+            raise ConfigError(f"--out {out}: is an input of the query ({source}); "
+                              f"choose another file")
+
+
+def render(table: pa.Table, fmt: str) -> bytes:
+    """``table`` as Parquet bytes (zstd) or UTF-8 text in one of the text formats."""
+    if fmt == "parquet":
+        import pyarrow.parquet as pq
+
+        sink = pa.BufferOutputStream()
+        pq.write_table(table, sink, compression="zstd")
+        return sink.getvalue().to_pybytes()
+    text = {"table": format_table, "csv": format_csv, "json": format_json}[fmt](table)
+    return (text if not text or text.endswith("\n") else text + "\n").encode()
 
 
 def format_table(table: pa.Table) -> str:
