@@ -84,7 +84,7 @@ def run_one(model: Any, sequence_path: Path, out_dir: Path,
     traj = run_sequence(adapter, sequence_path, schedule, time_limit_s=time_limit_s)
     odometry_s = time.perf_counter() - t0
     run = AdaptiveRun(sequence_path.stem, model.algorithm, frames, selector.selections,
-                      len(schedule.changes()) - 1, select_s, odometry_s)
+                      schedule.n_changes, select_s, odometry_s)
     schedule.write(out_dir / "schedule.parquet")
     write_trajectory(out_dir / "trajectory.parquet", traj,
                      {"setting": "adaptive", "algorithm": model.algorithm,

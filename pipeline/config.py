@@ -65,8 +65,11 @@ def validate_section(model: type[S], section: str, data: dict[str, Any] | None) 
         raise ConfigError(format_validation_error(section, exc)) from None
 
 
-def read_params(path: str | Path) -> dict[str, Any]:
-    """The whole params.yaml as a dict; ConfigError when missing or not a mapping."""
+def read_params(path: str | Path | None) -> dict[str, Any]:
+    """The whole params.yaml as a dict ({} for None: every section at its defaults);
+    ConfigError when missing or not a mapping."""
+    if path is None:
+        return {}
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
@@ -79,10 +82,11 @@ def read_params(path: str | Path) -> dict[str, Any]:
     return data
 
 
-def load_section(path: str | Path, section: str, model: type[S]) -> S:
+def load_section(path: str | Path | None, section: str, model: type[S]) -> S:
     """Read ``section`` of the params file at ``path`` and validate it as ``model``.
 
-    The keys ``FROM_BASE`` names for the section come from the validated ``base`` section.
+    The keys ``FROM_BASE`` names for the section come from the validated ``base`` section;
+    ``path`` None gives the section's defaults.
     """
     return validate_section(model, section, section_data(read_params(path), section))
 

@@ -21,8 +21,8 @@ from stages.common import dir_option, params_option, sequences_option
 @click.option("--split", default=None, help="Split of index.json to run [evaluate.split].")
 @dir_option("--out", "out_dir",
             help="Output folder: <sequence>/{schedule,trajectory}.parquet and run.json.")
-def adaptive(params_path: Path, model_dir: Path, sequence_dir: Path, split: str | None,
-             out_dir: Path) -> None:
+def adaptive(params_path: Path | None, model_dir: Path, sequence_dir: Path,
+             split: str | None, out_dir: Path) -> None:
     """Schedule every validation sequence with the model and run its odometry."""
     from pipeline.adaptive import run_adaptive
     from pipeline.config import load_section

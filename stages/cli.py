@@ -108,7 +108,7 @@ def main(verbose: int) -> None:
     from pipeline.lifetime import exit_on_termination
 
     exit_on_termination()  # SIGTERM ends children and temporary files, as Ctrl-C does
-    level = logging.WARNING - 10 * min(verbose, 2) if verbose else logging.INFO
+    level = logging.WARNING - 10 * min(verbose, 2)  # warnings only, unless -v / -vv
     logging.basicConfig(
         level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr
     )

@@ -18,7 +18,7 @@ from stages.common import dir_option, file_option, params_option, sequences_opti
 @dir_option("--pca", "pca_dir",
             help="PCA folder (mean.npy, components.npy, scale.npy, pca.json).")
 def descriptors(
-    params_path: Path, sequence_dir: Path, out: Path, environment: Path, pca_dir: Path
+    params_path: Path | None, sequence_dir: Path, out: Path, environment: Path, pca_dir: Path
 ) -> None:
     """Descriptor of every frame of every sequence; PCA fitted on the training frames."""
     from pipeline.descriptors.dataset import (

@@ -23,7 +23,7 @@ from stages.common import dir_option, file_option, params_option, sequences_opti
 @file_option("--metrics", "metrics_path", help="Metrics JSON to write.")
 @dir_option("--plots", "plots_dir", help="Folder for plot CSVs.")
 @dir_option("--report", "report_dir", help="Folder for report.md and its figures.")
-def evaluate(params_path: Path, sequence_dir: Path, trials_dir: Path, fixed_dir: Path,
+def evaluate(params_path: Path | None, sequence_dir: Path, trials_dir: Path, fixed_dir: Path,
              adaptive_dir: Path, runs_dir: Path, metrics_path: Path, plots_dir: Path,
              report_dir: Path) -> None:
     """Score baseline, fixed and adaptive parameters; write metrics, plots and the report."""

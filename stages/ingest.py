@@ -59,7 +59,8 @@ def _done(report: Any) -> None:
     click.echo(
         f"{report.out}: {report.frames} frames, {report.points} points"
         f"{f' ({report.dropped_points} non-finite dropped)' if report.dropped_points else ''}, "
-        f"ground truth: {'yes' if report.has_ground_truth else 'no'}, {report.seconds:.1f} s"
+        f"ground truth: {'yes' if report.has_ground_truth else 'no'}, {report.seconds:.1f} s",
+        err=True,
     )
 
 
@@ -133,7 +134,7 @@ def mcap(path: Path, **options: Any) -> None:
 @click.command("ingest-set")
 @params_option
 @dir_option("--out", "out_dir", help="Folder for <NN>.mcap and index.json (data/kitti).")
-def ingest_set(params_path: Path, out_dir: Path) -> None:
+def ingest_set(params_path: Path | None, out_dir: Path) -> None:
     """Ingest the KITTI sequences of the params section ``ingest`` (dvc stage)."""
     from pipeline.config import load_section
     from pipeline.sources.dataset import IngestSection, ingest_kitti_set
@@ -142,4 +143,4 @@ def ingest_set(params_path: Path, out_dir: Path) -> None:
     for report in ingest_kitti_set(section, out_dir):
         _done(report)
     click.echo(f"{out_dir / 'index.json'}: {len(section.train)} train, "
-               f"{len(section.validation)} validation sequences")
+               f"{len(section.validation)} validation sequences", err=True)

@@ -8,7 +8,14 @@ from pathlib import Path
 
 import click
 
-from stages.common import algorithm_option, file_option, model_argument, sequence_argument
+from stages.common import (
+    algorithm_option,
+    file_option,
+    json_option,
+    model_argument,
+    report,
+    sequence_argument,
+)
 
 
 @click.command()
@@ -16,14 +23,13 @@ from stages.common import algorithm_option, file_option, model_argument, sequenc
 @sequence_argument
 @file_option("--out", help="Output MCAP (scans, ground truth, estimated poses, chosen parameters).")
 @algorithm_option("Odometry algorithm (default: the model's; another one is refused).")
-def live(model_dir: Path, sequence: Path, out: Path, algorithm: str | None) -> None:
+@json_option
+def live(model_dir: Path, sequence: Path, out: Path, algorithm: str | None,
+         as_json: bool) -> None:
     """Stream a sequence through odometry with online parameter selection."""
     from pipeline.runtime import load_model, run_live
 
     model = load_model(model_dir, expected_algorithm=algorithm)
-    summary = run_live(model, sequence, out)
-    click.echo(
-        f"{model.algorithm}: {summary['frames']} frames, {summary['selections']} selections, "
-        f"{summary['changes']} parameter changes -> {out}",
-        err=True,
-    )
+    summary = {"algorithm": model.algorithm, **run_live(model, sequence, out), "out": str(out)}
+    report(summary, f"{model.algorithm}: {summary['frames']} frames, {summary['selections']} "
+           f"selections, {summary['changes']} parameter changes -> {out}", as_json)

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import click
 
 from stages.common import dir_option, file_option, params_option, sequences_option
 
-log = logging.getLogger(__name__)
 
 @click.command()
 @params_option
@@ -19,8 +17,9 @@ log = logging.getLogger(__name__)
 @file_option("--descriptors", required=False, help="data/descriptors.parquet.")
 @file_option("--environment", required=False, help="data/environment.parquet.")
 @file_option("--db", help="The database to (re)build.")
-def rte(params_path: Path, sequence_dir: Path, trials_dir: Path | None, fixed_dir: Path | None,
-        descriptors: Path | None, environment: Path | None, db: Path) -> None:
+def rte(params_path: Path | None, sequence_dir: Path, trials_dir: Path | None,
+        fixed_dir: Path | None, descriptors: Path | None, environment: Path | None,
+        db: Path) -> None:
     """Build the results database: sequences, trials, rte_frames, rte_kitti, descriptors."""
     from pipeline.config import load_section
     from pipeline.evaluation.store import RteSection, build_database
@@ -29,5 +28,6 @@ def rte(params_path: Path, sequence_dir: Path, trials_dir: Path | None, fixed_di
     studies = {name: path for name, path in (("trials", trials_dir), ("fixed", fixed_dir))
                if path is not None}
     summary = build_database(db, sequence_dir, studies, settings, descriptors, environment)
-    log.info("%s: %d sequences, %d trials, %d rte_frames rows, %d rte_kitti rows",
-             db, summary.sequences, summary.trials, summary.rte_frames, summary.rte_kitti)
+    click.echo(f"{db}: {summary.sequences} sequences, {summary.trials} trials, "
+               f"{summary.rte_frames} rte_frames rows, {summary.rte_kitti} rte_kitti rows",
+               err=True)

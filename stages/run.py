@@ -8,6 +8,14 @@ from typing import Any
 
 import click
 
+from stages.common import (
+    algorithm_option,
+    file_option,
+    json_option,
+    report,
+    sequence_argument,
+)
+
 
 def parse_params(text: str | None) -> dict[str, float]:
     """``--params``: a JSON object, or ``@file`` holding one. ConfigError otherwise."""
@@ -49,20 +57,20 @@ def parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
 
 
 @click.command("run")
-@click.option("--algorithm", "-a", required=True,
-              help="Adapter name (ndt, gicp, kiss_icp, command).")
+@algorithm_option("Adapter name (ndt, gicp, kiss_icp, command).", required=True)
 @click.option("--params", "params_json", default=None,
               help="Fixed parameters as a JSON object or @file.json (missing ones: baseline).")
 @click.option("--schedule", "schedule_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Per-frame parameter schedule (Parquet).")
-@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="Trajectory Parquet to write.")
+@file_option("--out", "out_path", help="Trajectory Parquet to write.")
 @click.option("--option", "-o", "options", multiple=True,
               help="Adapter option key=value (repeatable), e.g. -o source_voxel_m=0.5.")
 @click.option("--time-limit", "time_limit_s", type=float, default=None, help="Seconds.")
-@click.argument("sequence", type=click.Path(dir_okay=False, path_type=Path))
+@json_option
+@sequence_argument
 def run(algorithm: str, params_json: str | None, schedule_path: Path | None, out_path: Path,
-        options: tuple[str, ...], time_limit_s: float | None, sequence: Path) -> None:
+        options: tuple[str, ...], time_limit_s: float | None, as_json: bool,
+        sequence: Path) -> None:
     """Run ALGORITHM once over SEQUENCE (a sequence MCAP) and write its trajectory."""
     from pipeline.errors import ConfigError
     from pipeline.odometry import get_adapter, run_sequence
@@ -80,4 +88,6 @@ def run(algorithm: str, params_json: str | None, schedule_path: Path | None, out
     else:
         meta["params_json"] = json.dumps(adapter.space.validate(given))  # type: ignore[arg-type]
     write_trajectory(out_path, traj, meta)
-    click.echo(f"{algorithm}: {len(traj)} poses -> {out_path}", err=True)
+    summary = {"algorithm": algorithm, "sequence": str(sequence), "poses": len(traj),
+               "out": str(out_path)}
+    report(summary, f"{algorithm}: {len(traj)} poses -> {out_path}", as_json)

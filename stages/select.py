@@ -7,7 +7,14 @@ from pathlib import Path
 
 import click
 
-from stages.common import algorithm_option, file_option, model_argument, sequence_argument
+from stages.common import (
+    algorithm_option,
+    file_option,
+    json_option,
+    model_argument,
+    report,
+    sequence_argument,
+)
 
 
 @click.command()
@@ -16,19 +23,21 @@ from stages.common import algorithm_option, file_option, model_argument, sequenc
 @file_option("--out", help="The schedule Parquet (frame, stamp_ns, one column per parameter).")
 @algorithm_option("Refuse a model made for another algorithm.")
 @click.option("--period-s", type=float, default=None, help="Override the model's period [s].")
+@json_option
 def select(
-    model_dir: Path, sequence: Path, out: Path, algorithm: str | None, period_s: float | None
+    model_dir: Path, sequence: Path, out: Path, algorithm: str | None, period_s: float | None,
+    as_json: bool,
 ) -> None:
     """Parameter schedule of a recorded sequence from a model artifact."""
     from pipeline.runtime import Selector, load_model
     from pipeline.sequence import SequenceReader
 
     model = load_model(model_dir, expected_algorithm=algorithm)
+    selector = Selector(model, period_s=period_s)
     with SequenceReader(sequence) as reader:
-        schedule = Selector(model, period_s=period_s).schedule(reader)
+        schedule = selector.schedule(reader)
     schedule.write(out)
-    click.echo(
-        f"{model.algorithm}: {len(schedule)} frames, {len(schedule.changes())} parameter "
-        f"changes -> {out}",
-        err=True,
-    )
+    summary = {"algorithm": model.algorithm, "frames": len(schedule),
+               "selections": selector.selections, "changes": schedule.n_changes, "out": str(out)}
+    report(summary, f"{model.algorithm}: {len(schedule)} frames, {selector.selections} "
+           f"selections, {schedule.n_changes} parameter changes -> {out}", as_json)

@@ -70,14 +70,15 @@ def simulate(name: str | None, out: Path, **world: Any) -> None:
     s = simulate_sequence(spec, out, name=name, progress=sys.stderr.isatty())
     labels = ", ".join(f"{x.label} {x.start}-{x.end}" for x in s.labels)
     click.echo(
-        f"{s.path}: {s.frames} frames, {s.points} points, {s.length_m:.0f} m, labels: {labels}"
+        f"{s.path}: {s.frames} frames, {s.points} points, {s.length_m:.0f} m, labels: {labels}",
+        err=True,
     )
 
 
 @click.command("simulate-set")
 @params_option
 @dir_option("--out", help="Folder for <name>.mcap and index.json (data/sequences).")
-def simulate_set(params_path: Path, out: Path) -> None:
+def simulate_set(params_path: Path | None, out: Path) -> None:
     """Simulate the toy data set of the params section ``simulate`` (dvc stage)."""
     from pipeline.config import BaseSection, load_section
     from pipeline.sim.dataset import SimulateSection
@@ -87,8 +88,8 @@ def simulate_set(params_path: Path, out: Path) -> None:
     base = load_section(params_path, "base", BaseSection)
     done = run(section, base.seed, out, progress=sys.stderr.isatty())
     for s in done:
-        click.echo(f"{s.path}: {s.frames} frames, {s.length_m:.0f} m")
-    click.echo(f"{out / 'index.json'}: {len(done)} sequences")
+        click.echo(f"{s.path}: {s.frames} frames, {s.length_m:.0f} m", err=True)
+    click.echo(f"{out / 'index.json'}: {len(done)} sequences", err=True)
 
 
 @click.command("plot-world")
@@ -101,4 +102,4 @@ def plot_world(scan_frame: int | None, out: Path, **world: Any) -> None:
     from pipeline.sim.plot import plot_world as plot
 
     spec = _spec(**world)
-    click.echo(str(plot(spec, out, scan_frame)))
+    click.echo(f"{plot(spec, out, scan_frame)}: world {spec.world}, seed {spec.seed}", err=True)

@@ -22,7 +22,7 @@ from stages.common import algorithm_option, dir_option, file_option, params_opti
 @algorithm_option("Algorithm of the rows (default: the only one).")
 @file_option("--metrics", "metrics_path", required=False, help="Write the CV error here (JSON).")
 def surrogate(
-    params_path: Path,
+    params_path: Path | None,
     db_path: Path,
     pca_dir: Path,
     out: Path,

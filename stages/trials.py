@@ -9,14 +9,13 @@ defaults to ``base.seed``.
 
 from __future__ import annotations
 
-import logging
+import json
+from dataclasses import asdict
 from pathlib import Path
 
 import click
 
-from stages.common import FILE, algorithm_option, dir_option, params_option
-
-log = logging.getLogger(__name__)
+from stages.common import FILE, algorithm_option, dir_option, json_option, params_option
 
 
 @click.command()
@@ -39,6 +38,7 @@ log = logging.getLogger(__name__)
     "--joint", is_flag=True, help="One study over all sequences (the 'fixed' parameters)."
 )
 @params_option
+@json_option
 def trials(
     sequence_paths: tuple[Path, ...],
     out_dir: Path,
@@ -52,7 +52,8 @@ def trials(
     length_m: float | None,
     time_limit_s: float | None,
     joint: bool,
-    params_path: Path,
+    params_path: Path | None,
+    as_json: bool,
 ) -> None:
     """SMBO trials: per sequence, or one joint study (--joint) into OUT."""
     from pipeline.config import BaseSection, load_section, validate_section
@@ -88,14 +89,12 @@ def trials(
         if sequence_dir is not None
         else list(sequence_paths)
     )
+    studies = []
     for s in run_trials(paths, out_dir, settings, seed, joint=joint):
-        log.info(
-            "trials %s %s: %d trials (%d run now), %d failed, best objective %.4g %% (trial %d)",
-            s.algorithm,
-            s.sequence,
-            s.trials,
-            s.ran,
-            s.failed,
-            s.best_objective,
-            s.best_trial,
-        )
+        studies.append(s)
+        if not as_json:
+            click.echo(f"{s.algorithm} {s.sequence}: {s.trials} trials ({s.ran} run now), "
+                       f"{s.failed} failed, best objective {s.best_objective:.4g} % "
+                       f"(trial {s.best_trial})", err=True)
+    if as_json:
+        click.echo(json.dumps([asdict(s) for s in studies], indent=1, default=str))

@@ -43,3 +43,36 @@ def test_adaptune_error_becomes_one_line_exit_1(tmp_path: Path) -> None:
     assert result.returncode == 1
     assert result.stdout == ""
     assert result.stderr.splitlines() == [f"adaptune: error: {missing}: no such sequence file"]
+
+
+def test_no_info_lines_without_verbose(tmp_path: Path) -> None:
+    """Warnings only by default: the summary line alone on stderr; -v adds the INFO lines."""
+    params = tmp_path / "params.yaml"
+    params.write_text("ingest: {}\n")
+    args = [sys.executable, "-m", "stages.cli", "ingest-set", "--params", str(params),
+            "--out", str(tmp_path / "k")]
+    quiet = subprocess.run(args, capture_output=True, text=True, check=True)
+    summary = f"{tmp_path / 'k' / 'index.json'}: 0 train, 0 validation sequences"
+    assert (quiet.stdout, quiet.stderr.splitlines()) == ("", [summary])
+    verbose = subprocess.run([*args[:3], "-v", *args[3:]], capture_output=True, text=True,
+                             check=True)
+    assert verbose.stderr.splitlines() == [
+        "INFO pipeline.sources.dataset: ingest: no kitti_root configured, writing an empty "
+        "data set", summary]
+
+
+def test_default_simulation_fits_the_default_length() -> None:
+    """`adaptune simulate` with its default frame count drives farther than the default L, in
+    every world, so that a first `adaptune trials` on it can score RTE."""
+    import numpy as np
+
+    from pipeline.config import BaseSection
+    from pipeline.sim.simulate import SimSpec, make_world
+    from stages.simulate import WORLDS, simulate
+
+    frames = next(p.default for p in simulate.params if p.name == "frames")
+    for world in WORLDS:
+        for seed in (0, 1) if world == "cave" else (0,):  # cave: the slowest
+            poses = make_world(SimSpec(world, seed, frames)).poses.T_world_lidar
+            length = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1).sum()
+            assert length > 1.2 * BaseSection().length_m, (world, seed, length)

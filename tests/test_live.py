@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +31,14 @@ def test_live_writes_poses_and_params(tmp_path: Path, kitti_root: Path) -> None:
     seq = tmp_path / "s.mcap"
     write_tiny_sequence(seq, kitti_root, "04", n=5, step=4)
     out = tmp_path / "live.mcap"
-    res = CliRunner().invoke(main, ["live", str(model_dir), str(seq), "--out", str(out)])
+    res = CliRunner().invoke(main, ["live", str(model_dir), str(seq), "--out", str(out),
+                                    "--json"])
     assert res.exit_code == 0, res.output
+    live = json.loads(res.stdout)
+    res = CliRunner().invoke(main, ["select", str(model_dir), str(seq), "--out",
+                                    str(tmp_path / "schedule.parquet"), "--json"])
+    assert res.exit_code == 0, res.output
+    select = json.loads(res.stdout)
     space = get_adapter("ndt").space
     with SequenceReader(out) as r, SequenceReader(seq) as src:
         assert len(r) == 5 and r.ground_truth() is not None
@@ -44,3 +52,9 @@ def test_live_writes_poses_and_params(tmp_path: Path, kitti_root: Path) -> None:
     for _, m in params:
         space.validate({n: m[n] for n in space.names})
         assert m["predicted_rte_pct"] is None or m["predicted_rte_pct"] > 0
+    # one count of parameter changes: frames whose parameters differ from the previous frame's
+    values = [tuple(m[n] for n in space.names) for _, m in params]
+    changes = sum(a != b for a, b in pairwise(values))
+    for summary in (live, select):
+        assert {k: summary[k] for k in ("algorithm", "frames", "selections", "changes")} == {
+            "algorithm": "ndt", "frames": 5, "selections": 3, "changes": changes}

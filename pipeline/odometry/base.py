@@ -210,6 +210,12 @@ class Schedule:
         diff = np.any(arr[1:] != arr[:-1], axis=1)
         return [0, *(np.flatnonzero(diff) + 1).tolist()]
 
+    @property
+    def n_changes(self) -> int:
+        """Parameter changes after the first frame: the ``set_params`` calls a run makes (what
+        ``select``, ``live``, ``adaptive`` and the report count)."""
+        return max(len(self.changes()) - 1, 0)
+
     def validate(self, space: ParameterSpace, n_frames: int, what: str = "schedule") -> None:
         """InputError unless the schedule covers frames 0..n_frames-1 with valid values."""
         if len(self) != n_frames or not np.array_equal(self.frames, np.arange(n_frames)):

@@ -252,7 +252,7 @@ def metrics(ev: Evaluation, trials: Mapping[str, Mapping[str, float]]) -> dict[s
             "rte_pct_per_label": {s: ev.score(s, name).per_label() for s in SETTINGS},
             "kitti": ev.kitti[name],
             "wall_time_s": {s: ev.score(s, name).wall_time_s for s in SETTINGS},
-            "parameter_changes": len(ev.schedules[name].changes()) - 1,
+            "parameter_changes": ev.schedules[name].n_changes,
         } for name in ev.sequences},
         "params": {"baseline": ev.baseline_params, "fixed": ev.fixed_params},
         "trials": dict(trials),

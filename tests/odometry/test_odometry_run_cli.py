@@ -29,6 +29,18 @@ def test_run_with_params_and_options(synthetic_seq: Seq, tmp_path: Path) -> None
     np.testing.assert_array_equal(traj.T_world_lidar[:, :3], direct[:, :3])
 
 
+def test_run_summary_on_stderr_or_json_on_stdout(synthetic_seq: Seq, tmp_path: Path) -> None:
+    out = tmp_path / "t.parquet"
+    args = ["run", "-a", "ndt", str(synthetic_seq.path), "--out", str(out)]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0 and res.stdout == ""
+    assert res.stderr == f"ndt: {len(synthetic_seq)} poses -> {out}\n"
+    res = CliRunner().invoke(main, [*args, "--json"])
+    assert res.exit_code == 0 and res.stderr == ""
+    assert json.loads(res.stdout) == {"algorithm": "ndt", "sequence": str(synthetic_seq.path),
+                                      "poses": len(synthetic_seq), "out": str(out)}
+
+
 def test_run_with_schedule_file(synthetic_seq: Seq, tmp_path: Path) -> None:
     n = len(synthetic_seq)
     sched = Schedule.constant(get_adapter("ndt").space.defaults(), n)

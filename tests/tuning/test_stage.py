@@ -139,3 +139,24 @@ def test_ndt_trials_on_a_ray_cast_sequence(tmp_path: Path) -> None:
         trajectory_path(out, "ndt", "yard", i).is_file() == (s == "ok")
         for i, s in enumerate(t["status"])
     )
+
+
+def test_first_try_without_params_file_and_json_summary(
+    sequences: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """No params.yaml in the working folder: every section at its defaults (L = 25 m fits the
+    29 m sequence); --json puts the study summaries on stdout, nothing on stderr."""
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "out"
+    args = ["trials", str(sequences[0]), "--out", str(out), "--algorithm",
+            "tuning_adapters:drift", "--iterations", "2"]
+    res = CliRunner().invoke(main, [*args, "--json"])
+    assert res.exit_code == 0, res.output
+    assert res.stderr == ""
+    (study,) = json.loads(res.stdout)
+    assert (study["algorithm"], study["sequence"], study["trials"]) == ("drift", "seq_a", 2)
+    res = CliRunner().invoke(main, args)  # resumed: nothing to run; the summary on stderr
+    assert res.exit_code == 0 and res.stdout == ""
+    assert res.stderr.splitlines() == [
+        f"drift seq_a: 2 trials (0 run now), {study['failed']} failed, best objective "
+        f"{study['best_objective']:.4g} % (trial {study['best_trial']})"]
