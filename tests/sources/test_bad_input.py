@@ -74,7 +74,7 @@ def test_non_finite_points_are_dropped_and_counted(mini_root: Path, tmp_path: Pa
     out = tmp_path / "s.mcap"
     result = CliRunner().invoke(main, kitti_args(mini_root, out))
     assert result.exit_code == 0, result.output
-    assert "(3 non-finite dropped)" in result.stdout
+    assert "(3 non-finite dropped)" in result.stderr  # the summary line
     with SequenceReader(out) as r:
         got = r[0].points_lidar
     keep = np.ones(len(pts), bool)
