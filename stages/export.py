@@ -1,22 +1,48 @@
-"""`adaptune export TRAJ --format kitti|tum --out FILE`: Parquet -> text for evo / devkit."""
+"""`adaptune export TRAJ --format kitti|tum --out FILE`: Parquet -> text for evo / the devkit.
+
+By default the estimate is anchored at the ground truth of its first frame (from the sequence
+the trajectory names, or --sequence); ``--frame kitti-camera`` writes KITTI's camera-0 frame;
+``--ground-truth`` exports the ground truth of a sequence MCAP instead
+(``pipeline.evaluation.export`` documents the frames).
+"""
 
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import click
 
-log = logging.getLogger(__name__)
+from stages.common import FILE, file_option
+
+FRAMES = ["lidar", "kitti-camera"]
 
 
 @click.command()
-@click.argument("trajectory", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("source", type=FILE)
 @click.option("--format", "fmt", type=click.Choice(["kitti", "tum"]), required=True)
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), required=True)
-def export(trajectory: Path, fmt: str, out: Path) -> None:
-    """Write TRAJECTORY (T_world_lidar Parquet) as a KITTI or TUM text file."""
-    from pipeline.evaluation.posefile import export_trajectory
+@file_option("--out", help="The pose text file to write.")
+@click.option("--ground-truth", is_flag=True,
+              help="SOURCE is a sequence MCAP: export its ground truth.")
+@file_option("--sequence", required=False,
+             help="The sequence MCAP of the trajectory [default: the one it names].")
+@click.option("--anchor", type=click.Choice(["ground-truth", "identity"]),
+              default="ground-truth", show_default=True,
+              help="Start at the first frame's ground-truth pose, or where the odometry did.")
+@click.option("--frame", type=click.Choice(FRAMES), default="lidar", show_default=True,
+              help="lidar: T_world_lidar; kitti-camera: KITTI's camera-0 poses (poses/NN.txt).")
+@file_option("--calib", required=False,
+             help="KITTI calib.txt for --frame kitti-camera [default: the sequence's].")
+def export(source: Path, fmt: str, out: Path, ground_truth: bool, sequence: Path | None,
+           anchor: str, frame: str, calib: Path | None) -> None:
+    """Write SOURCE (a trajectory Parquet, or with --ground-truth a sequence MCAP) as a KITTI
+    or TUM pose file."""
+    from pipeline.evaluation.export import export_ground_truth, export_trajectory
 
-    n = export_trajectory(trajectory, fmt, out)
-    log.info("%s: %d poses as %s", out, n, fmt)
+    if ground_truth:
+        n = export_ground_truth(source, fmt, out, frame=frame, calib=calib)
+        what = "ground truth"
+    else:
+        n = export_trajectory(source, fmt, out, sequence=sequence, anchor=anchor, frame=frame,
+                              calib=calib)
+        what = f"anchored at {anchor}" if anchor == "ground-truth" else "as estimated"
+    click.echo(f"{out}: {n} poses as {fmt}, {frame} frame, {what}", err=True)

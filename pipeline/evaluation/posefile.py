@@ -221,25 +221,3 @@ def write_tum(path: str | Path, stamps_s: F64, poses: F64) -> None:
     lines = [f"{s:.9f} " + " ".join(f"{v:.12e}" for v in (*ti, *qi))
              for s, ti, qi in zip(stamps_s, t, q, strict=True)]
     atomic_write_text(path, "\n".join(lines) + ("\n" if lines else ""))
-
-
-EXPORT_FORMATS = ("kitti", "tum")
-
-
-def export_trajectory(traj_path: str | Path, fmt: str, out: str | Path) -> int:
-    """Write a trajectory Parquet file as KITTI or TUM text (poses as stored: T_world_lidar).
-
-    Returns the number of poses written. TUM stamps are stamp_ns / 1e9 [s].
-    """
-    from pipeline.trajectory import read_trajectory
-
-    if fmt not in EXPORT_FORMATS:
-        raise InputError(f"unknown export format '{fmt}', known: {list(EXPORT_FORMATS)}")
-    traj = read_trajectory(traj_path)
-    if not traj.is_finite():
-        raise InputError(f"{traj_path}: trajectory has non-finite poses")
-    if fmt == "kitti":
-        write_kitti_poses(out, traj.T_world_lidar)
-    else:
-        write_tum(out, traj.stamps_ns.astype(np.float64) / 1e9, traj.T_world_lidar)
-    return len(traj)

@@ -7,6 +7,7 @@ times.txt seconds in ns as they are (KITTI times start at 0.0).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from pathlib import Path
 from typing import ClassVar
@@ -91,6 +92,7 @@ class KittiSource:
                 "kitti_root": str(self.root),
                 "first_frame": str(self.start),
                 "last_frame": str(self.end),
+                "T_cam_lidar": json.dumps(self.Tr.ravel().tolist()),  # KITTI's Tr
             },
         )
 

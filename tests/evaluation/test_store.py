@@ -260,7 +260,8 @@ def test_export_cli_round_trip(world: World, tmp_path: Path) -> None:
     traj = read_trajectory(src)
     for fmt in ("kitti", "tum"):
         out = tmp_path / f"t.{fmt}"
-        result = CliRunner().invoke(main, ["export", str(src), "--format", fmt, "--out", str(out)])
+        result = CliRunner().invoke(main, ["export", str(src), "--format", fmt, "--out", str(out),
+                                           "--anchor", "identity"])
         assert result.exit_code == 0, result.output
     np.testing.assert_allclose(read_kitti_poses(tmp_path / "t.kitti"), traj.T_world_lidar,
                                atol=1e-10)
@@ -270,3 +271,18 @@ def test_export_cli_round_trip(world: World, tmp_path: Path) -> None:
     cli_fails(["export", str(tmp_path / "none.parquet"), "--format", "tum", "--out",
               str(tmp_path / "n.tum")], "none.parquet")
     assert not (tmp_path / "n.tum").exists()
+    # anchored at the ground truth (the default) it needs the trajectory's sequence
+    cli_fails(["export", str(src), "--format", "kitti", "--out", str(tmp_path / "a.kitti")],
+              "its sequence is unknown", "--sequence SEQ.mcap")
+    seq = world.root / "seq" / "cave_0.mcap"
+    result = CliRunner().invoke(main, ["export", str(src), "--format", "kitti", "--out",
+                                       str(tmp_path / "a.kitti"), "--sequence", str(seq)])
+    assert result.exit_code == 0, result.output
+    anchored = read_kitti_poses(tmp_path / "a.kitti")
+    np.testing.assert_allclose(anchored[0], SequenceReader(seq).ground_truth()[0], atol=1e-9)
+    np.testing.assert_allclose(np.linalg.inv(anchored[0]) @ anchored,
+                               np.linalg.inv(traj.T_world_lidar[0]) @ traj.T_world_lidar,
+                               atol=1e-9)
+    cli_fails(["export", str(src), "--format", "kitti", "--out", str(tmp_path / "c.kitti"),
+               "--sequence", str(seq), "--frame", "kitti-camera"], "no camera calibration",
+              "--calib")
