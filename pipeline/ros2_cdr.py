@@ -24,7 +24,8 @@ from pipeline.errors import InputError
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
-MESSAGE_TYPES = (POINTCLOUD2, POSE_STAMPED, TF_MESSAGE)
+PARAMETER_EVENT = "rcl_interfaces/msg/ParameterEvent"
+MESSAGE_TYPES = (POINTCLOUD2, POSE_STAMPED, TF_MESSAGE, PARAMETER_EVENT)
 
 # sensor_msgs/PointField datatype -> numpy dtype
 POINTFIELD_DTYPES: dict[int, np.dtype] = {

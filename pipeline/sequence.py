@@ -164,6 +164,7 @@ class SequenceWriter:
         self.dropped_points = 0
         self._poses: dict[str, list[tuple[int, bytes]]] = {}
         self._tf: list[tuple[int, bytes]] = []
+        self._ros2: dict[tuple[str, str], list[tuple[int, bytes]]] = {}
         self._json: dict[str, tuple[dict[str, Any], list[tuple[int, bytes]]]] = {}
 
     def __enter__(self) -> SequenceWriter:
@@ -238,6 +239,11 @@ class SequenceWriter:
         ``stamp_ns`` (written after the scans, in its own chunks)."""
         self._tf.append((int(stamp_ns), encode_tf(stamp_ns, parent, child, T_parent_child)))
 
+    def add_ros2(self, topic: str, msgtype: str, stamp_ns: int, data: bytes) -> None:
+        """Queue CDR bytes of ``msgtype`` (one of ``pipeline.ros2_cdr.MESSAGE_TYPES``) on
+        ``topic`` (written after the scans, in its own chunks)."""
+        self._ros2.setdefault((topic, msgtype), []).append((int(stamp_ns), data))
+
     def add_json(self, topic: str, stamp_ns: int, message: dict[str, Any],
                  json_schema: dict[str, Any]) -> None:
         """Queue a JSON message on ``topic`` with its JSON Schema (Foxglove plots its fields)."""
@@ -265,6 +271,13 @@ class SequenceWriter:
         if self._tf:
             ch = self._w.register_channel(TF_TOPIC, "cdr", self._schemas[TF_MESSAGE])
             for i, (t, data) in enumerate(sorted(self._tf, key=lambda m: m[0])):
+                self._w.add_message(ch, log_time=t, publish_time=t, data=data, sequence=i)
+        for (topic, msgtype), msgs in self._ros2.items():
+            if msgtype not in self._schemas:
+                self._schemas[msgtype] = self._w.register_schema(
+                    msgtype, "ros2msg", schema_text(msgtype).encode())
+            ch = self._w.register_channel(topic, "cdr", self._schemas[msgtype])
+            for i, (t, data) in enumerate(msgs):
                 self._w.add_message(ch, log_time=t, publish_time=t, data=data, sequence=i)
         for topic, (schema, msgs) in self._json.items():
             sid = self._w.register_schema(topic.strip("/").replace("/", "."), "jsonschema",

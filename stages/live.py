@@ -1,6 +1,8 @@
 """`adaptune live MODEL SEQ.mcap --out OUT.mcap`: scans streamed one by one through the odometry,
 parameters chosen online every period and pushed into it; the output MCAP holds the scans, the
-ground truth, ``/odometry/pose`` (PoseStamped) and ``/adaptune/params`` (JSON) for Foxglove."""
+ground truth, the anchored estimate (``/odometry/pose``, ``/tf``) and the parameters
+(``/adaptune/params``, rcl_interfaces/msg/ParameterEvent), all ROS 2 types, for Foxglove
+(``pipeline.live`` documents the channels and frames)."""
 
 from __future__ import annotations
 
@@ -27,7 +29,8 @@ from stages.common import (
 def live(model_dir: Path, sequence: Path, out: Path, algorithm: str | None,
          as_json: bool) -> None:
     """Stream a sequence through odometry with online parameter selection."""
-    from pipeline.runtime import load_model, run_live
+    from pipeline.live import run_live
+    from pipeline.runtime import load_model
 
     model = load_model(model_dir, expected_algorithm=algorithm)
     summary = {"algorithm": model.algorithm, **run_live(model, sequence, out), "out": str(out)}

@@ -1,17 +1,18 @@
-"""`adaptune live`: online selection pushed into a running odometry; the output MCAP."""
+"""`adaptune live`: online selection pushed into a running odometry; the output MCAP, read back
+with the ROS 2 decoders of mcap_ros2 only (what ROS 2 tools and Foxglove see)."""
 
 from __future__ import annotations
 
 import json
 from itertools import pairwise
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from click.testing import CliRunner
 from test_surrogate import build_model, write_tiny_sequence
 
 from pipeline.odometry.registry import get_adapter
-from pipeline.runtime import PARAMS_TOPIC, POSE_TOPIC
 from pipeline.sequence import SequenceReader
 from stages.cli import main
 
@@ -40,21 +41,76 @@ def test_live_writes_poses_and_params(tmp_path: Path, kitti_root: Path) -> None:
     assert res.exit_code == 0, res.output
     select = json.loads(res.stdout)
     space = get_adapter("ndt").space
-    with SequenceReader(out) as r, SequenceReader(seq) as src:
+    with SequenceReader(seq) as src:
+        stamps = [int(t) for t in src.stamps_ns]
+        gt = src.ground_truth()
+        scan2 = src[2].points_lidar
+    with SequenceReader(out) as r:  # the adaptune reader still reads it as a sequence
         assert len(r) == 5 and r.ground_truth() is not None
-        np.testing.assert_array_equal(r[2].points_lidar, src[2].points_lidar)
-        poses = list(r.iter_topic_poses(POSE_TOPIC))
-        params = list(r.iter_topic_json(PARAMS_TOPIC))
-    assert [t for t, _ in poses] == [int(s) for s in src.stamps_ns]
-    assert all(np.isfinite(T).all() for _, T in poses)
-    assert len(params) == 5
-    assert [m["selected"] for _, m in params] == [True, False, True, False, True]
-    for _, m in params:
-        space.validate({n: m[n] for n in space.names})
-        assert m["predicted_rte_pct"] is None or m["predicted_rte_pct"] > 0
+        np.testing.assert_array_equal(r[2].points_lidar, scan2)
+    by_topic = ros2_messages(out)
+    # every channel is a ROS 2 type: the ROS 2 decoder reads them all
+    assert set(by_topic) == {"/lidar/points", "/ground_truth/pose", "/tf", "/odometry/pose",
+                             "/adaptune/params"}
+    poses = [pose_matrix(m.pose) for _, m in by_topic["/odometry/pose"]]
+    assert [t for t, _ in by_topic["/odometry/pose"]] == stamps
+    assert all(np.isfinite(T).all() for T in poses)
+    np.testing.assert_allclose(poses[0], gt[0], atol=1e-6)  # the estimate starts at the GT
+    # /tf: world -> lidar (ground truth), world -> odom (the anchor), odom -> lidar_odometry
+    tf: dict[tuple[str, str], list[np.ndarray]] = {}
+    for _, msg in by_topic["/tf"]:
+        for t in msg.transforms:
+            tf.setdefault((t.header.frame_id, t.child_frame_id), []).append(
+                pose_matrix(t.transform))
+    assert set(tf) == {("world", "lidar"), ("world", "odom"), ("odom", "lidar_odometry")}
+    np.testing.assert_allclose(tf[("world", "lidar")], gt, atol=1e-6)
+    np.testing.assert_allclose(tf[("world", "odom")][0] @ tf[("odom", "lidar_odometry")][0],
+                               poses[0], atol=1e-6)
+    np.testing.assert_allclose(tf[("odom", "lidar_odometry")][0], np.eye(4), atol=1e-6)
+    # /adaptune/params: rcl_interfaces/msg/ParameterEvent, one a frame
+    events = [m for _, m in by_topic["/adaptune/params"]]
+    assert len(events) == 5 and {e.node for e in events} == {"/adaptune/ndt"}
+    assert [len(e.new_parameters) > 0 for e in events] == [True, False, False, False, False]
+    params = [{p.name: p.value for p in (*e.new_parameters, *e.changed_parameters)}
+              for e in events]
+    assert [m["adaptune.selected"].bool_value for m in params] == [True, False, True, False, True]
+    assert [m["adaptune.frame"].integer_value for m in params] == list(range(5))
+    for m in params:
+        space.validate({n: m[n].double_value for n in space.names})
+        pred = m["adaptune.predicted_rte_pct"].double_value
+        if m["adaptune.selected"].bool_value:
+            assert np.isnan(pred) or pred > 0
+        else:
+            assert np.isnan(pred)
     # one count of parameter changes: frames whose parameters differ from the previous frame's
-    values = [tuple(m[n] for n in space.names) for _, m in params]
+    values = [tuple(m[n].double_value for n in space.names) for m in params]
     changes = sum(a != b for a, b in pairwise(values))
     for summary in (live, select):
         assert {k: summary[k] for k in ("algorithm", "frames", "selections", "changes")} == {
             "algorithm": "ndt", "frames": 5, "selections": 3, "changes": changes}
+
+
+def ros2_messages(path: Path) -> dict[str, list[tuple[int, Any]]]:
+    """topic -> [(log time, message)] of an MCAP, decoded by mcap_ros2's decoder only."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    out: dict[str, list[tuple[int, Any]]] = {}
+    with path.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
+            out.setdefault(channel.topic, []).append((message.log_time, decoded))
+    return out
+
+
+def pose_matrix(pose: Any) -> np.ndarray:
+    """(4, 4) of a decoded geometry_msgs Pose or Transform."""
+    from scipy.spatial.transform import Rotation
+
+    t = getattr(pose, "position", None) or pose.translation
+    q = getattr(pose, "orientation", None) or pose.rotation
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+    T[:3, 3] = [t.x, t.y, t.z]
+    return T
