@@ -114,3 +114,16 @@ def report(summary: dict[str, Any], line: str, as_json: bool) -> None:
         click.echo(json.dumps(summary, indent=1, default=str))
     else:
         click.echo(line, err=True)
+
+
+def model_run_options(out_help: str) -> Callable[[F], F]:
+    """``MODEL_DIR SEQUENCE --out FILE [--algorithm NAME] [--json]``: what select and live take."""
+    return compose(model_argument, sequence_argument, file_option("--out", help=out_help),
+                   algorithm_option("Refuse a model made for another algorithm."), json_option)
+
+
+def report_selection(summary: dict[str, Any], as_json: bool) -> None:
+    """The summary of select and live: frames, selections, parameter changes (one wording)."""
+    report(summary, f"{summary['algorithm']}: {summary['frames']} frames, "
+           f"{summary['selections']} selections, {summary['changes']} parameter changes -> "
+           f"{summary['out']}", as_json)

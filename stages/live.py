@@ -10,22 +10,11 @@ from pathlib import Path
 
 import click
 
-from stages.common import (
-    algorithm_option,
-    file_option,
-    json_option,
-    model_argument,
-    report,
-    sequence_argument,
-)
+from stages.common import model_run_options, report_selection
 
 
 @click.command()
-@model_argument
-@sequence_argument
-@file_option("--out", help="Output MCAP (scans, ground truth, estimated poses, chosen parameters).")
-@algorithm_option("Odometry algorithm (default: the model's; another one is refused).")
-@json_option
+@model_run_options("Output MCAP (scans, ground truth, estimated poses, chosen parameters).")
 def live(model_dir: Path, sequence: Path, out: Path, algorithm: str | None,
          as_json: bool) -> None:
     """Stream a sequence through odometry with online parameter selection."""
@@ -33,6 +22,5 @@ def live(model_dir: Path, sequence: Path, out: Path, algorithm: str | None,
     from pipeline.runtime import load_model
 
     model = load_model(model_dir, expected_algorithm=algorithm)
-    summary = {"algorithm": model.algorithm, **run_live(model, sequence, out), "out": str(out)}
-    report(summary, f"{model.algorithm}: {summary['frames']} frames, {summary['selections']} "
-           f"selections, {summary['changes']} parameter changes -> {out}", as_json)
+    report_selection({"algorithm": model.algorithm, **run_live(model, sequence, out),
+                      "out": str(out)}, as_json)

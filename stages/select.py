@@ -7,23 +7,12 @@ from pathlib import Path
 
 import click
 
-from stages.common import (
-    algorithm_option,
-    file_option,
-    json_option,
-    model_argument,
-    report,
-    sequence_argument,
-)
+from stages.common import model_run_options, report_selection
 
 
 @click.command()
-@model_argument
-@sequence_argument
-@file_option("--out", help="The schedule Parquet (frame, stamp_ns, one column per parameter).")
-@algorithm_option("Refuse a model made for another algorithm.")
+@model_run_options("The schedule Parquet (frame, stamp_ns, one column per parameter).")
 @click.option("--period-s", type=float, default=None, help="Override the model's period [s].")
-@json_option
 def select(
     model_dir: Path, sequence: Path, out: Path, algorithm: str | None, period_s: float | None,
     as_json: bool,
@@ -37,7 +26,6 @@ def select(
     with SequenceReader(sequence) as reader:
         schedule = selector.schedule(reader)
     schedule.write(out)
-    summary = {"algorithm": model.algorithm, "frames": len(schedule),
-               "selections": selector.selections, "changes": schedule.n_changes, "out": str(out)}
-    report(summary, f"{model.algorithm}: {len(schedule)} frames, {selector.selections} "
-           f"selections, {schedule.n_changes} parameter changes -> {out}", as_json)
+    report_selection({"algorithm": model.algorithm, "frames": len(schedule),
+                      "selections": selector.selections, "changes": schedule.n_changes,
+                      "out": str(out)}, as_json)
