@@ -285,7 +285,7 @@ def test_kitti_and_kiss_icp_experiment_with_a_new_length(repro: tuple[Path, str]
                   "-S", "descriptors.range_bins=10",  # the default descriptor width here
                   # searched ranges wider than kiss_icp's built-in max_range [20, 200] m: every
                   # later stage must take them from the trials output (the baseline runs at 220)
-                  "-S", "trials.space={max_range: {high: 250.0, default: 220.0}}",
+                  "-S", "+trials.space.max_range={high: 250.0, default: 220.0}",
                   temp=False)
     for stage in ("ingest", "descriptors", "trials", "fixed", "rte", "surrogate", "adaptive",
                   "evaluate"):
