@@ -92,16 +92,6 @@ class LazyGroup(click.Group):
         except AdaptuneError as exc:
             click.echo(f"adaptune: error: {exc}", err=True)
             ctx.exit(1)
-        except OSError as exc:  # the machine refused: unwritable output, a file as a folder ...
-            click.echo(f"adaptune: error: {_os_error(exc)}", err=True)
-            ctx.exit(1)
-
-
-def _os_error(exc: OSError) -> str:
-    """One line for an OSError: the file(s) it names and the reason."""
-    names = " -> ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
-    reason = exc.strerror or type(exc).__name__
-    return f"{names}: {reason}" if names else reason
 
 
 def _module_exists(target: str) -> bool:

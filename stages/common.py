@@ -22,23 +22,13 @@ DIR = click.Path(file_okay=False, path_type=Path)
 """A folder path (a file is refused by click)."""
 
 
-def not_empty(ctx: click.Context, param: click.Parameter, value: Path | None) -> Path | None:
-    """ConfigError for an empty path (click turns "" into ".", the working folder)."""
-    if value is not None and str(value) in ("", "."):
-        from pipeline.errors import ConfigError
-
-        raise ConfigError(f"{param.opts[0]}: an empty path (or '.') names no file")
-    return value
-
-
 def file_option(flag: str, dest: str | None = None, *, help: str, required: bool = True,
                 default: Path | None = None, show_default: bool = False
                 ) -> Callable[[F], F]:
-    """``--flag FILE`` (required unless a default is given; an empty path is refused)."""
+    """``--flag FILE`` (required unless a default is given)."""
     names = (flag, dest) if dest else (flag,)
     return click.option(*names, type=FILE, required=required and default is None,
-                        default=default, show_default=show_default, help=help,
-                        callback=not_empty)
+                        default=default, show_default=show_default, help=help)
 
 
 def dir_option(flag: str, dest: str | None = None, *, help: str, required: bool = True

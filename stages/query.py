@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from stages.common import file_option, not_empty, read_text_argument, write_output
+from stages.common import file_option, read_text_argument, write_output
 
 FORMATS = ["table", "csv", "json", "parquet"]
 
@@ -48,7 +48,7 @@ def _tables(pairs: tuple[str, ...]) -> dict[str, Path]:
              help="The database.")
 @click.option("--format", "fmt", type=click.Choice(FORMATS), default="table", show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, allow_dash=True, path_type=Path),
-              default=None, callback=not_empty,
+              default=None,
               help="Write the result to this file (- or none: stdout).")
 @click.option("--table", "table_pairs", multiple=True, metavar="NAME=FILE",
               help="Let the SQL read a local Parquet file (or folder) as the view NAME "

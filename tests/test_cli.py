@@ -6,7 +6,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 from click.testing import CliRunner
 
 from stages.cli import COMMANDS, main
@@ -77,33 +76,3 @@ def test_default_simulation_fits_the_default_length() -> None:
             poses = make_world(SimSpec(world, seed, frames)).poses.T_world_lidar
             length = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1).sum()
             assert length > 1.2 * BaseSection().length_m, (world, seed, length)
-
-
-@pytest.mark.parametrize("bad_out", ["file_parent", "empty"])
-@pytest.mark.parametrize("command", ["query", "export"])
-def test_unwritable_or_empty_output_is_one_line(tmp_path: Path, command: str,
-                                                bad_out: str) -> None:
-    """An --out below a file, or empty, is one line and exit 1 (not a traceback)."""
-    import duckdb
-    import numpy as np
-
-    from pipeline.trajectory import Trajectory, write_trajectory
-
-    (tmp_path / "a_file").write_text("")
-    out = str(tmp_path / "a_file" / "result.txt") if bad_out == "file_parent" else ""
-    if command == "query":
-        db = tmp_path / "r.duckdb"
-        duckdb.connect(str(db)).close()
-        args = ["query", "--db", str(db), "SELECT 1", "--out", out]
-    else:
-        traj = tmp_path / "t.parquet"
-        poses = np.stack([np.eye(4)] * 2)
-        write_trajectory(traj, Trajectory(np.arange(2), np.arange(2) + 10, poses))
-        args = ["export", str(traj), "--format", "tum", "--anchor", "identity", "--out", out]
-    result = subprocess.run([sys.executable, "-m", "stages.cli", *args], capture_output=True,
-                            text=True)
-    assert result.returncode == 1 and result.stdout == ""
-    (line,) = result.stderr.splitlines()
-    expected = (f"adaptune: error: {tmp_path / 'a_file'}: " if bad_out == "file_parent"
-                else "adaptune: error: --out: an empty path")
-    assert line.startswith(expected), line

@@ -28,15 +28,19 @@ def frames(kitti_root: Path) -> KittiFrames:
 
 
 def cli(*args: object) -> str:
+    """stdout (data, --json) and stderr (the human summary) of ``adaptune ARGS``."""
     result = CliRunner().invoke(main, [str(a) for a in args])
     assert result.exit_code == 0, result.output
-    return result.stdout
+    return result.stdout + result.stderr
 
 
 def run_and_score(seq: Path, tmp_path: Path, algorithm: str, *options: str) -> dict:
     traj = tmp_path / f"{algorithm}.parquet"
     cli("run", "--algorithm", algorithm, *options, seq, "--out", traj)
-    return json.loads(cli("metric", "rte", seq, traj, "--length", "5", "--json"))
+    result = CliRunner().invoke(main, ["metric", "rte", str(seq), str(traj), "--length", "5",
+                                       "--json"])
+    assert result.exit_code == 0, result.output
+    return json.loads(result.stdout)
 
 
 @pytest.mark.parametrize("ros, storage, gt, topic", [
