@@ -141,7 +141,10 @@ def finite_points(points: NDArray[np.float32], what: str) -> NDArray[np.bool_]:
     Raises InputError naming ``what`` when nothing finite is left, or when a coordinate is
     beyond MAX_COORDINATE_M (not a LiDAR scan).
     """
-    ok: NDArray[np.bool_] = np.asarray(np.isfinite(points[:, :3]).all(axis=1))
+    xyz = points[:, :3]
+    if len(xyz) and max(float(xyz.max()), -float(xyz.min())) <= MAX_COORDINATE_M:
+        return np.ones(len(xyz), bool)  # the common case, in two passes (NaN fails the test)
+    ok: NDArray[np.bool_] = np.asarray(np.isfinite(xyz).all(axis=1))
     if not ok.any():
         raise InputError(f"{what}: empty scan (no finite points of {points.shape[0]})")
     far_mask = (np.abs(np.where(ok[:, None], points[:, :3], 0)) > MAX_COORDINATE_M).any(axis=1)
