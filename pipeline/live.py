@@ -24,11 +24,13 @@ needs the odometry adapters and the MCAP writer.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from pipeline.errors import ConfigError
 from pipeline.runtime import Model, Selector
 
 PARAMS_TOPIC = "/adaptune/params"
@@ -41,18 +43,27 @@ _BOOL, _INTEGER, _DOUBLE, _STRING = 1, 2, 3, 4
 
 
 def run_live(
-    model: Model, sequence: str | Path, out: str | Path, selector: Selector | None = None
+    model: Model, sequence: str | Path, out: str | Path, selector: Selector | None = None,
+    adapter_options: Mapping[str, Any] | None = None,
 ) -> dict[str, int]:
     """Stream ``sequence`` through the model's odometry, selecting parameters online; write
     ``out`` (module docstring). Returns frames, selections and parameter changes (the
-    ``set_params`` calls, counted as ``Schedule.n_changes`` counts them)."""
-    from pipeline.odometry.base import ParameterSpace, with_space
+    ``set_params`` calls, counted as ``Schedule.n_changes`` counts them).
+
+    ``adapter_options``: the adapter's untuned settings, as in the trials (params
+    ``trials.adapter_options``). ConfigError for an adapter that cannot stream (``command``).
+    """
+    from pipeline.odometry.base import ParameterSpace, StreamingAdapter, with_space
     from pipeline.odometry.registry import get_adapter
     from pipeline.ros2_cdr import PARAMETER_EVENT, encode
     from pipeline.sequence import WORLD_FRAME, SequenceReader, SequenceWriter
 
     selector = selector or Selector(model)
-    adapter = with_space(get_adapter(model.algorithm), ParameterSpace.from_json(model.space))
+    adapter = with_space(get_adapter(model.algorithm, **dict(adapter_options or {})),
+                         ParameterSpace.from_json(model.space))
+    if not isinstance(adapter, StreamingAdapter):
+        raise ConfigError(f"{model.algorithm}: adaptune live needs an adapter that streams "
+                          "scan by scan (start); this one runs whole sequences (use adaptive)")
     node = f"/adaptune/{model.algorithm}"
     odom = None
     selections = changes = 0
@@ -69,7 +80,7 @@ def run_live(
                 params = selector.update(scan.points_lidar, scan.stamp_ns)
                 selections += selected
                 if odom is None:
-                    odom = adapter.start(params)  # type: ignore[attr-defined]
+                    odom = adapter.start(params)
                 elif params != before:
                     odom.set_params(params)
                     changes += 1

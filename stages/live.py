@@ -10,17 +10,23 @@ from pathlib import Path
 
 import click
 
-from stages.common import model_run_options, report_selection
+from stages.common import model_run_options, params_option, report_selection
 
 
 @click.command()
+@params_option
 @model_run_options("Output MCAP (scans, ground truth, estimated poses, chosen parameters).")
-def live(model_dir: Path, sequence: Path, out: Path, algorithm: str | None,
-         as_json: bool) -> None:
+def live(params_path: Path | None, model_dir: Path, sequence: Path, out: Path,
+         algorithm: str | None, as_json: bool) -> None:
     """Stream a sequence through odometry with online parameter selection."""
+    from pipeline.config import load_section
     from pipeline.live import run_live
     from pipeline.runtime import load_model
+    from pipeline.tuning.smbo import TrialsSection
 
+    # the adapter's untuned settings as in the trials (without a params file, its defaults)
+    options = load_section(params_path, "trials", TrialsSection).adapter_options
     model = load_model(model_dir, expected_algorithm=algorithm)
-    report_selection({"algorithm": model.algorithm, **run_live(model, sequence, out),
+    report_selection({"algorithm": model.algorithm,
+                      **run_live(model, sequence, out, adapter_options=options),
                       "out": str(out)}, as_json)

@@ -35,13 +35,16 @@ def surrogate(
     from pipeline.io_utils import atomic_write_text
     from pipeline.odometry.registry import get_adapter
     from pipeline.surrogates.fit import ModelInputs, SurrogateSection, build_model
+    from pipeline.tuning.smbo import TrialsSection
     from pipeline.tuning.table import read_space
 
     section = load_section(params_path, "surrogate", SurrogateSection)
     descriptors = load_section(params_path, "descriptors", DescriptorsSection)
-    # the space the studies searched, stored with the trials (else the adapter's built-in one)
+    options = load_section(params_path, "trials", TrialsSection).adapter_options
+    # the space the studies searched, stored with the trials (else the adapter's built-in one,
+    # the adapter built with its configured options as in the trials)
     space_of = ((lambda name: read_space(trials_dir, name)) if trials_dir is not None
-                else (lambda name: get_adapter(name).space))
+                else (lambda name: get_adapter(name, **options).space))
     manifest = build_model(ModelInputs(db_path, pca_dir), out, section, descriptors, space_of,
                            algorithm)
     algo, cv, training = manifest["algorithm"], manifest["cross_validation"], manifest["training"]

@@ -18,7 +18,7 @@ import numpy as np
 
 from pipeline.errors import ConfigError, OdometryError, TrialTimeout
 from pipeline.io_utils import prefetch
-from pipeline.odometry.base import Adapter, Schedule
+from pipeline.odometry.base import Adapter, Schedule, TimeLimitedAdapter
 from pipeline.odometry.registry import adapter_names, get_adapter
 from pipeline.sequence import Scan, SequenceReader
 from pipeline.trajectory import Trajectory
@@ -42,8 +42,8 @@ def run_sequence(adapter: Adapter, sequence_path: str | Path,
         raise ConfigError(f"time limit must be a number of seconds > 0, got {time_limit_s}")
     with SequenceReader(path) as reader:
         schedule = make_schedule(adapter, params_or_schedule, len(reader), str(path))
-        if getattr(adapter, "accepts_time_limit", False):
-            traj = adapter.run(reader, schedule, time_limit_s=time_limit_s)  # type: ignore[call-arg]
+        if isinstance(adapter, TimeLimitedAdapter) and adapter.accepts_time_limit:
+            traj = adapter.run(reader, schedule, time_limit_s=time_limit_s)
         else:
             with contextlib.closing(prefetch(reader)) as ahead:  # decoding overlaps odometry
                 scans: Iterable[Scan] = ahead

@@ -1,4 +1,5 @@
-"""The black-box contract (DESIGN section 5): parameter spaces, schedules, adapters.
+"""The black-box contract (docs/design.md, "The black-box contract"): parameter spaces,
+schedules, adapters.
 
 An *adapter* wraps one odometry algorithm. It declares a ``ParameterSpace`` (the baseline is
 each parameter's default) and runs over scans with fixed parameters or a per-frame
@@ -6,10 +7,11 @@ each parameter's default) and runs over scans with fixed parameters or a per-fra
 one scan at a time and accepts new parameters between scans); ``run_streaming`` turns that
 into ``run``. Out-of-process adapters (``command``) implement ``run`` directly.
 
-An adapter may also offer ``warm(scans: list[Scan]) -> None``: precompute what depends only on
-the scans and its untuned options (``ndt``: the downsampled source clouds). The tuner calls it
-once per worker and set of sequences, before the trials; results must be bitwise the same with
-and without it.
+An adapter may also offer ``warm(scans: list[Scan]) -> None`` (``WarmableAdapter``): precompute
+what depends only on the scans and its untuned options (``ndt``: the downsampled source clouds).
+The tuner calls it once per worker and set of sequences, before the trials; results must be
+bitwise the same with and without it. The optional capabilities (``StreamingAdapter``,
+``WarmableAdapter``, ``TimeLimitedAdapter``) are runtime-checkable Protocols.
 """
 
 from __future__ import annotations
@@ -292,7 +294,11 @@ class Odometry(Protocol):
 
 @runtime_checkable
 class Adapter(Protocol):
-    """One odometry algorithm behind the black-box contract."""
+    """One odometry algorithm behind the black-box contract: what every caller may use.
+
+    The optional capabilities below are Protocols of their own; callers test them with
+    ``isinstance`` (``StreamingAdapter``, ``WarmableAdapter``, ``TimeLimitedAdapter``).
+    """
 
     name: str
     space: ParameterSpace
@@ -311,6 +317,39 @@ def with_space(adapter: Adapter, space: ParameterSpace) -> Adapter:
                           f"the adapter's {built_in.names}")
     adapter.space = space
     return adapter
+
+
+@runtime_checkable
+class StreamingAdapter(Adapter, Protocol):
+    """An in-process adapter that streams: ``start`` gives an ``Odometry`` that takes one scan
+    at a time and new parameters between scans (``run_streaming``, ``adaptune live``)."""
+
+    def start(self, params: Params) -> Odometry:
+        """A running odometry with ``params`` (validated; missing ones take the defaults)."""
+        ...
+
+
+@runtime_checkable
+class WarmableAdapter(Adapter, Protocol):
+    """An adapter with work that depends only on the scans and its untuned options (module
+    docstring): the tuner calls ``warm`` once per worker and set of sequences."""
+
+    def warm(self, scans: list[Scan]) -> None:
+        """Precompute for ``scans``; results must be bitwise the same with and without it."""
+        ...
+
+
+@runtime_checkable
+class TimeLimitedAdapter(Adapter, Protocol):
+    """An adapter that enforces a time limit itself (an external process it can kill):
+    ``run_sequence`` hands it the limit instead of checking between frames."""
+
+    accepts_time_limit: bool
+
+    def run(self, scans: Iterable[Scan], schedule: Schedule,  # type: ignore[override]
+            time_limit_s: float | None = None) -> Trajectory:
+        """``Adapter.run`` that raises TrialTimeout past ``time_limit_s`` seconds."""
+        ...
 
 
 def run_streaming(

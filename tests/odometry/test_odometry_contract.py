@@ -16,7 +16,13 @@ from odometry_data import Seq, final_errors, make_adapter
 
 from pipeline.errors import ConfigError, InputError
 from pipeline.odometry import adapter_names, run_sequence
-from pipeline.odometry.base import Schedule
+from pipeline.odometry.base import (
+    Adapter,
+    Schedule,
+    StreamingAdapter,
+    TimeLimitedAdapter,
+    WarmableAdapter,
+)
 
 MAX_T_ERR_M = 0.30
 MAX_R_ERR_DEG = 1.5
@@ -92,7 +98,7 @@ def test_constant_schedule_reproduces_the_fixed_run_bitwise(adapter, synthetic_s
     """A constant Schedule == the fixed-parameter run, bit for bit."""
     params = adapter.space.defaults()
     fixed = baseline_run(adapter, synthetic_seq)
-    if hasattr(adapter, "start"):
+    if isinstance(adapter, StreamingAdapter):
         # the fixed run without any schedule machinery: one odometry, stepped by hand
         odom = adapter.start(params)
         fixed = np.stack([odom.step(s.xyz, s.stamp_ns) for s in synthetic_seq.scans])
@@ -126,7 +132,7 @@ def test_unknown_or_out_of_range_parameter_is_a_config_error(name: str, syntheti
     spec = adapter.space.specs[0]
     with pytest.raises(ConfigError, match=rf"{spec.name} must be in \["):
         run_sequence(adapter, synthetic_seq.path, {spec.name: spec.high + 1.0})
-    if hasattr(adapter, "start"):
+    if isinstance(adapter, StreamingAdapter):
         with pytest.raises(ConfigError, match=rf"{spec.name} must be in \["):
             adapter.start({spec.name: spec.low - 1.0})
         odom = adapter.start({})
@@ -150,3 +156,16 @@ def test_unknown_adapter_option_is_a_config_error() -> None:
     for name in ("ndt", "gicp", "kiss_icp"):
         with pytest.raises(ConfigError, match=r"option\.bogus: unknown parameter"):
             make_adapter(name).__class__(bogus=1)
+
+
+@pytest.mark.parametrize("name", adapter_names())
+def test_what_callers_use_is_declared(name: str) -> None:
+    """``start``, ``warm`` and ``accepts_time_limit`` are Protocols of pipeline/odometry/base.py:
+    an adapter offering one is an instance of its Protocol, and the other way round."""
+    adapter = make_adapter(name)
+    assert isinstance(adapter, Adapter)
+    for protocol, member in ((StreamingAdapter, "start"), (WarmableAdapter, "warm"),
+                             (TimeLimitedAdapter, "accepts_time_limit")):
+        assert isinstance(adapter, protocol) == hasattr(adapter, member), (name, member)
+    # every adapter either streams in process or runs a whole sequence under its own limit
+    assert isinstance(adapter, StreamingAdapter) != isinstance(adapter, TimeLimitedAdapter)
