@@ -61,8 +61,8 @@ class Pca:
     def save(self, folder: str | Path) -> None:
         """Write mean.npy, components.npy, scale.npy and pca.json (with sha256) into ``folder``,
         atomically (a temp folder renamed onto ``folder``)."""
-        from pipeline.artifact import save_npy
         from pipeline.io_utils import atomic_dir
+        from pipeline.npy_files import save_npy
 
         arrays = {"mean.npy": self.mean, "components.npy": self.components, "scale.npy": self.scale}
         with atomic_dir(folder) as tmp:
@@ -73,8 +73,8 @@ class Pca:
     @classmethod
     def load(cls, folder: str | Path) -> Pca:
         """Read a folder written by ``save``; InputError when files are missing or altered."""
-        from pipeline.artifact import MAX_ARRAY_BYTES, parse_npy, read_regular_file
         from pipeline.errors import ArtifactError
+        from pipeline.npy_files import MAX_ARRAY_BYTES, parse_npy, read_regular_file
 
         folder = Path(folder)
         try:

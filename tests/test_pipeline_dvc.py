@@ -60,7 +60,7 @@ def reproduce(root: Path, params: dict[str, Any]) -> tuple[Path, str]:
     reproduced and committed on branch ``main`` (what `git status` shows: nothing)."""
     for name in ("dvc.yaml", ".dvcignore", ".gitignore"):
         shutil.copy(REPO / name, root / name)
-    for code in ("pipeline", "schemas"):  # the stages' code dependencies
+    for code in ("pipeline", "schemas", "stages"):  # the stages' code dependencies
         (root / code).symlink_to(REPO / code, target_is_directory=True)
     (root / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     git(root, "init", "-q", "-b", "main")

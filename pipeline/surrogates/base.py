@@ -22,19 +22,11 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.artifact import Arrays, ArraySpec
+
 if TYPE_CHECKING:
     from pipeline.surrogates.fit import SurrogateSection
 
-Arrays = dict[str, NDArray[Any]]
-
-
-@dataclass(frozen=True)
-class ArraySpec:
-    """What an artifact array must be: its number of dimensions and its kind of numbers
-    ('f' float, 'i' integer); the loader checks every array against its spec."""
-
-    ndim: int
-    kind: str = "f"
 
 
 @dataclass
