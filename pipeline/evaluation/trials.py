@@ -1,4 +1,5 @@
-"""The trials output layout of CONTRACTS.md: where trajectories and trials tables live; a reader.
+"""The trials output layout (docs/design.md, "Formats"): where trajectories and trials tables
+live, the joint study's name, the best trial of a study, a reader of every trials table.
 
 ``<OUT>/trajectories/algorithm=<A>/sequence=<S>/trial=<N>/trajectory.parquet`` and
 ``<OUT>/trials/algorithm=<A>/sequence=<S>/trials.parquet`` (S = ``__joint__`` for the joint SMBO).
@@ -6,6 +7,8 @@
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterable
 from pathlib import Path
 
 import pyarrow as pa
@@ -16,6 +19,16 @@ from schemas.arrow import TRIAL_STATUSES, TRIALS_BASE, check_schema_version
 
 JOINT_SEQUENCE = "__joint__"
 """The ``sequence`` of the joint SMBO's trials table (one x for all training sequences)."""
+
+
+def best_trial(trials: Iterable[tuple[int, str, float | None]]) -> int | None:
+    """The id of the best of a study's (trial, status, objective) rows: the lowest objective
+    among the 'ok' trials with a finite objective, ties to the lowest trial id; None when no
+    trial qualifies. The one rule for "the best trial" (the fixed parameters, the novelty
+    fallback)."""
+    ok = [(float(obj), int(t)) for t, status, obj in trials
+          if status == "ok" and obj is not None and math.isfinite(obj)]
+    return min(ok)[1] if ok else None
 
 
 def trajectory_path(out_dir: str | Path, algorithm: str, sequence: str, trial: int) -> Path:

@@ -117,7 +117,7 @@ def _mean(values: NDArray[np.float64]) -> float:
 def best_fixed_params(trials_dir: Path,
                       algorithm: str | None = None) -> tuple[str, dict[str, float]]:
     """(algorithm, parameters) of the best 'ok' trial of the joint SMBO under ``trials_dir``."""
-    from pipeline.evaluation.trials import JOINT_SEQUENCE, read_trials_tables
+    from pipeline.evaluation.trials import JOINT_SEQUENCE, best_trial, read_trials_tables
 
     table = read_trials_tables(trials_dir)
     rows = [r for r in table.to_pylist() if r["sequence"] == JOINT_SEQUENCE
@@ -125,10 +125,10 @@ def best_fixed_params(trials_dir: Path,
     if not rows:
         raise InputError(f"{trials_dir}: no joint trials table"
                          f"{f' for {algorithm}' if algorithm else ''} (run the `fixed` stage)")
-    ok = [r for r in rows if r["status"] == "ok" and math.isfinite(r["objective"])]
-    if not ok:
+    tid = best_trial((r["trial"], r["status"], r["objective"]) for r in rows)
+    if tid is None:
         raise InputError(f"{trials_dir}: no successful joint trial to take fixed parameters from")
-    best = min(ok, key=lambda r: (r["objective"], r["trial"]))
+    best = next(r for r in rows if r["trial"] == tid)
     return best["algorithm"], {k: float(v) for k, v in json.loads(best["params_json"]).items()}
 
 

@@ -98,18 +98,20 @@ def read_fallback_evidence(
     with the defaults is left out."""
     import duckdb
 
+    from pipeline.evaluation.trials import best_trial
+
     con = duckdb.connect(str(db_path), read_only=True)
     try:
         tables = {r[0] for r in con.execute("SELECT table_name FROM duckdb_tables()").fetchall()}
         if not {"trials", "rte_frames"} <= tables:
             return None
-        best = con.execute(
-            "SELECT trial, params_json FROM trials WHERE study = 'fixed' AND algorithm = ? "
-            "AND status = 'ok' AND objective IS NOT NULL ORDER BY objective, trial LIMIT 1",
-            [algorithm],
-        ).fetchone()
-        if best is None:
+        joint = con.execute(
+            "SELECT trial, status, objective, params_json FROM trials WHERE study = 'fixed' "
+            "AND algorithm = ?", [algorithm]).fetchall()
+        tid = best_trial((t, status, obj) for t, status, obj, _ in joint)
+        if tid is None:
             return None
+        best = next((t, params) for t, _, _, params in joint if t == tid)
         fixed_rte = con.execute(
             "SELECT sequence, avg(t_err_pct) FROM rte_frames WHERE study = 'fixed' "
             "AND algorithm = ? AND trial = ? GROUP BY sequence",

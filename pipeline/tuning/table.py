@@ -4,7 +4,9 @@
 row per finished trial sorted by trial id, rewritten atomically after every finished trial.
 The study's fingerprint (``pipeline.tuning.fingerprint``: adapter, options, parameter space,
 seed, ...) travels in the file's schema metadata under ``adaptune.study`` (``read_study``): the
-one home of the parameter space a study searched, for every later stage.
+one home of the parameter space a study searched, for every later stage. Where the table lives
+(``trials_path``) and the joint study's name (``JOINT``) are the trials output layout of
+``pipeline.evaluation.trials``.
 """
 
 from __future__ import annotations
@@ -18,19 +20,15 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.errors import InputError, SchemaError
+from pipeline.evaluation.trials import JOINT_SEQUENCE as JOINT
+from pipeline.evaluation.trials import trials_table_path as trials_path
 from pipeline.io_utils import atomic_path
 from pipeline.odometry.base import ParameterSpace
 from pipeline.tuning.job import TrialResult
 from schemas.arrow import check_schema_version, trials_schema
 
-JOINT = "__joint__"
-"""Sequence name of a joint study (one objective over several sequences)."""
-
-
-def trials_path(out_dir: str | Path, algorithm: str, sequence: str) -> Path:
-    """Path of a study's trials table."""
-    return (Path(out_dir) / "trials" / f"algorithm={algorithm}" / f"sequence={sequence}"
-            / "trials.parquet")
+__all__ = ["JOINT", "STUDY_KEY", "read_space", "read_study", "read_trials", "trials_path",
+           "write_trials"]
 
 
 STUDY_KEY = b"adaptune.study"
