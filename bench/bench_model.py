@@ -1,4 +1,5 @@
-"""Descriptor and online selection figures (DESIGN section 8) on the real KITTI scans.
+"""Descriptor and online selection figures (docs/design.md, "Performance") on the real KITTI
+scans.
 
 - descriptor of one ~120k-point HDL-64E scan, one core (paper: 40 ms; target <= 4 ms);
 - one parameter selection with a surrogate of 8 sequences x 300 frames x 256 trials = 614k rows

@@ -1,4 +1,4 @@
-"""`make bench`: every figure of DESIGN section 8, printed as one table.
+"""`make bench`: every performance figure (docs/design.md, "Performance"), printed as one table.
 
 Each ``bench/bench_*.py`` module exposes ``run() -> list[Row]``; a row gives the figure, our
 measurement, the reference measured in the same run (or the paper's number), and the target.

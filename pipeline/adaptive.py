@@ -1,4 +1,5 @@
-"""Adaptive runs (DESIGN section 1, step 6): the model picks parameters, the odometry uses them.
+"""Adaptive runs (docs/design.md, "Method", step 5): the model picks parameters, the odometry
+uses them.
 
 For every sequence, ``run_adaptive``
 1. loads the artifact (``pipeline.runtime.load_model``, checksums verified);

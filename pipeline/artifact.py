@@ -4,7 +4,7 @@ The manifest (schemas/artifact.schema.json) names the algorithm and its paramete
 descriptor, the PCA, the surrogate and its scalings, the selection settings, the training
 summary, the cross-validation error, the sha256 of every other file and where the model came
 from; its own canonical sha256 is stored in it (``MANIFEST_HASH_KEY``). No pickle anywhere:
-loading never runs code from the folder (docs/design.md, "The artifact").
+loading never runs code from the folder (docs/design.md, "Formats").
 
 numpy and the standard library at import time: the deployable runtime imports this module.
 """

@@ -1,6 +1,6 @@
 """The sequence MCAP: one file per LiDAR sequence, the format every later stage reads.
 
-Layout (DESIGN section 4):
+Layout (docs/design.md, "Formats"):
 - ``/lidar/points``: sensor_msgs/msg/PointCloud2 (float32 x, y, z, intensity), CDR;
 - ``/ground_truth/pose``: geometry_msgs/msg/PoseStamped, T_world_lidar, where known;
 - ``/tf``: tf2_msgs/msg/TFMessage, ``world`` -> ``lidar`` from the same ground truth (so a

@@ -84,7 +84,8 @@ TRIALS_BASE = pa.schema(
      pa.field("params_json", pa.string(), nullable=False)],
     metadata={**_META, b"adaptune.table": b"trials"},
 )
-"""One SMBO study's trials (CONTRACTS.md): these columns plus ``p_<name>`` float64 each."""
+"""One SMBO study's trials (docs/design.md, "Formats"): these columns plus ``p_<name>`` float64
+each."""
 
 TRIAL_STATUSES = ("ok", "failed", "lost")
 """Values of the trials table's ``status`` column: ok (scored), failed (the odometry failed:

@@ -1,5 +1,5 @@
 -- adaptune results database (results/adaptune.duckdb): tables. Built by the `rte` stage
--- (pipeline.evaluation.store); CONTRACTS.md gives the layout. `study` names the SMBO output a
+-- (pipeline.evaluation.store); docs/design.md ("Formats") gives the layout. `study` names the SMBO output a
 -- row comes from ('trials' = per-sequence SMBO, 'fixed' = joint SMBO), so that the two studies'
 -- trial numbers never collide.
 

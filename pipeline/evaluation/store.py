@@ -1,6 +1,6 @@
 """The results database (results/adaptune.duckdb), built by the ``rte`` stage.
 
-Tables and views follow CONTRACTS.md; their DDL is schemas/tables.sql and schemas/views.sql.
+Tables and views: docs/design.md, "Formats"; their DDL is schemas/tables.sql and views.sql.
 The per-start-frame RTE (``rte_frames``) and the KITTI devkit segments (``rte_kitti``) are
 computed inside DuckDB over the trajectory Parquet files (read_parquet, hive partitioning) and
 the ``ground_truth`` table: segment ends by an ASOF join on path distance, SE(3) errors by SQL
@@ -74,7 +74,7 @@ def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapp
     """Build the results database at ``db_path`` atomically.
 
     sequences_dir: data/sequences (``*.mcap`` and optionally index.json with the splits);
-    studies: study name ('trials' | 'fixed') -> SMBO output folder (CONTRACTS.md layout);
+    studies: study name ('trials' | 'fixed') -> SMBO output folder (pipeline.evaluation.trials);
     descriptors / environment: the descriptor Parquet files, or None for empty tables.
     """
     import duckdb

@@ -1,5 +1,5 @@
-"""The black-box contract (docs/design.md, "The black-box contract"): parameter spaces,
-schedules, adapters.
+"""The black-box contract (docs/design.md, "Contracts"): parameter spaces, schedules,
+adapters.
 
 An *adapter* wraps one odometry algorithm. It declares a ``ParameterSpace`` (the baseline is
 each parameter's default) and runs over scans with fixed parameters or a per-frame

@@ -1,4 +1,4 @@
-"""The explicit registry of odometry adapters (CONTRACTS.md, "Odometry registry").
+"""The explicit registry of odometry adapters (docs/design.md, "Seams").
 
 ``ADAPTERS`` maps a name to a factory ``(**options) -> Adapter``. Factories import their
 module lazily, so that listing the names never imports small_gicp or kiss_icp.

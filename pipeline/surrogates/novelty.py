@@ -1,4 +1,4 @@
-"""Scans unlike the training data (docs/design.md, "Novelty guard"): the novelty distance of a
+"""Scans unlike the training data (docs/design.md, "Runtime"): the novelty distance of a
 fitted model and the fallback parameters the runtime gives such scans.
 
 The novelty distance is a quantile of every training frame's distance to the nearest frame of

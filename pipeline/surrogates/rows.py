@@ -1,5 +1,5 @@
 """The training rows of the surrogate: q_ij = [E_i, x_j] -> y_ij, read from the results
-database (its ``surrogate_rows`` view; docs/design.md, "Results database")."""
+database (its ``surrogate_rows`` view; docs/design.md, "Formats")."""
 
 from __future__ import annotations
 

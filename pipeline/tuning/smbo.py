@@ -132,7 +132,7 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
                seed: int, joint: bool = False, progress: bool = True,
                on_trial: Callable[[Study, TrialResult], None] | None = None,
                executor: Executor | None = None) -> list[StudySummary]:
-    """Run the SMBO studies of ``sequence_paths`` into ``out_dir`` (CONTRACTS.md layout).
+    """Run the SMBO studies of ``sequence_paths`` into ``out_dir`` (docs/design.md, "Formats").
 
     ``executor``: run trials there instead of opening one from ``settings`` (left open).
     ``on_trial(study, result)`` is called after each finished trial is saved.

@@ -1,5 +1,6 @@
 """Synthetic inputs for the evaluation tests and bench: ground-truth paths, drifting estimates,
-and whole SMBO outputs in the CONTRACTS.md layout, written with the real writers."""
+and whole SMBO outputs in the trials layout (pipeline.evaluation.trials), written with the real
+writers."""
 
 from __future__ import annotations
 
