@@ -151,8 +151,10 @@ def load_model(path: str | Path, expected_algorithm: str | None = None) -> Model
             f"{path}: artifact is for algorithm {algorithm!r}, expected {expected_algorithm!r}"
         )
     model_json = manifest.get("model")
+    if not isinstance(model_json, dict):
+        raise ArtifactError(f"{path}: manifest.json: no model block")
     try:
-        kind = surrogate_class(str((model_json or {}).get("type")))
+        kind = surrogate_class(str(model_json.get("type")))
     except KeyError as exc:
         raise ArtifactError(f"{path}: model.type: {exc.args[0]}") from None
     arrays = read_arrays(path, manifest, {**COMMON_FILES, **kind.files})

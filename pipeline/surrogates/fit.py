@@ -66,7 +66,7 @@ class SurrogateSection(Section):
     refine_iters: int = Field(4, ge=0)
     novelty_quantile: float | None = Field(1.0, gt=0, le=1)
     novelty_fallback: Literal["defaults", "fixed", "auto"] = "auto"
-    forest: ForestSection = ForestSection()
+    forest: ForestSection = ForestSection.model_validate({})
 
     @field_validator("model")
     @classmethod
