@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import AdaptuneError, InputError, OdometryError
+from pipeline.evaluation.trials import trajectory_path
 from pipeline.odometry.base import Adapter
 from pipeline.trajectory import Trajectory
 
@@ -95,12 +96,6 @@ def resolve_adapter(ref: str, options: Mapping[str, Any] | None = None,
 
         adapter = with_space(adapter, ParameterSpace.from_json(space))
     return adapter
-
-
-def trajectory_path(out_dir: str | Path, algorithm: str, sequence: str, trial: int) -> Path:
-    """``<OUT>/trajectories/algorithm=<A>/sequence=<S>/trial=<N>/trajectory.parquet``."""
-    return (Path(out_dir) / "trajectories" / f"algorithm={algorithm}" / f"sequence={sequence}"
-            / f"trial={trial}" / "trajectory.parquet")
 
 
 def evaluate_trial(job: TrialJob, adapter: Adapter,
