@@ -94,11 +94,12 @@ def point_times_s(points: NDArray[np.float32]) -> NDArray[np.float32]:
     return ((az + np.pi) / (2 * np.pi) * 0.1).astype(np.float32)
 
 
-def cloud_bytes(points: NDArray[np.float32], layout: str) -> bytes:
-    """Point bytes of ``points`` (N, 4) in one of LAYOUTS."""
+def cloud_bytes(points: NDArray[np.float32], layout: str, big: bool = False) -> bytes:
+    """Point bytes of ``points`` (N, 4) in one of LAYOUTS (big-endian values when ``big``)."""
     fields, step = LAYOUTS[layout]
     buf = np.zeros((len(points), step), np.uint8)
-    codes = {7: "<f4", 8: "<f8", 2: "u1", 3: "<i2", 4: "<u2"}
+    order = ">" if big else "<"
+    codes = {7: order + "f4", 8: order + "f8", 2: "u1", 3: order + "i2", 4: order + "u2"}
     cols = {"x": 0, "y": 1, "z": 2, "intensity": 3}
     for name, dt, off in fields:
         if name == "time":  # a 10 Hz sweep: the azimuth's share of 0.1 s
@@ -112,23 +113,35 @@ def cloud_bytes(points: NDArray[np.float32], layout: str) -> bytes:
     return buf.tobytes()
 
 
+ORGANIZED = {"organized_be": (16, 24, True)}
+"""Cloud shapes besides the flat little-endian one: name -> (height, row padding in bytes,
+big-endian): an organized cloud (one row a beam, as Ouster drivers publish), each row padded."""
+
+
 def cloud_msg(
-    ts: Any, stamp_ns: int, points: NDArray[np.float32], ros1: bool, layout: str = "xyzi32"
+    ts: Any, stamp_ns: int, points: NDArray[np.float32], ros1: bool, layout: str = "xyzi32",
+    shape: str = "flat",
 ) -> Any:
+    """A PointCloud2 of ``points`` in ``layout``; ``shape`` flat or one of ORGANIZED (then
+    ``points`` must fill whole rows)."""
     T = ts.types
     fields, step = LAYOUTS[layout]
+    height, pad, big = ORGANIZED.get(shape, (1, 0, False))
+    width = len(points) // height
+    assert width * height == len(points), "an organized cloud needs whole rows"
     pf = [
         T["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=d, count=1) for n, d, o in fields
     ]
-    data = np.frombuffer(cloud_bytes(points, layout), np.uint8)
+    rows = np.frombuffer(cloud_bytes(points, layout, big), np.uint8).reshape(height, -1)
+    data = np.concatenate([rows, np.full((height, pad), 0xAB, np.uint8)], axis=1).ravel()
     return T["sensor_msgs/msg/PointCloud2"](
         header=header(ts, stamp_ns, "velodyne", ros1),
-        height=1,
-        width=len(points),
+        height=height,
+        width=width,
         fields=pf,
-        is_bigendian=False,
+        is_bigendian=big,
         point_step=step,
-        row_step=step * len(points),
+        row_step=step * width + pad,
         data=data,
         is_dense=False,
     )
@@ -157,15 +170,30 @@ def _transform_stamped(
     )
 
 
+GT_TOPICS = {"pose": "/ground_truth", "posecov": "/pose_cov", "transform": "/transform",
+             "odom": "/odom", "tf": "/tf"}
+"""The topic write_bag gives each kind of ground truth."""
+
+
 def gt_msg(
     ts: Any, kind: str, stamp_ns: int, T_w: NDArray[np.float64], ros1: bool
 ) -> tuple[str, Any]:
-    """(msgtype, message) of a ground-truth pose: kind pose | odom | tf."""
+    """(msgtype, message) of a ground-truth pose: kind pose | posecov | transform | odom |
+    tf (GT_TOPICS)."""
     T = ts.types
     if kind == "pose":
         return "geometry_msgs/msg/PoseStamped", T["geometry_msgs/msg/PoseStamped"](
             header=header(ts, stamp_ns, "world", ros1), pose=_pose_msg(ts, T_w)
         )
+    if kind == "posecov":
+        return ("geometry_msgs/msg/PoseWithCovarianceStamped",
+                T["geometry_msgs/msg/PoseWithCovarianceStamped"](
+                    header=header(ts, stamp_ns, "world", ros1),
+                    pose=T["geometry_msgs/msg/PoseWithCovariance"](
+                        pose=_pose_msg(ts, T_w), covariance=np.zeros(36))))
+    if kind == "transform":
+        return ("geometry_msgs/msg/TransformStamped",
+                _transform_stamped(ts, stamp_ns, T_w, "velodyne", ros1))
     if kind == "odom":
         cov = np.zeros(36)
         return "nav_msgs/msg/Odometry", T["nav_msgs/msg/Odometry"](
@@ -198,13 +226,15 @@ def write_bag(
     storage: str = "sqlite3",
     gt: str | None = "pose",
     layout: str = "xyzi32",
+    shape: str = "flat",
     cloud_topic: str = "/velodyne_points",
     extra_topics: tuple[str, ...] = (),
 ) -> Path:
     """A real ROS 1 .bag (ros=1) or ROS 2 bag folder (ros=2, sqlite3 | mcap storage) of ``kf``.
 
-    Scan k is at BAG_T0_NS + kf.stamps_ns[k]; ground truth (``gt`` pose | odom | tf | None)
-    at the same stamps. ``extra_topics`` are more PointCloud2 topics (one message each).
+    Scan k is at BAG_T0_NS + kf.stamps_ns[k]; ground truth (``gt``: a kind of GT_TOPICS, or
+    None) at the same stamps. Clouds in ``layout`` (LAYOUTS) and ``shape`` (flat or one of
+    ORGANIZED). ``extra_topics`` are more PointCloud2 topics (one message each).
     """
     ros1 = ros == 1
     ts = typestore(ros1)
@@ -228,12 +258,10 @@ def write_bag(
         gt_conn = None
         if gt is not None:
             msgtype = gt_msg(ts, gt, 0, np.eye(4), ros1)[0]
-            gt_conn = writer.add_connection(
-                {"pose": "/ground_truth", "odom": "/odom", "tf": "/tf"}[gt], msgtype, typestore=ts
-            )
+            gt_conn = writer.add_connection(GT_TOPICS[gt], msgtype, typestore=ts)
         for k, pts in enumerate(kf.points):
             t = int(stamps[k])
-            writer.write(conn, t, serialize(cloud_msg(ts, t, pts, ros1, layout), pc2))
+            writer.write(conn, t, serialize(cloud_msg(ts, t, pts, ros1, layout, shape), pc2))
             if gt_conn is not None:
                 msgtype, msg = gt_msg(ts, gt, t, kf.T_world_lidar[k], ros1)  # type: ignore[arg-type]
                 writer.write(gt_conn, t, serialize(msg, msgtype))

@@ -86,3 +86,28 @@ def test_bag_with_float64_xyz_uint8_intensity_ring_and_time(frames: KittiFrames,
     # with them changes the result, which shows that they reach KISS-ICP, nothing more
     deskewed = run_and_score(seq, tmp_path, "kiss_icp", "-o", "deskew=true")
     assert deskewed["rte"]["t_err_pct"] != plain["rte"]["t_err_pct"]
+
+
+@pytest.mark.parametrize("ros, storage, gt", [
+    (1, "sqlite3", "posecov"),  # geometry_msgs/PoseWithCovarianceStamped
+    (2, "sqlite3", "transform"),  # geometry_msgs/TransformStamped
+    (2, "mcap", "tf"),  # tf2_msgs/TFMessage, the child frame picked from two
+])
+def test_organized_big_endian_clouds_and_every_ground_truth_type(
+        frames: KittiFrames, tmp_path: Path, ros: int, storage: str, gt: str) -> None:
+    """Organized clouds (16 rows, each padded, as drivers of multi-beam sensors publish them),
+    big-endian, with the pose types not covered above."""
+    from source_inputs import GT_TOPICS
+
+    small = replace(frames, bins=frames.bins[:3], stamps_ns=frames.stamps_ns[:3],
+                    T_world_cam=frames.T_world_cam[:3],
+                    points=[p[: 16 * 128] for p in frames.points[:3]])
+    bag = write_bag(tmp_path / ("run.bag" if ros == 1 else "run"), small, ros=ros,
+                    storage=storage, gt=gt, shape="organized_be")
+    seq = tmp_path / "seq.mcap"
+    child = ["--gt-child-frame", "velodyne"] if gt == "tf" else []
+    cli("ingest", "rosbag", bag, "--gt-topic", GT_TOPICS[gt], *child, "--out", seq)
+    with SequenceReader(seq) as r:
+        np.testing.assert_allclose(r.ground_truth(), small.T_world_lidar, atol=1e-6)
+        for k in range(3):
+            np.testing.assert_array_equal(r[k].points_lidar, small.points[k])

@@ -108,6 +108,16 @@ def test_stamps_from_file_names(frames: KittiFrames, tmp_path: Path) -> None:
         assert r.stamps_ns.tolist() == [1317000000_850000000, 1317000000_950000000,
                                         1317000001_050000000]
         np.testing.assert_array_equal(r[0].points_lidar, frames.points[2])
+    d = tmp_path / "ns"  # integer ns names (18 digits and more)
+    d.mkdir()
+    for name, pts in zip(["1317000000950000000", "1317000000850000000"], frames.points,
+                         strict=False):
+        write_pcd(d / f"{name}.pcd", pts)
+    code, _, err = ingest(d, "--out", tmp_path / "n.mcap")
+    assert code == 0, err
+    with SequenceReader(tmp_path / "n.mcap") as r:
+        assert r.stamps_ns.tolist() == [1317000000_850000000, 1317000000_950000000]
+        np.testing.assert_array_equal(r[0].points_lidar, frames.points[1])
 
 
 def pose_file_variants(kf: KittiFrames, tmp: Path) -> dict[str, Path]:
@@ -148,6 +158,16 @@ def test_every_pose_format_is_read_and_guessed(frames: KittiFrames, tmp_path: Pa
                           tmp_path / "s.mcap")
     assert code == 1 and "give --poses-format euroc|tum" in err, err
     assert read_pose_file(bare, "tum").format == "tum"
+    for fmt, path in (("tum", "tum"), ("euroc", "euroc"), ("matrix4", "matrix4_stamped")):
+        variants = pose_file_variants(frames, tmp_path)
+        code, _, err = ingest(scan_folder(tmp_path, frames), "--poses", variants[path],
+                              "--poses-format", fmt, "--out", tmp_path / "s.mcap")
+        assert code == 0, err
+        with SequenceReader(tmp_path / "s.mcap") as r:
+            np.testing.assert_allclose(r.ground_truth(), frames.T_world_lidar, atol=1e-6)
+    code, _, err = ingest(scan_folder(tmp_path, frames), "--poses", variants["tum"],
+                          "--poses-format", "kitti", "--out", tmp_path / "s.mcap")
+    assert code == 1 and "expected 12 numbers (kitti pose file), got 8" in err, err
 
 
 def test_extrinsic_turns_camera_poses_into_lidar_poses(frames: KittiFrames, kitti_root: Path,
@@ -178,6 +198,11 @@ def test_extrinsic_turns_camera_poses_into_lidar_poses(frames: KittiFrames, kitt
             np.testing.assert_allclose(r.ground_truth(), frames.T_world_lidar, atol=1e-6)
     code, _, err = ingest(d, "--poses", tmp_path / "cam.txt", "--extrinsic", "1 2 3", "--out", out)
     assert code == 1 and "12 or 16" in err
+    from pipeline.sources.poses import read_extrinsic  # comma-separated; KITTI raw's key
+
+    np.testing.assert_allclose(read_extrinsic(twelve.replace(" ", ",")), Tr)
+    (tmp_path / "raw_calib.txt").write_text(f"calib_time: 2011\nTr_velo_to_cam: {twelve}\n")
+    np.testing.assert_allclose(read_extrinsic(tmp_path / "raw_calib.txt"), Tr)
 
 
 def test_pcd_intensity_0_255_and_per_point_time(frames: KittiFrames, tmp_path: Path) -> None:
@@ -237,3 +262,61 @@ def test_a_kitti_slice_as_pcds_with_the_full_times_poses_and_calib(frames: Kitti
         np.testing.assert_array_equal(r.stamps_ns, frames.stamps_ns[4:8])
         np.testing.assert_allclose(r.ground_truth(), frames.T_world_lidar[4:8], atol=1e-6)
         np.testing.assert_array_equal(r[0].points_lidar, frames.points[4])
+
+
+def write_pcd_columns(path: Path, columns: dict[str, np.ndarray]) -> None:
+    """A binary PCD of the named (N,) columns, each in its own dtype (f4, f8, u1, u2, u4)."""
+    kinds = {"f": "F", "u": "U", "i": "I"}
+    rec = np.zeros(len(next(iter(columns.values()))),
+                   [(name, "<" + col.dtype.str[1:]) for name, col in columns.items()])
+    for name, col in columns.items():
+        rec[name] = col
+    head = (f"VERSION 0.7\nFIELDS {' '.join(columns)}\n"
+            f"SIZE {' '.join(str(c.dtype.itemsize) for c in columns.values())}\n"
+            f"TYPE {' '.join(kinds[c.dtype.kind] for c in columns.values())}\n"
+            f"COUNT {' '.join('1' for _ in columns)}\nWIDTH {len(rec)}\nHEIGHT 1\n"
+            f"VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(rec)}\nDATA binary\n")
+    path.write_bytes(head.encode() + rec.tobytes())
+
+
+@pytest.mark.parametrize("field, unit", [
+    ("t", "ns"),  # Ouster: uint32 ns from the start of the sweep
+    ("offset_time", "ns"),  # Livox: uint32 ns
+    ("timestamp", "epoch"),  # Hesai / RoboSense: float64 s since the epoch
+    ("time", "before"),  # Velodyne: float32 s relative to the stamp, negative before it
+])
+def test_per_point_time_in_every_unit_and_16_bit_intensity(frames: KittiFrames, tmp_path: Path,
+                                                           field: str, unit: str) -> None:
+    """Each driver's time field becomes float32 seconds from the scan's stamp; 16-bit
+    intensities are scaled by 1/65535."""
+    d = tmp_path / "scans"
+    d.mkdir()
+    stamps_s = ["1317000000.1", "1317000000.2"]
+    expected = []
+    for name, pts in zip(stamps_s, frames.points, strict=False):
+        rel = point_times_s(pts).astype(np.float64)  # 0 .. 0.1 s
+        if unit == "ns":
+            stored: np.ndarray = np.round(rel * 1e9).astype(np.uint32)
+            expected.append((stored * 1e-9).astype(np.float32))
+        elif unit == "epoch":
+            stored = float(name) + rel
+            expected.append(rel.astype(np.float32))
+        else:
+            stored = (rel - 0.1).astype(np.float32)
+            expected.append(stored)
+        write_pcd_columns(d / f"{name}.pcd", {
+            "x": pts[:, 0], "y": pts[:, 1], "z": pts[:, 2],
+            "intensity": np.round(pts[:, 3] * 65535).astype(np.uint16), field: stored})
+    out = tmp_path / "s.mcap"
+    code, _, err = ingest(d, "--out", out)
+    assert code == 0, err
+    with SequenceReader(out) as r:
+        assert r.info.extra["intensity"] == "0-65535 scaled to 0-1 (x 1/65535)"
+        for k in range(2):
+            scan = r[k]
+            assert scan.time_s is not None and scan.time_s.dtype == np.float32
+            np.testing.assert_allclose(scan.time_s, expected[k], atol=1e-6 if unit == "epoch"
+                                       else 0.0)
+            np.testing.assert_allclose(scan.points_lidar[:, 3],
+                                       np.round(frames.points[k][:, 3] * 65535) / 65535,
+                                       atol=1e-7)
