@@ -54,8 +54,11 @@ def bag_path(path: str | Path) -> Path:
         )
     if path.is_dir() and not (path / "metadata.yaml").is_file():
         raise InputError(f"{path}: not a ROS 2 bag folder (no metadata.yaml)")
-    if path.is_file() and path.suffix != ".bag":
+    if not path.is_dir() and path.suffix != ".bag":
         raise InputError(f"{path}: not a ROS bag (expected a .bag file or a ROS 2 bag folder)")
+    for p in sorted(path.iterdir()) if path.is_dir() else [path]:
+        if not (p.is_file() or p.is_dir()):  # a FIFO or a device would block the reader
+            raise InputError(f"{p}: is not a regular file (a bag is made of files)")
     return path
 
 

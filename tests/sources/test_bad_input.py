@@ -216,6 +216,24 @@ def test_truncated_ros1_bag(small_frames: KittiFrames, tmp_path: Path) -> None:
     run_fails(["ingest", "rosbag", bag, "--out", out], out, str(bag), "cannot read bag")
 
 
+@pytest.mark.timeout(30, method="signal")
+@pytest.mark.parametrize("which", ["ros1", "ros2-storage"])
+def test_a_fifo_as_a_bag_is_refused_without_blocking(small_frames: KittiFrames, tmp_path: Path,
+                                                     which: str) -> None:
+    """rosbags would wait forever on a FIFO (a .bag, or a ROS 2 bag's storage file)."""
+    import os
+
+    if which == "ros1":
+        fifo = bag = tmp_path / "f.bag"
+    else:
+        bag = write_bag(tmp_path / "b", small_frames, ros=2, gt=None)
+        (fifo,) = bag.glob("*.db3")
+        fifo.unlink()
+    os.mkfifo(fifo)
+    out = tmp_path / "s.mcap"
+    run_fails(["ingest", "rosbag", bag, "--out", out], out, str(fifo), "not a regular file")
+
+
 # ------------------------------------------------------------------ MCAP
 
 
