@@ -140,3 +140,25 @@ def test_the_good_model_loads_and_selects(good: Path, tmp_path: Path, kitti_root
                                     str(tmp_path / "o.parquet")])
     assert res.exit_code == 0, res.output
     assert model.algorithm == "ndt"
+
+
+@pytest.mark.parametrize("how", ["bytes", "name"])
+def test_an_npz_in_place_of_an_npy_is_refused(good: Path, tmp_path: Path, how: str) -> None:
+    """A NumPy .npz archive (a zip) under an .npy name, or listed as .npz (issue 13, item 7:
+    it was a traceback)."""
+    bad = copy(good, tmp_path / "m")
+    arr = np.load(good / "env.npy")
+    if how == "bytes":
+        with open(bad / "env.npy", "wb") as fh:
+            np.savez(fh, env=arr)
+        sign(bad)
+        refused(bad, "env.npy", "not a plain numpy array")
+    else:
+        np.savez(bad / "env.npz", env=arr)
+        (bad / "env.npy").unlink()
+
+        def rename(m: dict[str, Any]) -> None:
+            m["files"]["env.npz"] = m["files"].pop("env.npy")
+
+        sign(bad, rename)
+        refused(bad, "does not list env.npy")
