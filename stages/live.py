@@ -20,10 +20,12 @@ def live(params_path: Path | None, model_dir: Path, sequence: Path, out: Path,
          algorithm: str | None, as_json: bool) -> None:
     """Stream a sequence through odometry with online parameter selection."""
     from pipeline.config import load_section
+    from pipeline.io_utils import refuse_input_as_output
     from pipeline.live import run_live
     from pipeline.runtime import load_model
     from pipeline.tuning.smbo import TrialsSection
 
+    refuse_input_as_output(out, [sequence, params_path, *sorted(model_dir.glob("*"))])
     # the adapter's untuned settings as in the trials (without a params file, its defaults)
     options = load_section(params_path, "trials", TrialsSection).adapter_options
     model = load_model(model_dir, expected_algorithm=algorithm)

@@ -73,12 +73,15 @@ def run(algorithm: str, params_json: str | None, schedule_path: Path | None, out
         sequence: Path) -> None:
     """Run ALGORITHM once over SEQUENCE (a sequence MCAP) and write its trajectory."""
     from pipeline.errors import ConfigError
+    from pipeline.io_utils import refuse_input_as_output
     from pipeline.odometry import get_adapter, run_sequence
     from pipeline.odometry.base import Schedule
     from pipeline.trajectory import write_trajectory
 
     if params_json is not None and schedule_path is not None:
         raise ConfigError("give --params or --schedule, not both")
+    params_file = params_json[1:] if params_json and params_json.startswith("@") else None
+    refuse_input_as_output(out_path, [sequence, schedule_path, params_file])
     adapter = get_adapter(algorithm, **parse_options(options))
     given = Schedule.read(schedule_path) if schedule_path else parse_params(params_json)
     traj = run_sequence(adapter, sequence, given, time_limit_s=time_limit_s)

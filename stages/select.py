@@ -18,9 +18,11 @@ def select(
     as_json: bool,
 ) -> None:
     """Parameter schedule of a recorded sequence from a model artifact."""
+    from pipeline.io_utils import refuse_input_as_output
     from pipeline.runtime import Selector, load_model
     from pipeline.sequence import SequenceReader
 
+    refuse_input_as_output(out, [sequence, *sorted(model_dir.glob("*"))])
     model = load_model(model_dir, expected_algorithm=algorithm)
     selector = Selector(model, period_s=period_s)
     with SequenceReader(sequence) as reader:

@@ -174,3 +174,36 @@ def test_out_equal_to_an_input_is_refused(tmp_path: Path) -> None:
         result = CliRunner().invoke(main, ["ingest", "mcap", str(seq), "--out", str(out)])
         assert result.exit_code == 1 and "the output is also an input" in result.stderr
     assert seq.read_bytes() == before
+
+
+@pytest.mark.parametrize("args, victim", [
+    (["run", "-a", "ndt", "{seq}", "--out", "{seq}"], "seq"),
+    (["run", "-a", "ndt", "--params", "@{params}", "{seq}", "--out", "{params}"], "params"),
+    (["export", "{seq}", "--ground-truth", "--format", "tum", "--out", "{seq}"], "seq"),
+    (["export", "{traj}", "--format", "kitti", "--out", "{traj}"], "traj"),
+    (["export", "{traj}", "--format", "kitti", "--sequence", "{seq}", "--out", "{seq}"], "seq"),
+    (["select", "{model}", "{seq}", "--out", "{seq}"], "seq"),
+    (["select", "{model}", "{seq}", "--out", "{model}/manifest.json"], "manifest"),
+    (["live", "{model}", "{seq}", "--out", "{seq}"], "seq"),
+])
+def test_no_command_writes_over_its_input(tmp_path: Path, args: list[str], victim: str) -> None:
+    """`run SEQ --out SEQ` replaced the sequence with a trajectory and exited 0 (found auditing
+    issue 13, item 1): every command that reads and writes refuses, and the input stays."""
+    from pipeline.trajectory import Trajectory, write_trajectory
+
+    paths = {"seq": tmp_path / "s.mcap", "params": tmp_path / "p.json",
+             "traj": tmp_path / "t.parquet", "model": tmp_path / "model",
+             "manifest": tmp_path / "model" / "manifest.json"}
+    write_sequence(paths["seq"])
+    paths["params"].write_text('{"resolution": 2.0}')
+    write_trajectory(paths["traj"], Trajectory(np.arange(2), np.array([10, 11]),
+                                               np.tile(np.eye(4), (2, 1, 1))),
+                     {"sequence": str(paths["seq"])})
+    paths["model"].mkdir()
+    paths["manifest"].write_text("{}")
+    before = paths[victim].read_bytes()
+    result = CliRunner().invoke(main, [a.format(**paths) for a in args])
+    assert result.exit_code == 1, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "the output is also an input" in lines[0], result.stderr
+    assert paths[victim].read_bytes() == before

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from pipeline.errors import ConfigError, InputError
 from pipeline.evaluation.posefile import write_kitti_poses, write_tum
 from pipeline.geometry import inv_se3
+from pipeline.io_utils import refuse_input_as_output
 
 F64 = NDArray[np.float64]
 ExportFormat = Literal["kitti", "tum"]
@@ -62,6 +63,7 @@ def export_trajectory(traj_path: str | Path, fmt: str, out: str | Path, *,
     T = traj.T_world_lidar
     needs_sequence = anchor == "ground-truth" or (frame == "kitti-camera" and calib is None)
     seq = _sequence_of(traj_path, sequence) if needs_sequence else None
+    refuse_input_as_output(out, [traj_path, seq, calib])
     if anchor == "ground-truth":
         T = anchor_at(T, _first_ground_truth(seq, traj.frames, traj.stamps_ns))  # type: ignore[arg-type]
     if frame == "kitti-camera":
@@ -76,6 +78,7 @@ def export_ground_truth(sequence: str | Path, fmt: str, out: str | Path, *,
     from pipeline.sequence import SequenceReader
 
     _check_choices(fmt, "identity", frame)
+    refuse_input_as_output(out, [sequence, calib])
     with SequenceReader(sequence) as reader:
         gt = reader.ground_truth()
         stamps = np.asarray(reader.stamps_ns, dtype=np.int64)
