@@ -14,6 +14,11 @@ from pipeline.errors import InputError
 F64 = NDArray[np.float64]
 
 
+MAX_POSITION_M = 1e8
+"""A ground-truth position beyond 100 000 km from the origin is not a trajectory on Earth (ECEF
+and UTM coordinates stay below 1e7 m)."""
+
+
 def inv_se3(T_a_b: F64) -> F64:
     """Inverse of one (4, 4) or a stack (N, 4, 4) of rigid transforms: T_b_a."""
     R = T_a_b[..., :3, :3]
@@ -93,9 +98,10 @@ def not_rotations(R: F64, tol: float = 1e-3) -> NDArray[np.bool_]:
     """(...,) True where a (..., 3, 3) matrix is not a rotation: R^T R != I (beyond ``tol``,
     element-wise) or det(R) != +1 (zero, scaled, reflected or sheared matrices)."""
     R = np.asarray(R, dtype=np.float64)
-    gram = np.swapaxes(R, -1, -2) @ R
-    off = np.abs(gram - np.eye(3)).max(axis=(-1, -2))
-    det = np.linalg.det(R)
+    with np.errstate(over="ignore", invalid="ignore"):  # huge entries: flagged, not warned
+        gram = np.swapaxes(R, -1, -2) @ R
+        off = np.abs(gram - np.eye(3)).max(axis=(-1, -2))
+        det = np.linalg.det(R)
     return ~((off <= tol) & (np.abs(det - 1.0) <= tol))
 
 

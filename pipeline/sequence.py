@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError, SchemaError
-from pipeline.geometry import refuse_non_rotations
+from pipeline.geometry import MAX_POSITION_M, refuse_non_rotations
 from pipeline.io_utils import atomic_path
 from pipeline.ros2_cdr import (
     POINTCLOUD2,
@@ -226,6 +226,9 @@ class SequenceWriter:
             if T.shape != (4, 4) or not np.isfinite(T).all():
                 raise InputError(f"{what}: ground-truth pose is not a finite 4x4 matrix")
             refuse_non_rotations(T[None, :3, :3], f"{what}: ground truth")
+            if np.abs(T[:3, 3]).max() > MAX_POSITION_M:
+                raise InputError(f"{what}: ground-truth position {T[:3, 3].tolist()} m is "
+                                 f"beyond {MAX_POSITION_M:g} m: not a trajectory on Earth")
             self.add_pose(GT_TOPIC, stamp_ns, T)
             self.add_tf(stamp_ns, WORLD_FRAME, LIDAR_FRAME, T)
         self.stamps_ns.append(stamp_ns)

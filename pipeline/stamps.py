@@ -60,7 +60,7 @@ def read_times(path: Path, n_scans: int | None) -> NDArray[np.int64]:
     if not path.is_file():
         raise InputError(f"{path}: no such times file")
     stamps: list[int] = []
-    text = path.read_text(encoding="utf-8", errors="replace")
+    text = path.read_text(encoding="utf-8-sig", errors="replace")
     for lineno, line in enumerate(text.splitlines(), start=1):
         fields = line.split("#", 1)[0].split()
         if not fields:

@@ -65,7 +65,7 @@ def _rows(path: Path) -> _Rows:
     values: list[list[float]] = []
     header: list[str] = []
     commas = False
-    text = path.read_text(encoding="utf-8", errors="replace")
+    text = path.read_text(encoding="utf-8-sig", errors="replace")
     for k, line in enumerate(text.splitlines(), 1):
         stripped = line.strip()
         if not stripped:

@@ -21,7 +21,12 @@ from numpy.typing import NDArray
 
 from pipeline.errors import InputError
 from pipeline.evaluation.posefile import PoseFile
-from pipeline.geometry import interpolate_rotations, inv_se3, refuse_non_rotations
+from pipeline.geometry import (
+    MAX_POSITION_M,
+    interpolate_rotations,
+    inv_se3,
+    refuse_non_rotations,
+)
 
 log = logging.getLogger(__name__)
 
@@ -38,7 +43,7 @@ def read_kitti_calib(path: str | Path) -> NDArray[np.float64]:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such calibration file")
-    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+    for line in path.read_text(encoding="utf-8-sig", errors="replace").splitlines():
         key, _, rest = line.partition(":")
         if key.strip() in ("Tr", "Tr_velo_to_cam"):
             try:
@@ -66,7 +71,7 @@ def read_extrinsic(value: str | Path) -> NDArray[np.float64]:
             is_file = False
         if not is_file:
             raise InputError(f"{text[:80]}: --extrinsic is neither 12 or 16 numbers nor a file")
-        content = path.read_text(encoding="utf-8", errors="replace")
+        content = path.read_text(encoding="utf-8-sig", errors="replace")
         if re.search(r"^\s*(Tr|Tr_velo_to_cam)\s*:", content, re.MULTILINE):
             return read_kitti_calib(path)
         text, source = content, str(path)
@@ -153,6 +158,12 @@ def lidar_ground_truth(
     if pose_file is not None:
         if pose_file.stamps_ns is None and n_scans is not None:
             check_count(pose_file, n_scans, scans_what)
+        far = np.abs(pose_file.T_world_x[:, :3, 3]).max(axis=1) > MAX_POSITION_M
+        if far.any():
+            k = int(np.flatnonzero(far)[0])
+            raise InputError(f"{pose_file.path}: pose {k} is at "
+                             f"{pose_file.T_world_x[k, :3, 3].tolist()} m, beyond "
+                             f"{MAX_POSITION_M:g} m: not a trajectory on Earth")
         gt = GroundTruth(str(pose_file.path), pose_file.stamps_ns, pose_file.T_world_x)
     if extrinsic is not None:
         E = read_extrinsic(extrinsic)

@@ -167,3 +167,33 @@ def test_kitti_numbering_with_a_gap(root: Path, tmp_path: Path) -> None:
     (velodyne / "000002.bin").rename(velodyne / "000005.bin")
     out = tmp_path / "s.mcap"
     fails(kitti(root, out), str(velodyne), "scan 2 is 000005.bin, expected 000002.bin", out=out)
+
+
+def test_ground_truth_far_off_earth_and_huge_rotation_entries(root: Path, tmp_path: Path) -> None:
+    """Positions of 1e300 m were accepted (a KITTI pose file; a TUM file); rotation entries of
+    1e300 were refused with numpy's overflow warnings around the line."""
+    poses = root / "poses" / "04.txt"
+    lines = poses.read_text().splitlines()
+    P = np.array(lines[1].split(), float).reshape(3, 4)
+    P[0, 3] = 1e300
+    lines[1] = " ".join(f"{v:.6e}" for v in P.ravel())
+    poses.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "s.mcap"
+    fails(kitti(root, out), "ground-truth position", "beyond 1e+08 m", out=out)
+    P[0, 3], P[0, 0] = 0.0, 1e300
+    lines[1] = " ".join(f"{v:.6e}" for v in P.ravel())
+    poses.write_text("\n".join(lines) + "\n")
+    fails(kitti(root, out), f"{poses} line 2", "not a rotation matrix", out=out)
+    tum = tmp_path / "gt.tum"
+    tum.write_text("0.0 0 0 0 0 0 0 1\n0.1 0 0 -2e9 0 0 0 1\n0.2 0 0 0 0 0 0 1\n")
+    fails(["ingest", "folder", root / "sequences" / "04" / "velodyne", "--poses", tum,
+           "--out", out], f"{tum}: pose 1 is at [0.0, 0.0, -2000000000.0] m", out=out)
+
+
+def test_a_times_file_with_a_byte_order_mark(root: Path, tmp_path: Path) -> None:
+    """Editors on Windows start UTF-8 files with a BOM: read, not refused."""
+    times = root / "sequences" / "04" / "times.txt"
+    times.write_bytes(b"\xef\xbb\xbf" + times.read_bytes().replace(b"\n", b"\r\n"))
+    out = tmp_path / "s.mcap"
+    result = CliRunner().invoke(main, [str(a) for a in kitti(root, out)])
+    assert result.exit_code == 0, result.output
