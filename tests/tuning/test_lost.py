@@ -88,3 +88,47 @@ def test_a_resumed_parallel_study_proposes_what_an_uninterrupted_one_does(
     run_trials(sequences[:1], tmp_path / "k", s, seed=12, progress=False, executor=pool)
     run_trials(sequences[:1], tmp_path / "w", s, seed=12, progress=False, executor=pool)
     assert rows(tmp_path / "k", "sleepy") == rows(tmp_path / "w", "sleepy")
+
+
+
+def test_sigkill_of_adaptune_trials_then_a_resume_loses_and_repeats_nothing(
+        sequences: list[Path], pool: Executor, tmp_path: Path) -> None:
+    """`adaptune trials` SIGKILLed mid-study (a real process, two trials in flight), then run
+    again: its trials table equals an uninterrupted run's, trial for trial (parameters,
+    status, objective)."""
+    import json
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    s = settings(algorithm="tuning_adapters:sleepy", workers=2, iterations=10, startup_trials=2)
+    params = tmp_path / "params.yaml"
+    params.write_text(json.dumps({"base": {"seed": 5, "length_m": s.length_m}, "trials": {
+        k: getattr(s, k) for k in ("algorithm", "iterations", "workers", "startup_trials",
+                                   "time_limit_s")}}))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(Path(__file__).parent), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    table = trials_path(tmp_path / "k", "sleepy", "seq_a")
+    killed = subprocess.Popen([sys.executable, "-m", "stages.cli", "trials", str(sequences[0]),
+                               "--out", str(tmp_path / "k"), "--params", str(params)], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        while not (table.exists() and pq.read_metadata(table).num_rows >= 3):
+            assert killed.poll() is None, killed.stderr.read()  # type: ignore[union-attr]
+            assert time.monotonic() < deadline, "no trials written"
+            time.sleep(0.05)
+        os.kill(killed.pid, signal.SIGKILL)
+        killed.wait(30)
+    finally:
+        if killed.poll() is None:
+            killed.kill()
+            killed.wait()
+    assert 3 <= len(rows(tmp_path / "k", "sleepy")["trial"]) < 10
+    for out in (tmp_path / "k", tmp_path / "w"):  # the resume; an uninterrupted run
+        run_trials(sequences[:1], out, s, seed=5, progress=False, executor=pool)
+    resumed = rows(tmp_path / "k", "sleepy")
+    assert resumed["trial"] == list(range(10)) and set(resumed["status"]) == {"ok"}
+    assert resumed == rows(tmp_path / "w", "sleepy")
