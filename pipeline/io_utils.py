@@ -22,7 +22,7 @@ from collections.abc import Generator, Iterable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
-from pipeline.errors import OutputError
+from pipeline.errors import InputError, OutputError
 
 T = TypeVar("T")
 log = logging.getLogger(__name__)
@@ -57,6 +57,18 @@ def _make_parent(path: Path) -> None:
                           "is a file") from None
     except OSError as exc:
         raise OutputError(f"{path}: cannot create its folder ({exc.strerror})") from None
+
+
+def input_file(path: str | os.PathLike[str], kind: str, hint: str = "") -> Path:
+    """``path`` when it is a regular file (links followed); InputError naming it and ``kind``
+    (with ``hint`` when it is missing) otherwise: a folder, FIFO or device is refused before a
+    reader would block on it or misread it."""
+    p = Path(path)
+    if p.is_file():
+        return p
+    if p.exists():
+        raise InputError(f"{p}: is not a regular file (a {kind} must be one)")
+    raise InputError(f"{p}: no such {kind}{hint}")
 
 
 def refuse_input_as_output(out: str | os.PathLike[str],

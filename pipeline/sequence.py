@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from pipeline.errors import InputError, SchemaError
 from pipeline.geometry import MAX_POSITION_M, refuse_non_rotations
-from pipeline.io_utils import atomic_path
+from pipeline.io_utils import atomic_path, input_file
 from pipeline.ros2_cdr import (
     POINTCLOUD2,
     POSE_STAMPED,
@@ -309,8 +309,7 @@ class SequenceReader:
         from mcap.reader import make_reader
 
         self.path = Path(path)
-        if not self.path.is_file():
-            raise InputError(f"{self.path}: no such sequence file")
+        input_file(self.path, "sequence file")
         self._fh = open(self.path, "rb")  # noqa: SIM115 - closed by close()
         try:
             self._reader = make_reader(self._fh, validate_crcs=True)

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
+from pipeline.io_utils import input_file
 
 MAX_STAMP_S = 2**31
 """Stamps must be below 2^31 s (ROS 2 Time.sec is int32)."""
@@ -56,9 +57,7 @@ def read_times(path: Path, n_scans: int | None) -> NDArray[np.int64]:
     InputError names the file and line for anything else: two columns, a word, a negative or
     too large time, a count that does not match, stamps that do not increase.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such times file")
+    path = input_file(path, "times file")
     stamps: list[int] = []
     text = path.read_text(encoding="utf-8-sig", errors="replace")
     for lineno, line in enumerate(text.splitlines(), start=1):

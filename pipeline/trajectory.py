@@ -11,7 +11,7 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
-from pipeline.io_utils import atomic_path
+from pipeline.io_utils import atomic_path, input_file
 from schemas.arrow import POSE_COLUMNS, TRAJECTORY, check_schema_version
 
 
@@ -74,9 +74,7 @@ def write_trajectory(
 
 def read_trajectory(path: str | Path) -> Trajectory:
     """Read a trajectory Parquet file written by ``write_trajectory``."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such trajectory file")
+    path = input_file(path, "trajectory file")
     try:
         table = pq.read_table(path)
     except (pa.ArrowInvalid, OSError) as exc:

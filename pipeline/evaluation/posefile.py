@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from pipeline.errors import InputError
 from pipeline.geometry import poses_from_quaternions, refuse_non_rotations, rot_to_quat
-from pipeline.io_utils import atomic_write_text
+from pipeline.io_utils import atomic_write_text, input_file
 from pipeline.stamps import check_stamp_ns, decimal_seconds_to_ns, seconds_to_ns
 
 F64 = NDArray[np.float64]
@@ -58,8 +58,7 @@ class _Rows:
 
 
 def _rows(path: Path) -> _Rows:
-    if not path.is_file():
-        raise InputError(f"{path}: no such pose file")
+    input_file(path, "pose file")
     lines: list[int] = []
     tokens: list[list[str]] = []
     values: list[list[float]] = []

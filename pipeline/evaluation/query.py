@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 import pyarrow as pa
 
 from pipeline.errors import ConfigError, InputError, QueryError
-from pipeline.io_utils import atomic_path
+from pipeline.io_utils import atomic_path, input_file
 
 if TYPE_CHECKING:
     import duckdb
@@ -58,9 +58,7 @@ def run_query(db_path: str | Path, sql: str,
     """Result of ``sql`` as an Arrow table (empty when the statement returns nothing)."""
     import duckdb
 
-    db_path = Path(db_path)
-    if not db_path.is_file():
-        raise InputError(f"{db_path}: no such database (build it with `adaptune rte`)")
+    db_path = input_file(db_path, "database", " (build it with `adaptune rte`)")
     con = open_sandbox(db_path, tables or {})
     try:
         rel = con.sql(sql)
@@ -104,8 +102,8 @@ def _parquet_dataset(path: Path) -> Any:
     """A pyarrow dataset over a Parquet file or folder; InputError names the file."""
     import pyarrow.dataset as ds
 
-    if not path.exists():
-        raise InputError(f"{path}: no such Parquet file")
+    if not path.is_dir():
+        input_file(path, "Parquet file")
     try:
         return ds.dataset(path, format="parquet")
     except (pa.ArrowException, OSError) as exc:

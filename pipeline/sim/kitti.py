@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from pipeline.errors import InputError
 from pipeline.geometry import inv_se3
+from pipeline.io_utils import input_file
 
 F64 = NDArray[np.float64]
 
@@ -62,9 +63,7 @@ def velodyne_to_camera(path: Path) -> F64:
 
 def kitti_lidar_poses(path: str | Path, frames: int | None = None) -> tuple[F64, NDArray[np.int64]]:
     """(T_world_lidar (N, 4, 4), stamps_ns (N,)) of the first ``frames`` poses of ``path``."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such KITTI trajectory file")
+    path = input_file(path, "KITTI trajectory file")
     try:
         rows = np.loadtxt(path, dtype=np.float64, ndmin=2)
     except ValueError as exc:

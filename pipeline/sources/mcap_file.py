@@ -15,6 +15,7 @@ from typing import Any, ClassVar
 
 from pipeline.errors import ConfigError, InputError
 from pipeline.evaluation.posefile import PoseFormat, read_pose_file
+from pipeline.io_utils import input_file
 from pipeline.sequence import SequenceInfo
 from pipeline.sources.base import (
     Frame,
@@ -42,8 +43,7 @@ def open_mcap(path: Path) -> Iterator[tuple[Any, Any]]:
     """(reader, summary) of an MCAP file; any failure becomes one InputError line."""
     from mcap.reader import make_reader
 
-    if not path.is_file():
-        raise InputError(f"{path}: no such MCAP file")
+    input_file(path, "MCAP file")
     with open(path, "rb") as fh:
         try:
             reader = make_reader(fh, validate_crcs=True)

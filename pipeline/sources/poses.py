@@ -27,6 +27,7 @@ from pipeline.geometry import (
     inv_se3,
     refuse_non_rotations,
 )
+from pipeline.io_utils import input_file
 
 log = logging.getLogger(__name__)
 
@@ -40,9 +41,7 @@ Z_MOTION_SHARE = 0.7
 
 def read_kitti_calib(path: str | Path) -> NDArray[np.float64]:
     """(4, 4) Tr (velodyne -> camera 0) from a KITTI odometry calib.txt."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such calibration file")
+    path = input_file(path, "calibration file")
     for line in path.read_text(encoding="utf-8-sig", errors="replace").splitlines():
         key, _, rest = line.partition(":")
         if key.strip() in ("Tr", "Tr_velo_to_cam"):

@@ -197,3 +197,32 @@ def test_a_times_file_with_a_byte_order_mark(root: Path, tmp_path: Path) -> None
     out = tmp_path / "s.mcap"
     result = CliRunner().invoke(main, [str(a) for a in kitti(root, out)])
     assert result.exit_code == 0, result.output
+
+
+@pytest.mark.timeout(60, method="signal")
+@pytest.mark.parametrize("args, kind", [
+    (["ingest", "folder", "{velodyne}", "--poses", "{fifo}", "--out", "{out}"], "pose file"),
+    (["ingest", "folder", "{velodyne}", "--times", "{fifo}", "--out", "{out}"], "times file"),
+    (["ingest", "kitti", "{root}", "04", "--calib", "{fifo}", "--out", "{out}"], None),
+    (["ingest", "mcap", "{fifo}", "--out", "{out}"], "MCAP file"),
+    (["info", "{fifo}"], "sequence file"),
+    (["export", "{fifo}", "--format", "tum", "--out", "{out}"], "trajectory file"),
+    (["metric", "rte", "{fifo}", "{fifo}", "--length", "5"], "pose file"),
+    (["query", "--db", "{fifo}", "SELECT 1"], "database"),
+])
+def test_a_fifo_in_place_of_an_input_file(root: Path, tmp_path: Path, args: list[str],
+                                          kind: str | None) -> None:
+    """Named as what it is, not as missing ("no such pose file"), and never waited on."""
+    import os
+
+    fifo = tmp_path / "in.fifo"
+    os.mkfifo(fifo)
+    names = {"velodyne": root / "sequences" / "04" / "velodyne", "fifo": fifo, "root": root,
+             "out": tmp_path / "o.out"}
+    if kind is None:  # kitti has no --calib: its calib.txt is the FIFO
+        calib = root / "sequences" / "04" / "calib.txt"
+        calib.unlink()
+        os.mkfifo(calib)
+        args = args[:4] + args[6:]
+        fifo, kind = calib, "calibration file"
+    fails([a.format(**names) for a in args], str(fifo), f"is not a regular file (a {kind}")
