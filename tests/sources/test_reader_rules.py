@@ -3,6 +3,7 @@ rule, exit 1, no output. Before these rules they were tracebacks or silently acc
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
@@ -73,6 +74,9 @@ def test_a_folder_named_like_a_scan(root: Path, tmp_path: Path) -> None:
     out = tmp_path / "s.mcap"
     fails(kitti(root, out), str(velodyne / "000003.bin"), "is not a regular file", out=out)
     fails(["ingest", "folder", velodyne, "--out", out], "000003.bin", "is not a regular file")
+    (velodyne / "000003.bin").rmdir()
+    os.mkfifo(velodyne / "000003.bin")  # a FIFO would block the reader
+    fails(kitti(root, out), str(velodyne / "000003.bin"), "is not a regular file", out=out)
 
 
 @pytest.mark.parametrize("header, rule", [
