@@ -87,9 +87,11 @@ TRIALS_BASE = pa.schema(
 """One SMBO study's trials (docs/design.md, "Formats"): these columns plus ``p_<name>`` float64
 each."""
 
-TRIAL_STATUSES = ("ok", "failed", "lost")
+TRIAL_STATUSES = ("ok", "failed", "pruned", "lost")
 """Values of the trials table's ``status`` column: ok (scored), failed (the odometry failed:
-objective = the penalty), lost (the machinery failed: objective NaN, run again on resume)."""
+objective = the penalty), pruned (stopped early, hopeless: objective = its running RTE where
+it stopped, its trajectory covers the frames it ran), lost (the machinery failed: objective
+NaN, run again on resume)."""
 
 
 def trials_schema(param_names: list[str]) -> pa.Schema:

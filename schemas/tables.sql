@@ -44,7 +44,7 @@ CREATE TABLE trials (
     algorithm VARCHAR NOT NULL,
     sequence VARCHAR NOT NULL,
     trial INTEGER NOT NULL,
-    status VARCHAR NOT NULL,        -- 'ok' | 'failed' | 'lost'
+    status VARCHAR NOT NULL,        -- 'ok' | 'failed' | 'pruned' | 'lost'
     error VARCHAR NOT NULL,         -- '' when ok
     objective DOUBLE,               -- the SMBO objective: mean RTE [%] or the failure penalty
     wall_time_s DOUBLE,

@@ -2,8 +2,10 @@
 INSERT INTO schema_info VALUES ('views.sql', '1.0');
 
 -- Training rows of the surrogate: one row per (algorithm, sequence, trial, frame) of the ok
--- trials of the per-sequence SMBO, with the frame's environment (e0..e9), the trial's
--- parameters (p_<name>, every algorithm's) and the target y = per-start-frame RTE [%].
+-- and pruned trials of the per-sequence SMBO, with the frame's environment (e0..e9), the
+-- trial's parameters (p_<name>, every algorithm's) and the target y = per-start-frame RTE [%].
+-- A pruned trial has rows for the segments that end within the frames it ran: the same rows a
+-- whole run would have given there (the odometry is causal), so they are kept.
 CREATE VIEW surrogate_rows AS
 SELECT r.algorithm, r.sequence, r.trial, r.frame,
        COLUMNS('^e[0-9]+$'), COLUMNS('^p_'),
@@ -11,7 +13,7 @@ SELECT r.algorithm, r.sequence, r.trial, r.frame,
 FROM rte_frames AS r
 JOIN trials AS t USING (study, algorithm, sequence, trial)
 JOIN environment AS e USING (sequence, frame)
-WHERE r.study = 'trials' AND t.status = 'ok';
+WHERE r.study = 'trials' AND t.status IN ('ok', 'pruned');
 
 -- RTE per environment label: each rte_frames row with the label of its start frame.
 CREATE VIEW rte_labelled AS

@@ -229,14 +229,23 @@ def load_trajectories(con: duckdb.DuckDBPyConnection, studies: Mapping[str, Path
 
 
 def check_trajectories(con: duckdb.DuckDBPyConnection) -> None:
-    """Raise InputError naming the first trajectory file that does not fit its sequence."""
+    """Raise InputError naming the first trajectory file that does not fit its sequence.
+
+    A pruned trial's trajectory covers the frames it ran: 0..k, fewer than the sequence has.
+    """
     finite = " AND ".join(f"isfinite({c})" for c in POSE_COLUMNS)
     bad = con.execute(f"""
+        WITH pruned AS (SELECT DISTINCT study, algorithm, sequence, trial FROM trials
+                        WHERE status = 'pruned')
         SELECT any_value(e.filename), e.sequence, any_value(s.frames), count(*),
                count(DISTINCT e.frame), min(e.frame), max(e.frame), bool_and({finite})
         FROM est AS e LEFT JOIN sequences AS s USING (sequence)
+        LEFT JOIN pruned AS p ON p.study = e.study AND p.algorithm = e.algorithm
+            AND p.trial = e.trial AND (p.sequence = e.sequence OR p.sequence = '__joint__')
         GROUP BY e.study, e.algorithm, e.sequence, e.trial
-        HAVING any_value(s.frames) IS NULL OR count(*) <> any_value(s.frames)
+        HAVING any_value(s.frames) IS NULL
+            OR (count(*) <> any_value(s.frames)
+                AND (count(p.trial) = 0 OR count(*) > any_value(s.frames)))
             OR count(DISTINCT e.frame) <> count(*) OR min(e.frame) <> 0
             OR NOT bool_and({finite})
         LIMIT 1""").fetchone()

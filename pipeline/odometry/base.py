@@ -353,10 +353,12 @@ class TimeLimitedAdapter(Adapter, Protocol):
 
 
 def run_streaming(
-    make: Callable[[Params], Odometry], scans: Iterable[Scan], schedule: Schedule
+    make: Callable[[Params], Odometry], scans: Iterable[Scan], schedule: Schedule,
+    after_frame: Callable[[int, list[NDArray[np.float64]]], None] | None = None,
 ) -> Trajectory:
     """``run`` for in-process adapters: ``make(params)`` -> Odometry, then step every scan,
-    calling ``set_params`` only where the schedule changes."""
+    calling ``set_params`` only where the schedule changes. ``after_frame(i, poses)`` (the
+    tuner's pruner) sees the poses of frames 0..i after each frame and may raise to stop."""
     changes = set(schedule.changes())
     odom: Odometry | None = None
     frames, stamps, poses = [], [], []
@@ -371,6 +373,8 @@ def run_streaming(
             poses.append(odom.step(scan.xyz, scan.stamp_ns))
         frames.append(scan.frame)
         stamps.append(scan.stamp_ns)
+        if after_frame is not None:
+            after_frame(i, poses)
     if odom is None:
         raise InputError("no scans to run odometry on")
     return Trajectory(np.array(frames), np.array(stamps), np.stack(poses))

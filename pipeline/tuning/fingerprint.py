@@ -4,9 +4,10 @@ match.
 A study's proposals and scores depend on the adapter and its options, the parameter space,
 the seed, L (``length_m``), the penalty, the jump limit, the time limit (a trial past it
 fails), TPE's start-up count, how far the proposals lag the results (``told_lag``, from the
-workers) and the sequences' content. Resuming with any of them changed would silently mix two
-studies, so ``check_fingerprint`` refuses it in one line naming every difference. What may
-change on a resume: ``iterations`` (a study can be extended), ``retries``, ``dask``.
+workers), the pruner's settings and the sequences' content. Resuming with any of them changed
+would silently mix two studies, so ``check_fingerprint`` refuses it in one line naming every
+difference. What may change on a resume: ``iterations`` (a study can be extended),
+``retries``, ``dask``.
 
 Sequences are identified by the SHA-256 of their file; ``sequence_digest`` skips the hashing
 when size and modification time equal the stored ones (a resume of an untouched sequence).
@@ -27,14 +28,14 @@ VERSION = 1
 """Format of the fingerprint (a change of it refuses every older study)."""
 
 COMPARED = ("adapter", "adapter_options", "space", "seed", "length_m", "penalty_pct",
-            "jump_limit_m", "time_limit_s", "startup_trials", "told_lag", "sequences")
+            "jump_limit_m", "time_limit_s", "startup_trials", "told_lag", "pruning", "sequences")
 """Keys that define a study, in the order differences are named."""
 
 
 def study_fingerprint(*, adapter: str, adapter_options: Mapping[str, Any],
                       space: list[dict[str, Any]], seed: int, length_m: float,
                       penalty_pct: float, jump_limit_m: float, time_limit_s: float | None,
-                      startup_trials: int, told_lag: int,
+                      startup_trials: int, told_lag: int, pruning: Mapping[str, Any],
                       sequences: list[tuple[str, str]],
                       stored: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The fingerprint (plain JSON data) of a study over ``sequences`` ((name, MCAP path)).
@@ -56,6 +57,7 @@ def study_fingerprint(*, adapter: str, adapter_options: Mapping[str, Any],
         "time_limit_s": None if time_limit_s is None else float(time_limit_s),
         "startup_trials": int(startup_trials),
         "told_lag": int(told_lag),
+        "pruning": dict(pruning),
         "sequences": [sequence_digest(name, path, known.get(name)) for name, path in sequences],
     }
 

@@ -43,6 +43,8 @@ class TrialJob:
 
     adapter: a registry name (``ndt``) or ``module:factory`` (``(**options) -> Adapter``).
     space: the parameter space the study searches (``trials.space`` applied), None = built-in.
+    checkpoints, thresholds: where the trial's curve is measured, and where it is pruned
+    (``pipeline.tuning.pruning``).
     algorithm: the name used in output paths (the adapter's ``name``).
     sequences: ((sequence name, MCAP path), ...); more than one for a joint trial.
     """
@@ -60,6 +62,8 @@ class TrialJob:
     time_limit_s: float | None = None
     adapter_options: dict[str, Any] = field(default_factory=dict)
     space: list[dict[str, Any]] | None = None  # the study's space (ParameterSpace.to_json)
+    checkpoints: tuple[tuple[int, int], ...] = ()  # (sequence index, frame): pruning.Checkpoint
+    thresholds: tuple[float | None, ...] = ()  # per checkpoint: prune above it (None: no check)
 
 
 @dataclass(frozen=True)
@@ -67,7 +71,7 @@ class TrialResult:
     """Outcome of one trial; objective: mean translational RTE [%] (over sequences) or penalty."""
 
     trial: int
-    status: str  # 'ok' | 'failed' | 'lost' (see the module docstring)
+    status: str  # 'ok' | 'failed' | 'pruned' | 'lost' (see the module docstring)
     error: str
     objective: float
     wall_time_s: float
@@ -75,6 +79,7 @@ class TrialResult:
     params: dict[str, float]
     rte_pct: dict[str, float] = field(default_factory=dict)
     odometry_s: float = 0.0
+    curve: tuple[float, ...] = ()  # values at the study's checkpoints (pruning.curve_of)
 
 
 def resolve_adapter(ref: str, options: Mapping[str, Any] | None = None,
@@ -104,38 +109,81 @@ def evaluate_trial(job: TrialJob, adapter: Adapter,
     failure.
 
     ``scans``: sequences already decoded, by MCAP path (the worker's scan cache); the others
-    are read from their file. Returns {"objective": mean RTE [%] over sequences,
-    "rte_pct": {sequence: RTE}, "odometry_s"}. ``pipeline.odometry.run_sequence`` checks frames,
-    stamps, finiteness; ``check_jump`` jumps.
+    are read from their file. Returns {"status": "ok" | "pruned", "objective": mean RTE [%]
+    over sequences (a pruned trial: its value where it stopped), "rte_pct": {sequence: RTE},
+    "odometry_s", "curve": values at the checkpoints, "error": why it was pruned}.
+    ``pipeline.odometry.run_sequence`` checks frames, stamps, finiteness; ``check_jump`` jumps.
+    A trial is pruned only where its scans are cached and the adapter streams (``start``).
     """
     import time
 
     from pipeline.evaluation.rte import mean_rte_pct
-    from pipeline.odometry import check_trajectory, make_schedule, run_sequence
     from pipeline.trajectory import write_trajectory
+    from pipeline.tuning.pruning import Checkpoint, Pruned, curve_of
 
+    points = [Checkpoint(s, k) for s, k in job.checkpoints]
     rte: dict[str, float] = {}
+    gts: list[NDArray[np.float64]] = []
+    ests: list[NDArray[np.float64] | None] = []
     odometry_s = 0.0
-    for name, path in job.sequences:
+    for index, (name, path) in enumerate(job.sequences):
         gt = load_ground_truth(path)
-        cached = (scans or {}).get(path)
         t0 = time.perf_counter()
-        if cached is None or getattr(adapter, "accepts_time_limit", False):
-            traj = run_sequence(adapter, path, job.params, job.time_limit_s)
-        else:
-            traj = adapter.run(cached, make_schedule(adapter, job.params, len(cached), path))
-            stamps_ns = np.array([sc.stamp_ns for sc in cached])
-            check_trajectory(traj, stamps_ns, f"{adapter.name} on {path}")
+        try:
+            traj = _run(job, adapter, index, path, (scans or {}).get(path), gt, list(rte.values()))
+        except Pruned as stop:
+            odometry_s += time.perf_counter() - t0
+            write_trajectory(trajectory_path(job.out_dir, job.algorithm, name, job.trial),
+                             stop.trajectory, _metadata(job, name))
+            return {"status": "pruned", "objective": stop.value, "rte_pct": rte,
+                    "odometry_s": odometry_s,
+                    "curve": curve_of(points, [*gts, gt], [*ests, stop.trajectory.T_world_lidar],
+                                      job.length_m),
+                    "error": f"pruned at {name} frame {stop.frames_run - 1}: running RTE "
+                             f"{stop.value:.4g} % above {stop.threshold:.4g} %"}
         odometry_s += time.perf_counter() - t0
         check_jump(traj, job.jump_limit_m)
         rte[name] = mean_rte_pct(gt, traj.T_world_lidar, job.length_m)
         if not np.isfinite(rte[name]):
             raise OdometryError(f"{name}: no segment of {job.length_m} m to score")
-        write_trajectory(trajectory_path(job.out_dir, job.algorithm, name, job.trial), traj, {
-            "algorithm": job.algorithm, "sequence": name, "trial": str(job.trial),
-            "params_json": json.dumps(job.params, sort_keys=True)})
+        write_trajectory(trajectory_path(job.out_dir, job.algorithm, name, job.trial), traj,
+                         _metadata(job, name))
+        gts.append(gt)
+        ests.append(traj.T_world_lidar)
     objective = float(np.mean(list(rte.values())))
-    return {"objective": objective, "rte_pct": rte, "odometry_s": odometry_s}
+    return {"status": "ok", "objective": objective, "rte_pct": rte, "odometry_s": odometry_s,
+            "curve": curve_of(points, gts, ests, job.length_m), "error": ""}
+
+
+def _metadata(job: TrialJob, sequence: str) -> dict[str, str]:
+    return {"algorithm": job.algorithm, "sequence": sequence, "trial": str(job.trial),
+            "params_json": json.dumps(job.params, sort_keys=True)}
+
+
+def _run(job: TrialJob, adapter: Adapter, index: int, path: str, cached: list[Scan] | None,
+         gt: NDArray[np.float64], done_rte: list[float]) -> Trajectory:
+    """The checked trajectory of sequence ``index`` of ``job``; pruning.Pruned when the trial
+    is pruned on it."""
+    from pipeline.odometry import check_trajectory, make_schedule, run_sequence
+    from pipeline.odometry.base import run_streaming
+    from pipeline.tuning.pruning import Checkpoint, watcher
+
+    if cached is None or getattr(adapter, "accepts_time_limit", False):
+        return run_sequence(adapter, path, job.params, job.time_limit_s)
+    schedule = make_schedule(adapter, job.params, len(cached), path)
+    checks = {k: (i, thr) for i, ((s, k), thr) in enumerate(zip(job.checkpoints, job.thresholds,
+                                                               strict=True))
+              if s == index and thr is not None}
+    start = getattr(adapter, "start", None)
+    if checks and start is not None:
+        watch = watcher(checks, [Checkpoint(s, k) for s, k in job.checkpoints], done_rte, gt,
+                        cached, job.length_m)
+        traj = run_streaming(start, cached, schedule, after_frame=watch)
+    else:
+        traj = adapter.run(cached, schedule)
+    stamps_ns = np.array([sc.stamp_ns for sc in cached])
+    check_trajectory(traj, stamps_ns, f"{adapter.name} on {path}")
+    return traj
 
 
 def load_ground_truth(path: str | Path) -> NDArray[np.float64]:

@@ -41,6 +41,7 @@ from pipeline.odometry.base import Adapter, Params, with_space
 from pipeline.tuning.fingerprint import check_fingerprint, study_fingerprint
 from pipeline.tuning.job import TrialJob, TrialResult, one_line, resolve_adapter
 from pipeline.tuning.progress import StudyProgress
+from pipeline.tuning.pruning import PruningSection, StudyPruner
 from pipeline.tuning.table import JOINT, read_study, read_trials, trials_path, write_trials
 from pipeline.tuning.tpe import TpeSearch, trial_seed
 from pipeline.tuning.worker import run_trial
@@ -67,6 +68,8 @@ class TrialsSection(Section):
     startup_trials: random proposals before TPE (hyperopt's n_startup_jobs).
     retries: times a lost trial (process killed from outside, executor broken) is run again
     before the run gives up on it (a resume runs it again).
+    pruning: stop hopeless trials early (``pipeline.tuning.pruning``; ``percentile: null``
+    turns it off).
     space: search ranges that replace the adapter's built-in ones, by parameter name
     (``{resolution: {low: 0.5, high: 8}}``; ``adaptune params ALGO`` lists them). The space a
     study used is stored with its trials table, where the later stages read it.
@@ -87,6 +90,7 @@ class TrialsSection(Section):
     split: str = "train"
     adapter_options: dict[str, Any] = Field(default_factory=dict)
     space: dict[str, SpaceRange] = Field(default_factory=dict)
+    pruning: PruningSection = Field(default_factory=lambda: PruningSection.model_validate({}))
 
     @field_validator("dask")
     @classmethod
@@ -117,6 +121,7 @@ class StudySummary:
     best_objective: float
     best_params: Params = field(default_factory=dict)
     trials_path: Path | None = None
+    pruned: int = 0
     lost: list[TrialResult] = field(default_factory=list)
 
 
@@ -207,7 +212,9 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
     if table.is_file():
         check_fingerprint(read_study(table), fingerprint, str(table))
     stored = [r for r in read_trials(table, space) if r.trial < settings.iterations]
-    done = {r.trial: r for r in stored if r.status != "lost"}
+    pruner = StudyPruner(study.sequences, settings.pruning, settings.length_m)
+    done = pruner.restore({r.trial: r for r in stored if r.status != "lost"}, str(out_dir),
+                          adapter.name)
     lost: dict[int, TrialResult] = {}
     proposed = {t: r.params for t, r in done.items()}
     todo = [t for t in range(settings.iterations) if t not in done]
@@ -227,7 +234,7 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
                 tid = todo.pop(0)
                 proposed[tid] = propose(search, tid, done, proposed, lag)
                 job = make_job(study, adapter, tid, trial_seed(seed, tid), proposed[tid],
-                               out_dir, settings)
+                               out_dir, settings, **pruner.job_fields(tid, done, lag))
                 in_flight[pool.submit(job)] = job
             if not in_flight:  # nothing can start: a trial before the next one was lost
                 break
@@ -265,7 +272,8 @@ def study_of(study: Study, adapter: Adapter, settings: TrialsSection, seed: int,
         space=adapter.space.to_json(), seed=seed, length_m=settings.length_m,
         penalty_pct=settings.penalty_pct, jump_limit_m=settings.jump_limit_m,
         time_limit_s=settings.time_limit_s, startup_trials=settings.startup_trials,
-        told_lag=told_lag(settings.workers), sequences=list(study.sequences), stored=stored)
+        told_lag=told_lag(settings.workers), pruning=settings.pruning.model_dump(),
+        sequences=list(study.sequences), stored=stored)
 
 
 def told_lag(workers: int) -> int:
@@ -290,14 +298,14 @@ def propose(search: TpeSearch, tid: int, done: dict[int, TrialResult],
 
 
 def make_job(study: Study, adapter: Adapter, tid: int, seed: int, params: Params, out_dir: Path,
-             settings: TrialsSection) -> TrialJob:
-    """The picklable job of one trial."""
+             settings: TrialsSection, **pruning: Any) -> TrialJob:
+    """The picklable job of one trial (``pruning``: its checkpoints and thresholds)."""
     return TrialJob(adapter=settings.algorithm, algorithm=adapter.name, sequences=study.sequences,
                     trial=tid, seed=seed, params=dict(params), out_dir=str(out_dir),
                     length_m=settings.length_m, penalty_pct=settings.penalty_pct,
                     jump_limit_m=settings.jump_limit_m, time_limit_s=settings.time_limit_s,
                     adapter_options=dict(settings.adapter_options),
-                    space=adapter.space.to_json() if settings.space else None)
+                    space=adapter.space.to_json() if settings.space else None, **pruning)
 
 
 def summarize(algorithm: str, sequence: str, done: dict[int, TrialResult], ran: int,
@@ -305,8 +313,10 @@ def summarize(algorithm: str, sequence: str, done: dict[int, TrialResult], ran: 
     """Counts and the best trial (lowest objective among ok trials; the baseline if none is ok)."""
     ok = [r for r in done.values() if r.status == "ok"]
     best = min(ok or done.values() or [_NO_TRIAL], key=lambda r: (r.objective, r.trial))
-    return StudySummary(algorithm, sequence, len(done), len(done) - len(ok), ran, best.trial,
-                        best.objective if ok else math.nan, dict(best.params), table)
+    failed = sum(r.status == "failed" for r in done.values())
+    return StudySummary(algorithm, sequence, len(done), failed, ran, best.trial,
+                        best.objective if ok else math.nan, dict(best.params), table,
+                        pruned=sum(r.status == "pruned" for r in done.values()))
 
 
 _NO_TRIAL = TrialResult(-1, "lost", "", math.nan, 0.0, 0, {})

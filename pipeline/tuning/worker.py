@@ -81,8 +81,8 @@ class WorkerState:
     # -- running a trial -------------------------------------------------------------------
 
     def run(self, job: TrialJob) -> TrialResult:
-        """Run ``job``: an ok, failed (odometry) or lost (infrastructure) TrialResult, never an
-        exception."""
+        """Run ``job``: an ok, pruned, failed (odometry) or lost (infrastructure) TrialResult,
+        never an exception."""
         t0 = time.perf_counter()
         try:
             if job.time_limit_s is None:
@@ -97,8 +97,9 @@ class WorkerState:
             remove_trajectories(job)
             return TrialResult(job.trial, "failed", one_line(exc), job.penalty_pct,
                                time.perf_counter() - t0, job.seed, dict(job.params))
-        return TrialResult(job.trial, "ok", "", out["objective"], time.perf_counter() - t0,
-                           job.seed, dict(job.params), out["rte_pct"], out["odometry_s"])
+        return TrialResult(job.trial, out["status"], out["error"], out["objective"],
+                           time.perf_counter() - t0, job.seed, dict(job.params), out["rte_pct"],
+                           out["odometry_s"], tuple(out["curve"]))
 
     def evaluate(self, job: TrialJob) -> dict[str, Any]:
         """``evaluate_trial`` in this process, with the scan cache and the warmed adapter."""

@@ -34,7 +34,7 @@ def pool() -> Iterator[Executor]:
 
 
 def settings(**kw: object) -> TrialsSection:
-    """Small, fast settings for the drift adapter."""
+    """Small, fast settings for the drift adapter (no pruning unless asked for)."""
     base: dict[str, object] = dict(
         algorithm="tuning_adapters:drift",
         iterations=6,
@@ -42,6 +42,7 @@ def settings(**kw: object) -> TrialsSection:
         startup_trials=3,
         length_m=5.0,
         time_limit_s=20.0,
+        pruning={"percentile": None},
     )
     base.update(kw)
     return TrialsSection(**base)

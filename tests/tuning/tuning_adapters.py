@@ -39,10 +39,23 @@ SPACE = ParameterSpace(
 
 
 class DriftAdapter:
-    """Dead reckoning on the ground-truth motion with a parameter-controlled drift."""
+    """Dead reckoning on the ground-truth motion with a parameter-controlled drift.
+
+    Streams too (``start``) once ``warm`` has seen the scans: it then finds each scan's ground
+    truth by its stamp (an odometry step gets points and a stamp only).
+    """
 
     name = "drift"
     space = SPACE
+
+    def __init__(self) -> None:
+        self.truth: dict[int, np.ndarray] = {}
+
+    def warm(self, scans: list[Scan]) -> None:
+        self.truth = {s.stamp_ns: s.T_world_lidar for s in scans if s.T_world_lidar is not None}
+
+    def start(self, params: dict[str, float]) -> DriftOdometry:
+        return DriftOdometry(self, self.space.validate(params))
 
     def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
         frames, stamps, poses = [], [], []
@@ -67,12 +80,32 @@ class DriftAdapter:
         return out
 
 
+class DriftOdometry:
+    """The streaming form of DriftAdapter (same poses, bitwise)."""
+
+    def __init__(self, adapter: DriftAdapter, params: dict[str, float]) -> None:
+        self.adapter, self.params = adapter, params
+        self.T = np.eye(4)
+        self.prev: np.ndarray | None = None
+
+    def set_params(self, params: dict[str, float]) -> None:
+        self.params = self.adapter.space.validate(params)
+
+    def step(self, points_lidar: np.ndarray, stamp_ns: int) -> np.ndarray:
+        gt = self.adapter.truth[int(stamp_ns)]
+        if self.prev is not None:
+            self.T = self.T @ DriftAdapter.step(inv_se3(self.prev) @ gt, self.params)
+        self.prev = gt
+        return self.T.copy()
+
+
 class FailingAdapter(DriftAdapter):
     """DriftAdapter that fails in ``mode`` whenever bias > ``threshold``."""
 
     name = "failing"
 
     def __init__(self, mode: str, threshold: float = 0.0, marker_dir: str = "") -> None:
+        super().__init__()
         self.mode = mode
         self.threshold = threshold
         self.marker_dir = marker_dir
