@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Mapping
+from collections.abc import Mapping, MutableMapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -104,12 +104,15 @@ def resolve_adapter(ref: str, options: Mapping[str, Any] | None = None,
 
 
 def evaluate_trial(job: TrialJob, adapter: Adapter,
-                   scans: Mapping[str, list[Scan]] | None = None) -> dict[str, Any]:
+                   scans: Mapping[str, list[Scan]] | None = None,
+                   truths: MutableMapping[str, NDArray[np.float64]] | None = None
+                   ) -> dict[str, Any]:
     """Run, check, score and write every sequence of ``job`` with ``adapter``; raises on any
     failure.
 
     ``scans``: sequences already decoded, by MCAP path (the worker's scan cache); the others
-    are read from their file. Returns {"status": "ok" | "pruned", "objective": mean RTE [%]
+    are read from their file. ``truths``: ground truth by path, read once and kept there.
+    Returns {"status": "ok" | "pruned", "objective": mean RTE [%]
     over sequences (a pruned trial: its value where it stopped), "rte_pct": {sequence: RTE},
     "odometry_s", "curve": values at the checkpoints, "error": why it was pruned}.
     ``pipeline.odometry.run_sequence`` checks frames, stamps, finiteness; ``check_jump`` jumps.
@@ -126,8 +129,11 @@ def evaluate_trial(job: TrialJob, adapter: Adapter,
     gts: list[NDArray[np.float64]] = []
     ests: list[NDArray[np.float64] | None] = []
     odometry_s = 0.0
+    truths = {} if truths is None else truths
     for index, (name, path) in enumerate(job.sequences):
-        gt = load_ground_truth(path)
+        if path not in truths:
+            truths[path] = load_ground_truth(path)
+        gt = truths[path]
         t0 = time.perf_counter()
         try:
             traj = _run(job, adapter, index, path, (scans or {}).get(path), gt, list(rte.values()))

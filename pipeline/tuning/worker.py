@@ -3,7 +3,8 @@
 A worker (a process-pool process, a Dask worker, or a trial server) runs many trials of the
 same study. It keeps:
 - the scan cache: the study's sequences decoded once (only these; skipped when they exceed
-  ``SCAN_CACHE_LIMIT_BYTES``), so reading the MCAPs is paid once, not once per trial;
+  ``SCAN_CACHE_LIMIT_BYTES``), so reading the MCAPs is paid once, not once per trial; and
+  their ground truth, read once;
 - the warmed adapter: one adapter instance per (adapter, options, sequences) on which the
   optional ``warm(scans)`` ran (``ndt`` keeps its downsampled source clouds there);
 - its idle trial servers (``pipeline.tuning.server``), one per concurrent caller, for trials
@@ -74,6 +75,7 @@ class WorkerState:
     def __init__(self, scan_cache_limit_bytes: int = SCAN_CACHE_LIMIT_BYTES) -> None:
         self.scan_cache_limit_bytes = scan_cache_limit_bytes
         self.scans: dict[str, list[Any]] = {}
+        self.truths: dict[str, Any] = {}  # ground truth by path, read once
         self.adapter: tuple[tuple[Any, ...], Adapter] | None = None
         self.idle: list[Any] = []  # TrialServer
         self._lock = threading.Lock()
@@ -104,7 +106,7 @@ class WorkerState:
     def evaluate(self, job: TrialJob) -> dict[str, Any]:
         """``evaluate_trial`` in this process, with the scan cache and the warmed adapter."""
         adapter = self.warm(job)
-        return evaluate_trial(job, adapter, self.scans)
+        return evaluate_trial(job, adapter, self.scans, self.truths)
 
     def outcome(self, job: TrialJob) -> tuple[str, Any]:
         """("ok", ``self.evaluate(job)``) or ("error", the exception in one line)."""
@@ -182,6 +184,8 @@ class WorkerState:
 
         for stale in set(self.scans) - set(paths):
             del self.scans[stale]
+        for stale in set(self.truths) - set(paths):
+            del self.truths[stale]
         if sum(decoded_bytes(p) for p in paths) > self.scan_cache_limit_bytes:
             log.info("scan cache: %s too large to keep decoded; every trial reads them", paths)
             self.scans.clear()
