@@ -1,5 +1,5 @@
 """Stop hopeless trials early: a percentile pruner over the running RTE (the idea of Optuna's
-``MedianPruner`` / ``PercentilePruner``, docs/design.md "Trials").
+``MedianPruner`` / ``PercentilePruner``; docs/design.md, "Stages").
 
 A study has *checkpoints*: ``checkpoints - 1`` evenly spaced frames of each of its sequences
 (a joint study also checks at the end of every sequence but the last). A trial's value at a
