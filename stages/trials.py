@@ -37,6 +37,9 @@ from stages.common import FILE, algorithm_option, dir_option, json_option, param
 @click.option(
     "--joint", is_flag=True, help="One study over all sequences (the 'fixed' parameters)."
 )
+@dir_option("--warm-start", "warm_start_dir", required=False,
+            help="With --joint and fixed.warm_start: the per-sequence trials output to start "
+                 "from (their best parameters first).")
 @params_option
 @json_option
 def trials(
@@ -52,6 +55,7 @@ def trials(
     length_m: float | None,
     time_limit_s: float | None,
     joint: bool,
+    warm_start_dir: Path | None,
     params_path: Path | None,
     as_json: bool,
 ) -> None:
@@ -59,13 +63,20 @@ def trials(
     from pipeline.config import BaseSection, load_section, validate_section
     from pipeline.errors import ConfigError
     from pipeline.sequence_index import read_index
-    from pipeline.tuning.smbo import FixedSection, TrialsSection, run_trials
+    from pipeline.tuning.smbo import FixedSection, TrialsSection, run_trials, study_adapter
+    from pipeline.tuning.table import best_params
 
     section = load_section(params_path, "trials", TrialsSection)
+    warm = False
     if joint:  # the `fixed` section overrides `trials` for the joint study
         fixed = load_section(params_path, "fixed", FixedSection)
+        warm = fixed.warm_start
         section = validate_section(TrialsSection, "trials", {
-            **section.model_dump(), **fixed.model_dump(exclude_none=True)})
+            **section.model_dump(), **fixed.model_dump(exclude_none=True,
+                                                       exclude={"warm_start"})})
+    elif warm_start_dir is not None:
+        raise ConfigError("--warm-start goes with --joint (a joint study starts from the "
+                          "per-sequence ones)")
     overrides = dict(
         algorithm=algorithm,
         iterations=iterations,
@@ -89,8 +100,14 @@ def trials(
         if sequence_dir is not None
         else list(sequence_paths)
     )
+    first: list[dict[str, float]] = []
+    if warm:
+        if warm_start_dir is None:
+            raise ConfigError("fixed.warm_start needs --warm-start DIR (the trials output)")
+        adapter = study_adapter(settings)
+        first = best_params(warm_start_dir, adapter.name, adapter.space)
     studies = []
-    for s in run_trials(paths, out_dir, settings, seed, joint=joint):
+    for s in run_trials(paths, out_dir, settings, seed, joint=joint, warm_start=first):
         studies.append(s)
         if not as_json:
             click.echo(f"{s.algorithm} {s.sequence}: {s.trials} trials ({s.ran} run now), "

@@ -102,10 +102,15 @@ class TrialsSection(Section):
 
 class FixedSection(Section):
     """params.yaml ``fixed``: what the joint study (the paper's "fixed" parameters) does
-    differently from ``trials``; null keeps the ``trials`` value."""
+    differently from ``trials``; null keeps the ``trials`` value.
+
+    warm_start: the joint study starts from what the per-sequence studies measured: after the
+    baseline, its first trials are their best parameters (one per sequence), not random ones.
+    """
 
     iterations: int | None = Field(None, ge=1)
     workers: int | None = Field(None, ge=1)
+    warm_start: bool = False
 
 
 @dataclass
@@ -136,10 +141,13 @@ class Study:
 def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settings: TrialsSection,
                seed: int, joint: bool = False, progress: bool = True,
                on_trial: Callable[[Study, TrialResult], None] | None = None,
-               executor: Executor | None = None) -> list[StudySummary]:
+               executor: Executor | None = None,
+               warm_start: Sequence[Params] = ()) -> list[StudySummary]:
     """Run the SMBO studies of ``sequence_paths`` into ``out_dir`` (docs/design.md, "Formats").
 
     ``executor``: run trials there instead of opening one from ``settings`` (left open).
+    ``warm_start``: parameters every study tries first, after its baseline (trials 1..n; e.g.
+    the per-sequence studies' best ones for the joint study: ``table.best_params``).
     ``on_trial(study, result)`` is called after each finished trial is saved.
     InfrastructureError when trials were lost beyond ``settings.retries`` (all others saved).
     """
@@ -154,7 +162,7 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
         check_shared(pool.executor, [p for s in studies for _, p in s.sequences], out_dir)
         for study in studies:
             summaries.append(run_study(study, adapter, pool, Path(out_dir), settings, seed,
-                                       progress, on_trial))
+                                       progress, on_trial, warm_start))
     lost = [(s, r) for s in summaries for r in s.lost]
     if lost:
         s, r = lost[0]
@@ -204,11 +212,14 @@ def check_scorable(path: str | Path, length_m: float) -> None:
 
 def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path,
               settings: TrialsSection, seed: int, progress: bool = True,
-              on_trial: Callable[[Study, TrialResult], None] | None = None) -> StudySummary:
+              on_trial: Callable[[Study, TrialResult], None] | None = None,
+              warm_start: Sequence[Params] = ()) -> StudySummary:
     """Run (or resume) one study until trials 0..iterations-1 are all finished."""
     space = adapter.space
     table = trials_path(out_dir, adapter.name, study.name)
-    fingerprint = study_of(study, adapter, settings, seed, stored=read_study(table))
+    first = [space.validate(p) for p in warm_start]
+    fingerprint = study_of(study, adapter, settings, seed, stored=read_study(table),
+                           warm_start=first)
     if table.is_file():
         check_fingerprint(read_study(table), fingerprint, str(table))
     stored = [r for r in read_trials(table, space) if r.trial < settings.iterations]
@@ -232,7 +243,8 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
             while (todo and not lost and len(in_flight) < settings.workers
                    and all(t in done for t in range(todo[0] - lag + 1))):
                 tid = todo.pop(0)
-                proposed[tid] = propose(search, tid, done, proposed, lag)
+                proposed[tid] = (first[tid - 1] if 0 < tid <= len(first)
+                                 else propose(search, tid, done, proposed, lag))
                 job = make_job(study, adapter, tid, trial_seed(seed, tid), proposed[tid],
                                out_dir, settings, **pruner.job_fields(tid, done, lag))
                 in_flight[pool.submit(job)] = job
@@ -265,7 +277,8 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
 
 
 def study_of(study: Study, adapter: Adapter, settings: TrialsSection, seed: int,
-             stored: dict[str, Any] | None = None) -> dict[str, Any]:
+             stored: dict[str, Any] | None = None, warm_start: Sequence[Params] = ()
+             ) -> dict[str, Any]:
     """The fingerprint of ``study`` run with ``settings`` (``pipeline.tuning.fingerprint``)."""
     return study_fingerprint(
         adapter=settings.algorithm, adapter_options=settings.adapter_options,
@@ -273,7 +286,8 @@ def study_of(study: Study, adapter: Adapter, settings: TrialsSection, seed: int,
         penalty_pct=settings.penalty_pct, jump_limit_m=settings.jump_limit_m,
         time_limit_s=settings.time_limit_s, startup_trials=settings.startup_trials,
         told_lag=told_lag(settings.workers), pruning=settings.pruning.model_dump(),
-        sequences=list(study.sequences), stored=stored)
+        warm_start=[dict(p) for p in warm_start], sequences=list(study.sequences),
+        stored=stored)
 
 
 def told_lag(workers: int) -> int:
