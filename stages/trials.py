@@ -111,7 +111,7 @@ def trials(
         studies.append(s)
         if not as_json:
             click.echo(f"{s.algorithm} {s.sequence}: {s.trials} trials ({s.ran} run now), "
-                       f"{s.failed} failed, best objective {s.best_objective:.4g} % "
+                       f"{s.failed} failed, {s.pruned} pruned, best objective {s.best_objective:.4g} % "
                        f"(trial {s.best_trial})", err=True)
     if as_json:
         click.echo(json.dumps([asdict(s) for s in studies], indent=1, default=str))
