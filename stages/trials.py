@@ -111,7 +111,8 @@ def trials(
         studies.append(s)
         if not as_json:
             click.echo(f"{s.algorithm} {s.sequence}: {s.trials} trials ({s.ran} run now), "
-                       f"{s.failed} failed, {s.pruned} pruned, best objective {s.best_objective:.4g} % "
-                       f"(trial {s.best_trial})", err=True)
+                       f"{s.failed} failed, {s.pruned} pruned, "
+                       f"best objective {s.best_objective:.4g} % (trial {s.best_trial})",
+                       err=True)
     if as_json:
         click.echo(json.dumps([asdict(s) for s in studies], indent=1, default=str))
