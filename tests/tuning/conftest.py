@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import Executor
 from pathlib import Path
 
@@ -46,3 +46,20 @@ def settings(**kw: object) -> TrialsSection:
     )
     base.update(kw)
     return TrialsSection(**base)
+
+
+class Interrupt(KeyboardInterrupt):
+    """Ctrl-C in the middle of a study (raised by an ``on_trial`` callback)."""
+
+
+def interrupt_after(n: int) -> Callable[[object, object], None]:
+    """An ``on_trial`` callback of ``run_trials`` that interrupts the run after its n-th
+    finished trial."""
+    seen: list[int] = []
+
+    def on_trial(study: object, result: object) -> None:
+        seen.append(result.trial)  # type: ignore[attr-defined]
+        if len(seen) == n:
+            raise Interrupt
+
+    return on_trial

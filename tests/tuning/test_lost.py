@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-from conftest import settings
+from conftest import Interrupt, settings
 
 from pipeline.errors import InfrastructureError
 from pipeline.tuning.smbo import run_trials
@@ -62,10 +62,6 @@ def test_a_broken_process_pool_is_replaced_and_its_trials_run_again(
     s = oom_once(tmp_path, iterations=2, time_limit_s=None)
     (summary,) = run_trials(sequences[:1], tmp_path / "k", s, seed=6, progress=False)
     assert rows(tmp_path / "k", "failing")["status"] == ["ok", "ok"] and summary.ran == 2
-
-
-class Interrupt(KeyboardInterrupt):
-    pass
 
 
 def test_a_resumed_parallel_study_proposes_what_an_uninterrupted_one_does(

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from conftest import settings
+from conftest import Interrupt, interrupt_after, settings
 
 from pipeline.evaluation.rte import mean_rte_pct
 from pipeline.sequence import SequenceReader
@@ -116,21 +116,10 @@ def test_hanging_adapter_is_killed_at_the_time_limit(
     assert summary.failed == sum(b > 0 for b in t["p_bias"])
 
 
-class Interrupt(KeyboardInterrupt):
-    pass
-
-
 def test_killed_run_resumes_to_exactly_n_trials(
     sequences: list[Path], pool: Executor, tmp_path: Path
 ) -> None:
     s = settings(iterations=7)
-    seen: list[int] = []
-
-    def kill_after_three(study: object, result: object) -> None:
-        seen.append(result.trial)  # type: ignore[attr-defined]
-        if len(seen) == 3:
-            raise Interrupt
-
     with pytest.raises(Interrupt):
         run_trials(
             sequences[:1],
@@ -138,11 +127,11 @@ def test_killed_run_resumes_to_exactly_n_trials(
             s,
             seed=5,
             progress=False,
-            on_trial=kill_after_three,
+            on_trial=interrupt_after(3),
             executor=pool,
         )
     assert table(tmp_path / "killed", "drift", "seq_a")["trial"] == [0, 1, 2]
-    seen.clear()
+    seen: list[int] = []
     (summary,) = run_trials(
         sequences[:1],
         tmp_path / "killed",
