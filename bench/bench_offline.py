@@ -5,7 +5,7 @@ Config: two simulated training worlds (cave, street), ``FRAMES`` HDL-32E frames 
 ``ITERATIONS`` trials per sequence and ``JOINT_ITERATIONS`` joint trials, 2 workers (a process
 pool), the toy's time limit and L = 25 m. "With the savings" is what params.yaml does by
 default: the pruner (``trials.pruning`` defaults) in both stages, and a joint study that starts
-from the per-sequence studies' best parameters (``fixed.warm_start``) with
+from the parameters the per-sequence studies predict best (``fixed.warm_start``) with
 ``fixed.iterations / trials.iterations`` of the trials' iterations. Reported per setting and
 stage: wall time, trials/s, odometry frames run and frames/s (the frames the trials actually
 ran, over the wall time), and the quality beside it (the best objective of every study). The
@@ -73,7 +73,7 @@ def stages(seqs: list[Path], out: Path, savings: bool, pool: object) -> dict[str
     """Run the trials and the joint study; their wall time, trials, frames run and quality."""
     from pipeline.config import load_section
     from pipeline.tuning.smbo import FixedSection, TrialsSection, run_trials, study_adapter
-    from pipeline.tuning.table import best_params
+    from pipeline.tuning.warm_start import warm_start_params
 
     defaults = Path(__file__).resolve().parents[1] / "params.yaml"
     trials = load_section(defaults, "trials", TrialsSection)
@@ -88,7 +88,8 @@ def stages(seqs: list[Path], out: Path, savings: bool, pool: object) -> dict[str
     for stage, joint, iterations in (("trials", False, ITERATIONS),
                                      ("fixed", True, joint_iterations)):
         s = settings.model_copy(update={"iterations": iterations})
-        first = (best_params(out / "trials", "ndt", study_adapter(s).space)
+        first = (warm_start_params(out / "trials", "ndt", study_adapter(s).space,
+                                   fixed.warm_start)
                  if joint and savings and fixed.warm_start else [])
         t0 = time.perf_counter()
         summaries = run_trials(seqs, out / stage, s, seed=0, joint=joint, progress=False,

@@ -39,7 +39,7 @@ from stages.common import FILE, algorithm_option, dir_option, json_option, param
 )
 @dir_option("--warm-start", "warm_start_dir", required=False,
             help="With --joint and fixed.warm_start: the per-sequence trials output to start "
-                 "from (their best parameters first).")
+                 "from (the parameters it predicts best for all sequences first).")
 @params_option
 @json_option
 def trials(
@@ -64,10 +64,10 @@ def trials(
     from pipeline.errors import ConfigError
     from pipeline.sequence_index import read_index
     from pipeline.tuning.smbo import FixedSection, TrialsSection, run_trials, study_adapter
-    from pipeline.tuning.table import best_params
+    from pipeline.tuning.warm_start import warm_start_params
 
     section = load_section(params_path, "trials", TrialsSection)
-    warm = False
+    warm = 0
     if joint:  # the `fixed` section overrides `trials` for the joint study
         fixed = load_section(params_path, "fixed", FixedSection)
         warm = fixed.warm_start
@@ -105,7 +105,7 @@ def trials(
         if warm_start_dir is None:
             raise ConfigError("fixed.warm_start needs --warm-start DIR (the trials output)")
         adapter = study_adapter(settings)
-        first = best_params(warm_start_dir, adapter.name, adapter.space)
+        first = warm_start_params(warm_start_dir, adapter.name, adapter.space, warm)
     studies = []
     for s in run_trials(paths, out_dir, settings, seed, joint=joint, warm_start=first):
         studies.append(s)

@@ -105,12 +105,13 @@ class FixedSection(Section):
     differently from ``trials``; null keeps the ``trials`` value.
 
     warm_start: the joint study starts from what the per-sequence studies measured: after the
-    baseline, its first trials are their best parameters (one per sequence), not random ones.
+    baseline, its first ``warm_start`` trials are the parameter sets they predict best for all
+    sequences together (``pipeline.tuning.warm_start``), not random ones; 0 = off.
     """
 
     iterations: int | None = Field(None, ge=1)
     workers: int | None = Field(None, ge=1)
-    warm_start: bool = False
+    warm_start: int = Field(0, ge=0)
 
 
 @dataclass
@@ -147,7 +148,7 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
 
     ``executor``: run trials there instead of opening one from ``settings`` (left open).
     ``warm_start``: parameters every study tries first, after its baseline (trials 1..n; e.g.
-    the per-sequence studies' best ones for the joint study: ``table.best_params``).
+    the predicted best ones for the joint study: ``warm_start.warm_start_params``).
     ``on_trial(study, result)`` is called after each finished trial is saved.
     InfrastructureError when trials were lost beyond ``settings.retries`` (all others saved).
     """

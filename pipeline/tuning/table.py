@@ -23,7 +23,7 @@ from pipeline.errors import InputError, SchemaError
 from pipeline.evaluation.trials import JOINT_SEQUENCE as JOINT
 from pipeline.evaluation.trials import trials_table_path as trials_path
 from pipeline.io_utils import atomic_path
-from pipeline.odometry.base import ParameterSpace, Params
+from pipeline.odometry.base import ParameterSpace
 from pipeline.tuning.job import TrialResult
 from schemas.arrow import check_schema_version, trials_schema
 
@@ -98,29 +98,6 @@ def read_space(out_dir: str | Path, algorithm: str) -> ParameterSpace:
         if space != first[1]:
             raise InputError(f"{table}: searched another parameter space than {first[0]}")
     return ParameterSpace.from_json(first[1], str(first[0]))
-
-
-def best_params(out_dir: str | Path, algorithm: str, space: ParameterSpace) -> list[Params]:
-    """The best ok trial's parameters of every per-sequence study of ``algorithm`` in the
-    trials folder ``out_dir`` (by sequence name; repeats dropped): what a joint study can start
-    from. InputError when there is none, or a study searched another parameter space."""
-    found = read_space(out_dir, algorithm)
-    if found.to_json() != space.to_json():
-        raise InputError(f"{out_dir}: its studies searched another parameter space than this "
-                         "one; a warm start needs the same")
-    out: list[Params] = []
-    folder = trials_path(out_dir, algorithm, JOINT).parent.parent
-    for table in sorted(folder.glob("sequence=*/trials.parquet")):
-        if table.parent.name == f"sequence={JOINT}":
-            continue
-        ok = [r for r in read_trials(table, space) if r.status == "ok"]
-        if ok:
-            best = min(ok, key=lambda r: (r.objective, r.trial)).params
-            if best not in out:
-                out.append(best)
-    if not out:
-        raise InputError(f"{out_dir}: no ok trial of {algorithm!r} to start from")
-    return out
 
 
 def read_trials(path: str | Path, space: ParameterSpace) -> list[TrialResult]:

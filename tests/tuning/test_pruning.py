@@ -11,7 +11,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from conftest import settings
+from conftest import Interrupt, interrupt_after, settings
 
 from pipeline.sequence import SequenceReader
 from pipeline.trajectory import read_trajectory
@@ -120,24 +120,13 @@ def test_the_rows_a_pruned_trial_earned_reach_the_results_database(
     assert all(ends[i] == 29 for i in set(ends) - set(pruned))
 
 
-class Interrupt(KeyboardInterrupt):
-    pass
-
-
 def test_a_resumed_study_prunes_as_an_uninterrupted_one(
         sequences: list[Path], pool: Executor, tmp_path: Path) -> None:
     """The curves of finished trials come back from their trajectories on resume."""
     s = settings(iterations=14, pruning=PRUNING)
-    seen: list[int] = []
-
-    def stop_after_nine(study: object, result: object) -> None:
-        seen.append(result.trial)  # type: ignore[attr-defined]
-        if len(seen) == 9:
-            raise Interrupt
-
     with pytest.raises(Interrupt):
         run_trials(sequences[:1], tmp_path / "k", s, seed=8, progress=False,
-                   on_trial=stop_after_nine, executor=pool)
+                   on_trial=interrupt_after(9), executor=pool)
     run_trials(sequences[:1], tmp_path / "k", s, seed=8, progress=False, executor=pool)
     run_trials(sequences[:1], tmp_path / "w", s, seed=8, progress=False, executor=pool)
     whole = table(tmp_path / "w")
