@@ -102,8 +102,8 @@ def test_sigkill_of_adaptune_trials_then_a_resume_loses_and_repeats_nothing(
     s = settings(algorithm="tuning_adapters:sleepy", workers=2, iterations=10, startup_trials=2)
     params = tmp_path / "params.yaml"
     params.write_text(json.dumps({"base": {"seed": 5, "length_m": s.length_m}, "trials": {
-        k: getattr(s, k) for k in ("algorithm", "iterations", "workers", "startup_trials",
-                                   "time_limit_s")}}))
+        **{k: getattr(s, k) for k in ("algorithm", "iterations", "workers", "startup_trials",
+                                      "time_limit_s")}, "pruning": s.pruning.model_dump()}}))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
         [str(Path(__file__).parent), *filter(None, [os.environ.get("PYTHONPATH")])])}
     table = trials_path(tmp_path / "k", "sleepy", "seq_a")

@@ -158,5 +158,5 @@ def test_first_try_without_params_file_and_json_summary(
     res = CliRunner().invoke(main, args)  # resumed: nothing to run; the summary on stderr
     assert res.exit_code == 0 and res.stdout == ""
     assert res.stderr.splitlines() == [
-        f"drift seq_a: 2 trials (0 run now), {study['failed']} failed, best objective "
-        f"{study['best_objective']:.4g} % (trial {study['best_trial']})"]
+        f"drift seq_a: 2 trials (0 run now), {study['failed']} failed, {study['pruned']} "
+        f"pruned, best objective {study['best_objective']:.4g} % (trial {study['best_trial']})"]
