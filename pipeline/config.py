@@ -26,8 +26,9 @@ class Section(BaseModel):
 
 class BaseSection(Section):
     """The shared ``base`` section: the seed; L, the RTE sub-trajectory length that the
-    ``trials``, ``rte`` and ``evaluate`` sections take from here (``FROM_BASE``); and the
-    sequence folder every stage after ``simulate`` / ``ingest`` reads (dvc.yaml ``${...}``)."""
+    ``trials``, ``rte``, ``evaluate`` and ``generalize`` sections take from here
+    (``FROM_BASE``); and the sequence folder every stage after ``simulate`` / ``ingest``
+    reads (dvc.yaml ``${...}``)."""
 
     seed: int = Field(0, ge=0)
     length_m: float = Field(25.0, gt=0)
@@ -38,6 +39,7 @@ FROM_BASE: dict[str, tuple[str, ...]] = {
     "trials": ("length_m",),
     "rte": ("length_m",),
     "evaluate": ("length_m",),
+    "generalize": ("length_m",),
 }
 """Keys that a section takes from ``base``: set once there (dvc.yaml lists ``base.length_m`` as
 a param of these stages, so ``dvc exp run -S base.length_m=100`` re-runs them); a section that

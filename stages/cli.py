@@ -48,6 +48,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "stages.evaluate:evaluate",
         "Baseline vs fixed vs adaptive: metrics, plots, report.",
     ),
+    "generalize": (
+        "stages.generalize:generalize",
+        "Baseline vs fixed vs adaptive on unseen worlds (dvc stage).",
+    ),
     "ingest-set": (
         "stages.ingest:ingest_set",
         "Ingest the KITTI data set of params.yaml (dvc stage).",

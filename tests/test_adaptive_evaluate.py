@@ -26,18 +26,20 @@ REPO = Path(__file__).resolve().parents[1]
 def test_every_section_of_the_repository_params_validates() -> None:
     from pipeline.descriptors.dataset import DescriptorsSection
     from pipeline.evaluation.store import RteSection
+    from pipeline.generalization.suite import GeneralizeSection
     from pipeline.report.evaluate import EvaluateSection
     from pipeline.surrogates.fit import SurrogateSection
 
     models = {"base": BaseSection, "simulate": SimulateSection, "ingest": IngestSection,
               "descriptors": DescriptorsSection, "trials": TrialsSection, "fixed": FixedSection,
-              "rte": RteSection, "surrogate": SurrogateSection, "evaluate": EvaluateSection}
+              "rte": RteSection, "surrogate": SurrogateSection, "evaluate": EvaluateSection,
+              "generalize": GeneralizeSection}
     params = yaml.safe_load((REPO / "params.yaml").read_text())
     assert set(params) == set(models)
     for name, model in models.items():
         load_section(REPO / "params.yaml", name, model)
-    # one L for trials, rte and evaluate: base.length_m, no copy in their sections
-    assert not any("length_m" in params[s] for s in ("trials", "rte", "evaluate"))
+    # one L for trials, rte, evaluate and generalize: base.length_m, no copy in their sections
+    assert not any("length_m" in params[s] for s in ("trials", "rte", "evaluate", "generalize"))
 
 
 def _params(tmp_path: Path, **sections: dict) -> Path:

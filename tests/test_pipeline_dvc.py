@@ -38,6 +38,8 @@ def tiny_params() -> dict[str, Any]:
     p["trials"].update(iterations=3, workers=1, startup_trials=2)
     p["fixed"].update(iterations=2)
     p["surrogate"].update(n_sobol=16, cv_max_frames=20)
+    p["generalize"].update(worlds=3, segments=[2, 2], segment_frames=[25, 25],
+                           sensors=["hdl32", "vlp16", "hdl64"], bootstrap=200, workers=2)
     return p
 
 
@@ -158,6 +160,40 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
         assert len(lines) == 61  # header + 60 frames
 
 
+def test_generalize_scores_every_world_of_the_suite(repro: tuple[Path, str]) -> None:
+    """The generalize stage: three unseen worlds (one per sensor), three settings each."""
+    from pipeline.generalization.summary import RATIOS
+    from pipeline.odometry.base import Schedule
+    from pipeline.trajectory import read_trajectory
+
+    root, log = repro
+    m = json.loads((root / "metrics/generalization.json").read_text())
+    assert (m["suite"], m["seed_root"], m["worlds"]) == ("test", 90217, 3)
+    worlds = m["per_world"]
+    assert [w["sensor"] for w in worlds.values()] == ["hdl32", "vlp16", "hdl64"]
+    for name, w in worlds.items():
+        assert len(w["segments"]) == 2 and w["frames"] == 50
+        r = w["rte_pct"]
+        assert all(v > 0 for v in r.values())
+        assert w["ratio"]["adaptive_vs_best"] == pytest.approx(
+            r["adaptive"] / min(r["baseline"], r["fixed"]))
+        for setting in ("baseline", "fixed"):
+            path = root / f"results/generalization/runs/{name}/{setting}.parquet"
+            assert len(read_trajectory(path)) == 50
+        assert len(Schedule.read(root / f"results/generalization/adaptive/{name}/"
+                                 "schedule.parquet")) == 50
+    assert not list((root / "results/generalization").rglob("*.mcap"))  # scratch removed
+    for ratio in RATIOS:
+        s = m["summary"][ratio]
+        lo, hi = s["median_interval"]
+        assert lo <= s["median"] <= hi and s["worst_world"] in worlds
+        assert s["worst"] == max(w["ratio"][ratio] for w in worlds.values())
+    rows = (root / "plots/generalization.csv").read_text().splitlines()
+    assert len(rows) == 4 and rows[0].startswith("world,segments,sensor,frames,")
+    assert (root / "report/generalization.png").read_bytes()[:4] == b"\x89PNG"
+    assert "on the test suite (3 worlds)" in log
+
+
 def test_second_repro_is_a_no_op(repro: tuple[Path, str]) -> None:
     root, _ = repro
     log = dvc(root, "repro")
@@ -180,7 +216,7 @@ def test_base_length_makes_the_stages_that_read_it_stale(repro: tuple[Path, str]
     changed = {stage: change["changed deps"]["params.yaml"] for stage, changes in status.items()
                for change in changes if "params.yaml" in change.get("changed deps", {})}
     assert changed == {stage: {"base.length_m": "modified"}
-                       for stage in ("trials", "fixed", "rte", "evaluate")}
+                       for stage in ("trials", "fixed", "rte", "evaluate", "generalize")}
 
 
 def test_metrics_and_plots_commands_read_the_outputs(repro: tuple[Path, str]) -> None:
@@ -194,7 +230,8 @@ def test_metrics_and_plots_commands_read_the_outputs(repro: tuple[Path, str]) ->
     for shown in ("plots/schedule/resolution.csv", "plots/schedule/keyframe_interval.csv",
                   "Per-start-frame RTE [%]", "Trajectories (top view)"):
         assert shown in html, shown
-    assert len(list((root / "dvc_plots" / "static").glob("*.png"))) == 5
+    assert "Unseen worlds, adaptive / min(baseline, fixed)" in html
+    assert len(list((root / "dvc_plots" / "static").glob("*.png"))) == 6
 
 
 def test_the_command_adapter_runs_the_whole_pipeline(

@@ -1,0 +1,91 @@
+"""The ``generalize`` stage's outputs: ``run_generalization`` reads like its table of contents.
+
+Take the fixed parameters from the joint SMBO, score baseline, fixed and adaptive on every
+world of the suite (``pipeline.generalization.run``), then write the metrics JSON, the plot
+data (one row per world) and the figure (RTE of every setting per world above, the ratio
+adaptive / min(baseline, fixed) per world below, with the issue's targets).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.generalization.run import SuiteInputs, WorldScore, run_suite
+from pipeline.generalization.suite import GeneralizeSection
+from pipeline.generalization.summary import plot_rows, suite_metrics
+from pipeline.io_utils import atomic_write_text
+
+TARGET_MEDIAN = 0.75
+TARGET_WORST = 1.05
+"""The issue's targets on the test worlds: median ratio adaptive / min(baseline, fixed) and
+worst world (drawn in the figure)."""
+
+
+@dataclass(frozen=True)
+class GeneralizationPaths:
+    """Inputs and outputs of the ``generalize`` stage (all from dvc.yaml)."""
+
+    model: Path  # model/ (the artifact)
+    fixed: Path  # results/fixed (joint SMBO)
+    runs: Path  # results/generalization: trajectories and schedules per world
+    metrics: Path  # metrics/generalization.json
+    plot_data: Path  # plots/generalization.csv
+    figure: Path  # report/generalization.png
+
+
+def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
+                       adapter_options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Score the suite ``section.suite``; write metrics, plot data and figure; return the
+    metrics."""
+    from pipeline.report.evaluate import best_fixed_params
+    from pipeline.report.report import _csv, json_safe
+
+    algorithm, fixed = best_fixed_params(paths.fixed)
+    inputs = SuiteInputs(paths.model, algorithm, fixed, dict(adapter_options or {}),
+                         section.length_m)
+    scores = run_suite(section, inputs, paths.runs)
+    result = suite_metrics(scores, section.suite, section.root, section.bootstrap, algorithm,
+                           section.length_m)
+    atomic_write_text(paths.metrics, json.dumps(json_safe(result), indent=2) + "\n")
+    atomic_write_text(paths.plot_data, _csv(plot_rows(scores)))
+    suite_figure(scores, result, paths.figure)
+    return result
+
+
+def suite_figure(scores: Sequence[WorldScore], metrics: Mapping[str, Any], out_png: Path) -> Path:
+    """RTE of every setting per world (top, log scale) and adaptive / min(baseline, fixed)
+    per world (bottom, log scale) with the median and the targets."""
+    from pipeline.report.evaluate import SETTINGS
+    from pipeline.report.figures import SETTING_COLOURS, _figure
+
+    x = np.arange(len(scores))
+    names = [f"{s.name}\n{'-'.join(lab[0] for lab in s.segments)} {s.sensor}" for s in scores]
+    best = metrics["summary"]["adaptive_vs_best"]
+    with _figure(out_png, 2, 1, (max(8.0, 0.7 * len(scores) + 2), 7), sharex=True) as (fig, ax):
+        for j, setting in enumerate(SETTINGS):
+            ax[0, 0].bar(x + (j - 1) * 0.27, [s.rte_pct[setting] for s in scores], 0.27,
+                         color=SETTING_COLOURS[setting], label=setting)
+        ax[0, 0].set_yscale("log")
+        ax[0, 0].set_ylabel(f"RTE over {metrics['length_m']:g} m [%]")
+        ax[0, 0].legend(fontsize=8)
+        ratio = [s.ratios()["adaptive_vs_best"] for s in scores]
+        ax[1, 0].bar(x, ratio, 0.6, color=["tab:green" if r < 1 else "tab:red" for r in ratio])
+        ax[1, 0].axhline(1.0, color="black", lw=0.8)
+        if best["median"] is not None:
+            ax[1, 0].axhline(best["median"], color="tab:blue", ls="-",
+                             label=f"median {best['median']:.2f}")
+        ax[1, 0].axhline(TARGET_MEDIAN, color="tab:blue", ls=":", label="target median")
+        ax[1, 0].axhline(TARGET_WORST, color="tab:red", ls=":", label="target worst")
+        ax[1, 0].set_yscale("log")
+        ax[1, 0].set_ylabel("adaptive / min(baseline, fixed)")
+        ax[1, 0].legend(fontsize=8)
+        ax[1, 0].set_xticks(x, names, fontsize=7)
+        fig.suptitle(f"{metrics['algorithm']} on the {metrics['suite']} suite "
+                     f"({metrics['worlds']} unseen worlds; c/o/s: cave/open/street)")
+    return out_png

@@ -1,0 +1,140 @@
+"""Baseline, fixed and adaptive on every world of a suite, with the pipeline's own code.
+
+For every world (``pipeline.generalization.suite``), ``score_world``
+1. simulates it (``pipeline.sim.simulate.simulate_sequence``) into a scratch MCAP;
+2. runs the model's selector and odometry on it (``pipeline.adaptive.run_one``, the ``adaptive``
+   stage's code);
+3. runs baseline and fixed and scores all three (``pipeline.report.evaluate.evaluate``, the
+   ``evaluate`` stage's code: per-start-frame RTE at L = ``length_m``);
+4. deletes the MCAP (hundreds of MB a world) and keeps the trajectories and the schedule:
+   ``<out>/adaptive/<world>/`` and ``<out>/runs/<world>/``.
+
+``run_suite`` does that for every world, ``workers`` worlds at a time (spawned processes), and
+writes ``<out>`` atomically.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+import multiprocessing
+import time
+from collections.abc import Mapping
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from pipeline.generalization.suite import GeneralizeSection, SuiteWorld, suite_worlds
+from pipeline.report.evaluate import SETTINGS
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class WorldScore:
+    """One world's result: mean per-start-frame RTE [%] of every setting, overall and per
+    environment label, the adaptive run's parameter changes and the wall time [s]."""
+
+    name: str
+    segments: tuple[str, ...]
+    sensor: str
+    frames: int
+    seed: int
+    rte_pct: dict[str, float]
+    rte_pct_per_label: dict[str, dict[str, float]]
+    parameter_changes: int
+    wall_time_s: float
+
+    @property
+    def best_fixed_setting(self) -> str:
+        """The better of baseline and fixed on this world."""
+        return min(("baseline", "fixed"), key=lambda s: self.rte_pct[s])
+
+    def ratios(self) -> dict[str, float]:
+        """adaptive / baseline, adaptive / fixed and adaptive / min(baseline, fixed)."""
+        a, b, f = (self.rte_pct[s] for s in SETTINGS[::-1])
+        return {"adaptive_vs_baseline": _ratio(a, b), "adaptive_vs_fixed": _ratio(a, f),
+                "adaptive_vs_best": _ratio(a, min(b, f))}
+
+    def to_json(self) -> dict[str, Any]:
+        return {**asdict(self), "segments": list(self.segments), "ratio": self.ratios()}
+
+
+def _ratio(a: float, b: float) -> float:
+    return a / b if b > 0 and math.isfinite(a) and math.isfinite(b) else math.nan
+
+
+@dataclass(frozen=True)
+class SuiteInputs:
+    """What every world is run with: the artifact, the joint study's fixed parameters (and
+    their algorithm), the adapter's untuned options, L [m]."""
+
+    model_dir: Path
+    algorithm: str
+    fixed_params: dict[str, float]
+    adapter_options: dict[str, Any]
+    length_m: float
+
+
+def run_suite(section: GeneralizeSection, inputs: SuiteInputs, out_dir: Path) -> list[WorldScore]:
+    """Score every world of ``section.suite`` (module docstring); ``out_dir`` is written
+    atomically (a failure leaves an existing one untouched)."""
+    from pipeline.io_utils import atomic_dir
+
+    worlds = suite_worlds(section)
+    log.info("suite %s: %d worlds (%d frames), %d workers", section.suite, len(worlds),
+             sum(w.spec.frames for w in worlds), section.workers)
+    with atomic_dir(out_dir) as tmp:
+        if section.workers == 1 or len(worlds) == 1:
+            return [_logged(score_world(w, inputs, tmp), i, len(worlds))
+                    for i, w in enumerate(worlds)]
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(min(section.workers, len(worlds)), mp_context=ctx) as pool:
+            futures = [pool.submit(score_world, w, inputs, tmp) for w in worlds]
+            return [_logged(f.result(), i, len(worlds)) for i, f in enumerate(futures)]
+
+
+def _logged(score: WorldScore, i: int, n: int) -> WorldScore:
+    r = score.rte_pct
+    log.info("[%d/%d] %s (%s, %s): baseline %.3f %%, fixed %.3f %%, adaptive %.3f %% "
+             "(x%.2f of the better), %.0f s", i + 1, n, score.name, "-".join(score.segments),
+             score.sensor, r["baseline"], r["fixed"], r["adaptive"],
+             score.ratios()["adaptive_vs_best"], score.wall_time_s)
+    return score
+
+
+def score_world(world: SuiteWorld, inputs: SuiteInputs, out_dir: Path) -> WorldScore:
+    """Simulate ``world``, run adaptive, baseline and fixed, score them (module docstring)."""
+    from pipeline.adaptive import run_one
+    from pipeline.report.evaluate import EvaluateSection, evaluate
+    from pipeline.sim.simulate import simulate_sequence
+
+    t0 = time.perf_counter()
+    scratch = out_dir / "worlds"
+    scratch.mkdir(parents=True, exist_ok=True)
+    path = scratch / f"{world.name}.mcap"
+    try:
+        simulate_sequence(world.spec, path, name=world.name)
+        run = run_one(_model(inputs.model_dir), path, out_dir / "adaptive" / world.name,
+                      inputs.adapter_options)
+        ev = evaluate([path], inputs.algorithm, inputs.fixed_params, out_dir / "adaptive",
+                      out_dir / "runs", EvaluateSection(length_m=inputs.length_m),
+                      inputs.adapter_options)
+    finally:
+        path.unlink(missing_ok=True)
+    return WorldScore(
+        world.name, world.spec.segments, world.spec.sensor, world.spec.frames, world.spec.seed,
+        {s: ev.score(s, world.name).rte_pct for s in SETTINGS},
+        {s: ev.score(s, world.name).per_label() for s in SETTINGS},
+        run.changes, time.perf_counter() - t0)
+
+
+@functools.lru_cache(maxsize=2)
+def _model(model_dir: Path) -> Any:
+    """The artifact, loaded once per process."""
+    from pipeline.runtime import load_model
+
+    return load_model(model_dir)
+

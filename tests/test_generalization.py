@@ -1,0 +1,92 @@
+"""The generalization suite: its worlds, its statistics, its params section.
+
+The stage itself runs through DVC on a tiny suite in tests/test_pipeline_dvc.py.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.config import validate_section
+from pipeline.errors import ConfigError
+from pipeline.generalization.suite import GeneralizeSection, suite_worlds, world_of
+from pipeline.generalization.summary import ratio_summary
+from pipeline.sim.raycast import Raycaster
+from pipeline.sim.simulate import SimSpec, label_ranges, make_world
+
+
+def test_world_i_depends_on_its_root_and_i_alone() -> None:
+    section = GeneralizeSection(worlds=6)
+    more = suite_worlds(section.model_copy(update={"worlds": 9}))
+    assert suite_worlds(section) == more[:6]
+    dev = suite_worlds(section.model_copy(update={"suite": "dev"}))
+    assert {w.spec.seed for w in dev}.isdisjoint(w.spec.seed for w in more)
+    assert [w.name for w in dev] == [f"dev_{i:02d}" for i in range(6)]
+
+
+def test_worlds_follow_the_section() -> None:
+    section = GeneralizeSection(worlds=40, segments=(2, 5), segment_frames=(100, 200))
+    worlds = suite_worlds(section)
+    for i, w in enumerate(worlds):
+        segs = w.spec.segments
+        assert 2 <= len(segs) <= 5 and set(segs) <= set(section.labels)
+        assert all(a != b for a, b in itertools.pairwise(segs))
+        assert w.spec.frames % len(segs) == 0 and 100 <= w.spec.frames // len(segs) <= 200
+        assert w.spec.sensor == section.sensors[i % len(section.sensors)]
+        w.spec.check()
+    assert {len(w.spec.segments) for w in worlds} == {2, 3, 4, 5}
+    assert any(len(set(w.spec.segments)) < len(w.spec.segments) for w in worlds)  # repeats
+    assert {w.spec.sensor for w in worlds} == {"hdl32", "vlp16", "hdl64"}
+
+
+def test_a_composite_repeats_a_segment() -> None:
+    """cave, street, cave: two tunnels, each scanned from inside, one continuous drive."""
+    spec = SimSpec("composite", 11, 240, segments=("cave", "street", "cave"))
+    world = make_world(spec)
+    ranges = label_ranges(world.poses.frame_labels)
+    assert [r.label for r in ranges] == ["cave", "street", "cave"]
+    caster = Raycaster(world.vertices, world.triangles, spec.sensor_model())
+    for r in ranges:
+        pts = caster.scan(world.poses.T_world_lidar[(r.start + r.end) // 2],
+                          np.random.default_rng(0))
+        side_up = (pts[:, 2] > 0.5) & (np.abs(pts[:, 1]) > np.abs(pts[:, 0]))
+        near = np.median(np.abs(pts[side_up, 1])) < 5.0  # walls and roof of a tunnel
+        assert near == (r.label == "cave"), r
+    step = np.linalg.norm(np.diff(world.poses.T_world_lidar[:, :3, 3], axis=0), axis=1)
+    assert step.max() < 1.0
+
+
+def test_ratio_summary() -> None:
+    names = ["a", "b", "c", "d", "e"]
+    s = ratio_summary(names, [0.5, 0.8, 1.2, 0.6, math.nan], 500, seed=1)
+    assert s["median"] == pytest.approx(0.7) and s["worlds"] == 4
+    assert (s["worst"], s["worst_world"], s["win_rate"]) == (1.2, "c", 0.75)
+    lo, hi = s["median_interval"]
+    assert 0.5 <= lo <= s["median"] <= hi <= 1.2
+    assert ratio_summary(names, [0.5, 0.8, 1.2, 0.6, math.nan], 500, seed=1) == s
+
+
+@pytest.mark.parametrize(("data", "message"), [
+    ({"seed_roots": {"dev": 3, "test": 3}}, "generalize.seed_roots: the dev and test roots "
+                                            "must differ, got 3 for both"),
+    ({"seed_roots": {"test": 3}}, "needs exactly the suites dev, test, got ['test']"),
+    ({"segments": [3, 2]}, "generalize.segments: must be (min, max) with 1 <= min <= max, "
+                           "got [3, 2]"),
+    ({"sensors": ["hdl32", "os1"]}, "must be a non-empty list of hdl32, hdl64, vlp16"),
+    ({"labels": ["cave"]}, "must be at least two distinct labels"),
+    ({"suite": "train"}, "generalize.suite: Input should be 'dev' or 'test'"),
+])
+def test_bad_section_values_name_the_rule(data: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=None) as err:
+        validate_section(GeneralizeSection, "generalize", data)
+    assert message in str(err.value)
+
+
+def test_world_of_draws_from_the_named_suite() -> None:
+    section = GeneralizeSection()
+    assert world_of(section, "test", 3) == suite_worlds(section)[3]
+    assert world_of(section, "dev", 3).spec != world_of(section, "test", 3).spec
