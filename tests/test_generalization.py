@@ -60,6 +60,15 @@ def test_a_composite_repeats_a_segment() -> None:
     assert step.max() < 1.0
 
 
+def test_a_short_cave_between_streets_is_driven_to_the_last_frame() -> None:
+    """The speed smoothed across a short cave made this route too short for its frames (the
+    last segment is now lengthened until the drive fits)."""
+    world = make_world(SimSpec("composite", 10, 150, segments=("street", "cave", "street")))
+    assert world.frames == 150
+    assert [r.label for r in label_ranges(world.poses.frame_labels)] == [
+        "street", "cave", "street"]
+
+
 def test_ratio_summary() -> None:
     names = ["a", "b", "c", "d", "e"]
     s = ratio_summary(names, [0.5, 0.8, 1.2, 0.6, math.nan], 500, seed=1)

@@ -83,11 +83,7 @@ def build_world(
         ground: _Terrain | _kitti_ground = _kitti_ground(route)
     else:
         labels = list(segments) if kind == "composite" else [kind]
-        lengths, speeds = segment_lengths(labels, frames, rng, rate_hz)
-        route = generate_route(labels, lengths, rng)
-        ground = _Terrain(route, rng)
-        route.floor_z = _floor_profile(route, ground, rng)  # type: ignore[arg-type]
-        poses = sample_poses(route, speeds, frames, rate_hz, rng)
+        route, ground, poses = _drive(labels, frames, rate_hz, rng)
     mb = meshes.MeshBuilder()
     if "cave" in [route.labels[i] for i in np.unique(route.label)]:
         for a, b in route.runs("cave"):
@@ -98,6 +94,34 @@ def build_world(
         _dress_street(mb, route, ground, rng)
     vertices, triangles = mb.build()
     return World(kind, seed, vertices, triangles, poses, route)
+
+
+ROUTE_ATTEMPTS = 4
+
+
+def _drive(
+    labels: list[str], frames: int, rate_hz: float, rng: np.random.Generator
+) -> tuple[Route, _Terrain, Poses]:
+    """A route through the segments ``labels``, its ground and ``frames`` poses along it.
+
+    The segment lengths assume each label's own speed, but the speed is smoothed across label
+    boundaries, so a short slow segment (a cave) between fast ones (streets) is driven faster
+    than planned and the route can end before the last frame. Then the last segment is made
+    longer by a quarter of the route and everything is drawn again (from the same generator:
+    still one world per seed; worlds that fit at once are unchanged).
+    """
+    lengths, speeds = segment_lengths(labels, frames, rng, rate_hz)
+    for attempt in range(ROUTE_ATTEMPTS):
+        route = generate_route(labels, lengths, rng)
+        ground = _Terrain(route, rng)
+        route.floor_z = _floor_profile(route, ground, rng)
+        try:
+            return route, ground, sample_poses(route, speeds, frames, rate_hz, rng)
+        except ValueError:
+            if attempt == ROUTE_ATTEMPTS - 1:
+                raise
+            lengths[-1] += 0.25 * sum(lengths)
+    raise AssertionError("unreachable")  # pragma: no cover
 
 
 def check_world_args(
