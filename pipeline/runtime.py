@@ -20,17 +20,26 @@ Selection (x_t = argmin_x S(E_t, x), S = the artifact's surrogate), every ``peri
    scans look familiar again. ``null`` as novelty_distance disables it.
 4. The surrogate's query at E_t (``pipeline.surrogates.base.Search``): for the kNN the exact
    k nearest rows over every row, grouped by trial set, or a certified kd-tree search
-   (``pipeline.surrogates.knn_search``); for the forest a walk of its trees.
+   (``pipeline.surrogates.knn_search``); for the forest a walk of its trees. With ``window``
+   W > 1 the selector minimises the mean of S over the environments of the last W familiar
+   scans (the paper's "environment descriptor sequence"; a novel scan empties the window).
 5. argmin over the (certified) candidates (the artifact's candidate set: every distinct trial
    parameter vector plus a Sobol set), then a pattern search (``refine_iters`` rounds, step
-   halving, moves accepted only to certified points) around the best few.
-6. Hysteresis: the current parameters stay unless the new ones are predicted better by more
+   halving, moves accepted only to certified points that are better by more than TIE_TOL)
+   around the best few. Values within TIE_TOL are equal: the kNN surface is piecewise
+   constant, so many candidates share their value exactly (their neighbours are the same,
+   ``knn_search.canonical_mean``); among them the one nearest the parameters in force wins,
+   then the smallest parameters, whatever the candidates' order or the last bits of E_t.
+6. Anchor (``anchor_margin``, null: off): the fallback parameters (step 3) are kept unless the
+   best is predicted better than them by more than ``anchor_margin`` (target units).
+7. Hysteresis: the current parameters stay unless the new ones are predicted better by more
    than ``hysteresis`` (in target units: log1p(RTE %) for the default log target, so 0.05 is
    about 5 % relative).
 """
 
 from __future__ import annotations
 
+import collections
 import functools
 import math
 from dataclasses import dataclass, field
@@ -171,9 +180,14 @@ def load_model(path: str | Path, expected_algorithm: str | None = None) -> Model
                  surrogate, list(manifest["parameter_space"]))
 
 
+TIE_TOL = 1e-9
+"""Predicted values (target units) closer than this are equal for the selector (step 5)."""
+
+
 class Selector:
     """Online parameter selection from scans (module docstring). Settings default to the
-    manifest's ``selection`` block."""
+    manifest's ``selection`` block; ``window`` and ``anchor_margin`` default to the paper's
+    selection (one scan, no anchor) for artifacts that do not name them."""
 
     def __init__(
         self,
@@ -185,6 +199,8 @@ class Selector:
         refine_iters: int | None = None,
         n_starts: int = 3,
         grouped: bool = True,
+        window: int | None = None,
+        anchor_margin: float | None = None,
     ) -> None:
         sel = model.selection
         self.model = model
@@ -195,13 +211,20 @@ class Selector:
         )
         self.subset_rows = int(sel["subset_rows"] if subset_rows is None else subset_rows)
         self.refine_iters = int(sel["refine_iters"] if refine_iters is None else refine_iters)
+        self.window = int(sel.get("window", 1) if window is None else window)
+        margin = sel.get("anchor_margin") if anchor_margin is None else anchor_margin
+        self.anchor_margin = None if margin is None else float(margin)
         novelty = sel.get("novelty_distance")
         self.novelty_distance = math.inf if novelty is None else float(novelty)
         self.n_starts = n_starts
         self.candidates = np.unique(model.snap(model.candidates_u), axis=0)
         self.search = model.surrogate.search(
             self.candidates, model.x_scale, {"subset_rows": self.subset_rows, "grouped": grouped})
+        fallback = model.fallback()
+        self.anchor_u = model.to_unit(np.array([[fallback[n] for n in model.names]]))[0]
         self.current_u: NDArray[np.float64] | None = None
+        self.recent: collections.deque[tuple[Query, NDArray[np.float64]]] = collections.deque(
+            maxlen=max(1, self.window))
         self.last_stamp_ns: int | None = None
         self.last: dict[str, Any] = {}
         self.selections = 0
@@ -239,21 +262,25 @@ class Selector:
         env_d2 = environment_d2(self.model.env, e_s)
         nearest = float(np.sqrt(env_d2.min()))  # E-distance to the closest training frame
         if nearest > self.novelty_distance:  # an unfamiliar scan: the fallback (step 3)
-            fallback = self.model.fallback()
-            self.current_u = self.model.to_unit(
-                np.array([[fallback[n] for n in self.model.names]]))[0]
+            self.current_u = self.anchor_u.copy()
+            self.recent.clear()  # the window restarts with the next familiar scan
             self.last = {"kept": "novel", "nearest_environment": nearest}
-            return fallback
+            return self.model.fallback()
         nb = self.search.at(e_s, env_d2)
-        u_best, t_best, exact_frac = self._search(nb)
-        kept = False
+        self.recent.append((nb, nb.candidate_values(self.candidates)))
+        u_best, t_best, exact_frac = self._search()
+        kept = ""
+        if self.anchor_margin is not None and not np.array_equal(u_best, self.anchor_u):
+            t_anchor = float(self._predict(self.anchor_u[None])[0])
+            if not t_best < t_anchor - self.anchor_margin:
+                u_best, t_best, kept = self.anchor_u.copy(), t_anchor, "anchor"
         if self.current_u is not None and not np.array_equal(u_best, self.current_u):
-            t_cur = float(nb.predict(self.current_u[None]).t[0])
+            t_cur = float(self._predict(self.current_u[None])[0])
             if not t_best < t_cur - self.hysteresis:
-                u_best, t_best, kept = self.current_u, t_cur, True
+                u_best, t_best, kept = self.current_u, t_cur, "hysteresis"
         self.current_u = u_best
         self.last = {
-            "kept": "hysteresis" if kept else "",
+            "kept": kept,
             "predicted_t": t_best,
             "exact_fraction": exact_frac,
             "rows_searched": nb.rows_searched,
@@ -265,30 +292,47 @@ class Selector:
         """The surrogate's query at E_s (D,) (step 4)."""
         return self.search.at(e_s, environment_d2(self.model.env, e_s))
 
-    def _search(
-        self, nb: Query
-    ) -> tuple[NDArray[np.float64], float, float]:
-        t = nb.candidate_values(self.candidates)
+    def _predict(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
+        """S at unit points U (C, P) averaged over the window's environments (exact or not)."""
+        return np.mean([nb.predict(U).t for nb, _ in self.recent], axis=0)
+
+    def _certified(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``_predict`` where every value is certified exact, inf elsewhere: (C,)."""
+        return np.mean([nb.certified(U) for nb, _ in self.recent], axis=0)
+
+    def _order(self, t: NDArray[np.float64], U: NDArray[np.float64]) -> NDArray[np.intp]:
+        """Indices of U (C, P) by value t (C,), values within TIE_TOL of each other in one
+        rank, ties by distance to the parameters in force (the anchor before the first
+        selection), then by the parameters themselves: a rule that does not depend on the
+        order of the candidates or on rounding (step 5)."""
+        ref = self.anchor_u if self.current_u is None else self.current_u
+        finite = t[np.isfinite(t)]
+        rank = np.floor((t - (finite.min() if len(finite) else 0.0)) / TIE_TOL)
+        keys = [U[:, j] for j in reversed(range(U.shape[1]))]
+        return np.lexsort((*keys, ((U - ref) ** 2).sum(axis=1), rank))
+
+    def _search(self) -> tuple[NDArray[np.float64], float, float]:
+        t = np.mean([values for _, values in self.recent], axis=0)
         exact_frac = float(np.isfinite(t).mean())
         if exact_frac == 0.0:  # nothing certified: fall back to the approximate values
-            t = nb.predict(self.candidates).t
+            t = self._predict(self.candidates)
         n = min(self.n_starts, len(t))
-        starts = np.argsort(t, kind="stable")[:n]
+        starts = self._order(t, self.candidates)[:n]
         best_u, best_t = self.candidates[starts].copy(), t[starts].copy()
         step = 0.5 / max(2.0, len(self.candidates) ** (1.0 / self.candidates.shape[1]))
         p = self.candidates.shape[1]
         eye = np.vstack([np.eye(p), -np.eye(p)])
         for _ in range(self.refine_iters):
             probes = self.model.snap((best_u[:, None, :] + step * eye[None]).reshape(-1, p))
-            pt = nb.certified(probes).reshape(n, 2 * p)
+            pt = self._certified(probes).reshape(n, 2 * p)
             j = np.argmin(pt, axis=1)
-            better = pt[np.arange(n), j] < best_t
+            better = pt[np.arange(n), j] < best_t - TIE_TOL  # a real improvement, not rounding
             if better.any():
                 best_u[better] = probes.reshape(n, 2 * p, p)[better, j[better]]
                 best_t[better] = pt[better, j[better]]
             else:
                 step /= 2.0
-        i = int(np.argmin(best_t))
+        i = int(self._order(best_t, best_u)[0])
         return best_u[i], float(best_t[i]), exact_frac
 
     def schedule(self, reader: Any) -> Any:

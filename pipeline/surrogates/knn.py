@@ -15,7 +15,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.surrogates.base import Arrays, ArraySpec, Query, Regressor, TrainingSet
-from pipeline.surrogates.knn_search import GroupedNeighbourhood, Neighbourhood, TrialGroups
+from pipeline.surrogates.knn_search import (
+    GroupedNeighbourhood,
+    Neighbourhood,
+    TrialGroups,
+    canonical_mean,
+)
 
 if TYPE_CHECKING:
     from pipeline.surrogates.fit import SurrogateSection
@@ -60,7 +65,7 @@ class KnnSurrogate:
         joint = TrainingSet(self.env, self.env_offsets, self.rows_x, self.rows_t).features()
         k = min(self.k, len(self.rows_t))
         _, idx = cKDTree(joint).query(np.atleast_2d(features), k=k)
-        return np.asarray(self.rows_t[np.reshape(idx, (len(idx), k))].mean(axis=1))
+        return canonical_mean(self.rows_t[np.reshape(idx, (len(idx), k))])
 
     def arrays(self) -> Arrays:
         return {"env_offsets.npy": self.env_offsets, "rows_x.npy": self.rows_x,

@@ -29,6 +29,8 @@ def knn_mean(
     E-distances (ascending, inf-padded) and first rows of the group's k nearest frames; rows_t
     (M,) the targets. A row's squared joint distance is trial_d2 + frame_d2. Both lists are
     sorted, so a group is left as soon as its next pair cannot beat the k-th best so far.
+    The mean is ``knn_search.canonical_mean`` of the k targets (the same bits for the same
+    neighbours, whatever order they were found in).
     """
     n, n_groups, width = trial_d2.shape
     out = np.empty(n)
@@ -53,8 +55,5 @@ def knn_mean(
                         m -= 1
                     best_d[m] = d
                     best_r[m] = frame_row0[g, j] + trial_pos[c, g, a]
-        total = 0.0
-        for m in range(k):
-            total += rows_t[best_r[m]]
-        out[c] = total / k
+        out[c] = np.sort(rows_t[best_r]).sum() / k  # canonical: see canonical_mean
     return out

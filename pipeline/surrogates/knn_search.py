@@ -73,7 +73,7 @@ class Neighbourhood:
     def predict(self, U: NDArray[np.float64]) -> Prediction:
         """Prediction at unit points U (C, P)."""
         dist, idx = self._query(U, math.inf)
-        return Prediction(self.t[idx].mean(axis=1), dist[:, -1] ** 2 <= self.boundary2)
+        return Prediction(canonical_mean(self.t[idx]), dist[:, -1] ** 2 <= self.boundary2)
 
     def certified(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
         """``predict(U).t`` where it is certified exact, inf elsewhere: (C,).
@@ -83,7 +83,7 @@ class Neighbourhood:
         dist, idx = self._query(U, math.sqrt(self.boundary2) * (1.0 + 1e-9) + 1e-12)
         exact = dist[:, -1] ** 2 <= self.boundary2
         t = np.full(len(U), np.inf)
-        t[exact] = self.t[idx[exact]].mean(axis=1)
+        t[exact] = canonical_mean(self.t[idx[exact]])
         return t
 
     def candidate_values(self, candidates: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -230,7 +230,21 @@ def knn_mean_numpy(
     d2 = (trial_d2[:, :, a] + frame_d2[None, :, j]).reshape(n, -1)
     rows = (trial_pos[:, :, a] + frame_row0[None, :, j]).reshape(n, -1)
     pick = np.argpartition(d2, k - 1, axis=1)[:, :k]
-    return rows_t[np.take_along_axis(rows, pick, 1)].mean(axis=1)
+    return canonical_mean(rows_t[np.take_along_axis(rows, pick, 1)])
+
+
+def canonical_mean(t: F64) -> F64:
+    """Mean of every row of t (n, k), summed in ascending order: (n,).
+
+    A floating-point sum depends on its order, and the order in which a search finds the same k
+    neighbours differs from one query point to the next (and between the numba and numpy
+    searches). Candidates with the same neighbours then differed in their last bits, and the
+    argmin among such equals was decided by rounding noise, which any last-digit change of the
+    environment (another BLAS, another machine) could flip. Summed in ascending order, the same
+    neighbours give the same bits; the selector breaks such exact ties by a rule of its own
+    (pipeline/runtime.py, step 5).
+    """
+    return np.sort(t, axis=1).sum(axis=1) / t.shape[1]
 
 
 KnnMean = Callable[..., NDArray[np.float64]]
