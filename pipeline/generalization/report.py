@@ -47,7 +47,7 @@ def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
     from pipeline.report.report import _csv, json_safe
 
     algorithm, fixed = best_fixed_params(paths.fixed)
-    inputs = SuiteInputs(paths.model, algorithm, fixed, dict(adapter_options or {}),
+    inputs = SuiteInputs(paths.model, paths.fixed, algorithm, fixed, dict(adapter_options or {}),
                          section.length_m)
     scores = run_suite(section, inputs, paths.runs)
     result = suite_metrics(scores, section.suite, section.root, section.bootstrap, algorithm,

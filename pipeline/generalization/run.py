@@ -18,10 +18,7 @@ from __future__ import annotations
 import functools
 import logging
 import math
-import multiprocessing
 import time
-from collections.abc import Mapping
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -68,10 +65,12 @@ def _ratio(a: float, b: float) -> float:
 
 @dataclass(frozen=True)
 class SuiteInputs:
-    """What every world is run with: the artifact, the joint study's fixed parameters (and
-    their algorithm), the adapter's untuned options, L [m]."""
+    """What every world is run with: the artifact, the joint study's output (its stored
+    parameter space gives the baseline) and best parameters (and their algorithm), the
+    adapter's untuned options, L [m]."""
 
     model_dir: Path
+    fixed_dir: Path
     algorithm: str
     fixed_params: dict[str, float]
     adapter_options: dict[str, Any]
@@ -90,8 +89,9 @@ def run_suite(section: GeneralizeSection, inputs: SuiteInputs, out_dir: Path) ->
         if section.workers == 1 or len(worlds) == 1:
             return [_logged(score_world(w, inputs, tmp), i, len(worlds))
                     for i, w in enumerate(worlds)]
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(min(section.workers, len(worlds)), mp_context=ctx) as pool:
+        from pipeline.tuning.smbo import open_executor  # spawned workers that end with us
+
+        with open_executor(min(section.workers, len(worlds))) as pool:
             futures = [pool.submit(score_world, w, inputs, tmp) for w in worlds]
             return [_logged(f.result(), i, len(worlds)) for i, f in enumerate(futures)]
 
@@ -121,7 +121,7 @@ def score_world(world: SuiteWorld, inputs: SuiteInputs, out_dir: Path) -> WorldS
                       inputs.adapter_options)
         ev = evaluate([path], inputs.algorithm, inputs.fixed_params, out_dir / "adaptive",
                       out_dir / "runs", EvaluateSection(length_m=inputs.length_m),
-                      inputs.adapter_options)
+                      inputs.adapter_options, inputs.fixed_dir)
     finally:
         path.unlink(missing_ok=True)
     return WorldScore(
