@@ -151,6 +151,8 @@ COMMON_FILES: dict[str, ArraySpec] = {
 """The arrays of every artifact, whatever its surrogate (which adds its ``files``)."""
 MAX_MANIFEST_BYTES = 64 << 20
 MAX_REFINE_ITERS = 64
+MAX_WINDOW = 60
+"""The most scans a selection may average over (selection.window)."""
 
 
 def read_manifest(path: Path) -> dict[str, Any]:
@@ -275,6 +277,10 @@ def _validate_selection(sel: Any, space: list[dict[str, Any]]) -> None:
     _integer(sel.get("refine_iters"), "selection.refine_iters", 0, MAX_REFINE_ITERS)
     if sel.get("novelty_distance") is not None:
         _number(sel["novelty_distance"], "selection.novelty_distance", 0.0)
+    if sel.get("window") is not None:
+        _integer(sel["window"], "selection.window", 1, MAX_WINDOW)
+    if sel.get("anchor_margin") is not None:
+        _number(sel["anchor_margin"], "selection.anchor_margin", 0.0)
     chosen = sel.get("novelty_fallback_params")
     if chosen is None:
         return

@@ -64,6 +64,8 @@ class SurrogateSection(Section):
     min_scan_points: int = Field(1000, ge=0)
     subset_rows: int = Field(4096, ge=1)
     refine_iters: int = Field(4, ge=0)
+    window: int = Field(1, ge=1, le=60)
+    anchor_margin: float | None = Field(None, ge=0)
     novelty_quantile: float | None = Field(1.0, gt=0, le=1)
     novelty_fallback: Literal["defaults", "fixed", "auto"] = "auto"
     forest: ForestSection = ForestSection.model_validate({})
@@ -85,6 +87,8 @@ class SurrogateSection(Section):
             "min_scan_points": self.min_scan_points,
             "subset_rows": self.subset_rows,
             "refine_iters": self.refine_iters,
+            "window": self.window,
+            "anchor_margin": self.anchor_margin,
         }
 
 
