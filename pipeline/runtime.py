@@ -265,7 +265,9 @@ class Selector:
             self.current_u = self.anchor_u.copy()
             self.recent.clear()  # the window restarts with the next familiar scan
             self.last = {"kept": "novel", "nearest_environment": nearest}
-            return self.model.fallback()
+            return self.current  # the fallback as held: params_of(anchor_u), not the manifest's
+            # own floats (7.774158360578929 comes back as ...928), or every novel selection
+            # would be followed by a last-bit parameter change on the next frame
         nb = self.search.at(e_s, env_d2)
         self.recent.append((nb, nb.candidate_values(self.candidates)))
         u_best, t_best, exact_frac = self._search()

@@ -291,6 +291,16 @@ def test_unfamiliar_scans_get_the_fallback(tmp_path: Path, kitti_root: Path) -> 
                      hysteresis=0.0)
     assert fixed.select_environment(far) == chosen and fixed.last["kept"] == "novel"
     assert fixed.select_environment(familiar) == first
+    # fallback values that do not survive the unit-cube round trip bit for bit (the base NDT
+    # artifact's fixed parameters): what a novel scan returns is what is then held
+    odd = {"resolution": 2.1933988413775443, "keyframe_interval": 7.774158360578929}
+    selection = {**selection, "novelty_fallback_params": odd}
+    held = Selector(load_model(build_model(tmp_path / "odd", kitti_root, selection=selection)),
+                    hysteresis=0.0)
+    assert held.model.params_of(held.anchor_u) != odd  # the case at hand
+    got = held.select_environment(far)
+    assert got == held.current and got == pytest.approx(odd, rel=1e-15)
+    assert held.select_environment(far) == got
     # without a novelty distance (null in the manifest) the surrogate always decides
     off = load_model(build_model(tmp_path / "off", kitti_root,
                                  settings=SurrogateSection(n_sobol=256, cv_max_frames=5,
