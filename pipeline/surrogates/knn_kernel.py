@@ -55,5 +55,9 @@ def knn_mean(
                         m -= 1
                     best_d[m] = d
                     best_r[m] = frame_row0[g, j] + trial_pos[c, g, a]
-        out[c] = np.sort(rows_t[best_r]).sum() / k  # canonical: see canonical_mean
+        ordered = np.sort(rows_t[best_r])  # canonical: see knn_search.canonical_mean
+        total = 0.0
+        for m in range(k):  # left to right, as canonical_mean
+            total += ordered[m]
+        out[c] = total / k
     return out

@@ -242,9 +242,15 @@ def canonical_mean(t: F64) -> F64:
     argmin among such equals was decided by rounding noise, which any last-digit change of the
     environment (another BLAS, another machine) could flip. Summed in ascending order, the same
     neighbours give the same bits; the selector breaks such exact ties by a rule of its own
-    (pipeline/runtime.py, step 5).
+    (pipeline/runtime.py, step 5). The sum runs left to right, one column at a time, as the numba
+    kernel's loop does: numpy's own ``sum`` adds eight partial sums pairwise from eight values
+    on, which gave other last bits than the kernel for k = 20.
     """
-    return np.sort(t, axis=1).sum(axis=1) / t.shape[1]
+    ordered = np.sort(t, axis=1)
+    total = ordered[:, 0].copy()
+    for j in range(1, ordered.shape[1]):
+        total += ordered[:, j]
+    return total / t.shape[1]
 
 
 KnnMean = Callable[..., NDArray[np.float64]]
