@@ -114,7 +114,7 @@ def test_artifact_round_trip(tmp_path: Path, kitti_root: Path) -> None:
     model_dir = build_model(tmp_path / "model", kitti_root)
     manifest = json.loads((model_dir / "manifest.json").read_text())
     jsonschema.validate(manifest, json.loads(read_text("artifact.schema.json")))
-    assert manifest["algorithm"] == "ndt" and manifest["model"]["k"] == 5
+    assert manifest["algorithm"] == "ndt" and manifest["model"]["k"] == 20
     assert set(manifest["files"]) == {p.name for p in model_dir.iterdir()} - {"manifest.json"}
     assert manifest["provenance"]["git_revision"]
     assert not any(p.suffix in (".pkl", ".joblib") for p in model_dir.iterdir())

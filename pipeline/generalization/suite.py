@@ -38,7 +38,7 @@ class GeneralizeSection(Section):
 
     suite: Literal["dev", "test"] = "test"
     seed_roots: dict[str, int] = Field(default_factory=lambda: {"dev": 61403, "test": 90217})
-    worlds: int = Field(12, ge=1)
+    worlds: int = Field(6, ge=1)
     segments: tuple[int, int] = (2, 5)
     segment_frames: tuple[int, int] = (150, 300)
     labels: tuple[str, ...] = LABELS

@@ -52,7 +52,7 @@ class SurrogateSection(Section):
     the selection settings the artifact carries (pipeline/runtime.py documents them)."""
 
     model: str = "knn"
-    k: int = Field(5, ge=1)
+    k: int = Field(20, ge=1)
     w_e: float = Field(1.0, gt=0)
     w_x: float = Field(1.0, gt=0)
     target: Literal["log", "linear"] = "log"
@@ -64,7 +64,7 @@ class SurrogateSection(Section):
     min_scan_points: int = Field(1000, ge=0)
     subset_rows: int = Field(4096, ge=1)
     refine_iters: int = Field(4, ge=0)
-    window: int = Field(1, ge=1, le=60)
+    window: int = Field(5, ge=1, le=60)
     anchor_margin: float | None = Field(None, ge=0)
     novelty_quantile: float | None = Field(1.0, gt=0, le=1)
     novelty_fallback: Literal["defaults", "fixed", "auto"] = "auto"
