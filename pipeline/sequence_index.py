@@ -44,6 +44,15 @@ class SequenceIndex:
                              "which does not exist")
         return paths
 
+    def split_paths(self, splits: list[str]) -> dict[Path, str]:
+        """MCAP path -> split of every sequence of ``splits``, in order; a sequence listed by
+        two of them belongs to the first. InputError as ``paths``."""
+        out: dict[Path, str] = {}
+        for split in splits:
+            for path in self.paths(split):
+                out.setdefault(path, split)
+        return out
+
     def all_names(self) -> list[str]:
         """Every listed sequence once, in split order."""
         return list(dict.fromkeys(n for names in self.splits.values() for n in names))

@@ -1,4 +1,4 @@
-"""``adaptune adaptive``: adaptive runs on the validation sequences (dvc stage ``adaptive``).
+"""``adaptune adaptive``: adaptive runs on the evaluated sequences (dvc stage ``adaptive``).
 
 The model picks the parameters of every period from the scans, the model's odometry runs with
 that schedule; ``pipeline.adaptive`` documents the outputs. Untuned adapter settings come from
@@ -18,12 +18,13 @@ from stages.common import dir_option, params_option, sequences_option
 @params_option
 @dir_option("--model", "model_dir", help="The artifact (model/).")
 @sequences_option
-@click.option("--split", default=None, help="Split of index.json to run [evaluate.split].")
+@click.option("--split", "splits", multiple=True,
+              help="Split of index.json to run, repeatable [evaluate.splits].")
 @dir_option("--out", "out_dir",
             help="Output folder: <sequence>/{schedule,trajectory}.parquet and run.json.")
-def adaptive(params_path: Path | None, model_dir: Path, sequence_dir: Path,
-             split: str | None, out_dir: Path) -> None:
-    """Schedule every validation sequence with the model and run its odometry."""
+def adaptive(params_path: Path | None, model_dir: Path, sequence_dir: Path, splits: tuple[str, ...],
+             out_dir: Path) -> None:
+    """Schedule every sequence of the evaluated splits with the model and run its odometry."""
     from pipeline.adaptive import run_adaptive
     from pipeline.config import load_section
     from pipeline.report.evaluate import EvaluateSection
@@ -32,7 +33,7 @@ def adaptive(params_path: Path | None, model_dir: Path, sequence_dir: Path,
 
     trials = load_section(params_path, "trials", TrialsSection)
     section = load_section(params_path, "evaluate", EvaluateSection)
-    paths = read_index(sequence_dir).paths(split or section.split)
+    paths = list(read_index(sequence_dir).split_paths(list(splits) or section.splits))
     for run in run_adaptive(model_dir, paths, out_dir, trials.adapter_options):
         click.echo(f"{run.sequence}: {run.frames} frames, {run.selections} selections, "
                    f"{run.changes} parameter changes, {run.wall_time_s:.1f} s", err=True)

@@ -42,7 +42,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "adaptive": (
         "stages.adaptive:adaptive",
-        "Adaptive runs on the validation sequences (dvc stage).",
+        "Adaptive runs on the evaluated sequences (dvc stage).",
     ),
     "evaluate": (
         "stages.evaluate:evaluate",
@@ -59,6 +59,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "simulate-set": (
         "stages.simulate:simulate_set",
         "Simulate the toy data set of params.yaml (dvc stage).",
+    ),
+    "kitti-preset": (
+        "stages.kitti:kitti_preset",
+        "The `dvc exp run` arguments of the paper's KITTI protocol.",
+    ),
+    "kitti-table": (
+        "stages.kitti:kitti_table",
+        "The paper's Table II from the evaluate metrics of each algorithm.",
     ),
     "plot-world": (
         "stages.simulate:plot_world",

@@ -12,28 +12,19 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from pipeline.config import BaseSection, load_section
+from pipeline.config import load_section
 from pipeline.errors import ConfigError
-from pipeline.sim.dataset import SimulateSection
-from pipeline.sources.dataset import IngestSection
 from pipeline.tuning.job import TrialResult
-from pipeline.tuning.smbo import FixedSection, TrialsSection
+from pipeline.tuning.smbo import FixedSection
 from stages.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 def test_every_section_of_the_repository_params_validates() -> None:
-    from pipeline.descriptors.dataset import DescriptorsSection
-    from pipeline.evaluation.store import RteSection
-    from pipeline.generalization.suite import GeneralizeSection
-    from pipeline.report.evaluate import EvaluateSection
-    from pipeline.surrogates.fit import SurrogateSection
+    from pipeline.presets import section_models
 
-    models = {"base": BaseSection, "simulate": SimulateSection, "ingest": IngestSection,
-              "descriptors": DescriptorsSection, "trials": TrialsSection, "fixed": FixedSection,
-              "rte": RteSection, "surrogate": SurrogateSection, "evaluate": EvaluateSection,
-              "generalize": GeneralizeSection}
+    models = section_models()
     params = yaml.safe_load((REPO / "params.yaml").read_text())
     assert set(params) == set(models)
     for name, model in models.items():

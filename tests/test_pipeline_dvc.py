@@ -57,9 +57,9 @@ def git(cwd: Path, *args: str) -> str:
     return done.stdout
 
 
-def reproduce(root: Path, params: dict[str, Any]) -> tuple[Path, str]:
-    """A git + DVC project in ``root`` with the repository's dvc.yaml, .gitignore and ``params``,
-    reproduced and committed on branch ``main`` (what `git status` shows: nothing)."""
+def project(root: Path, params: dict[str, Any]) -> Path:
+    """A git + DVC project in ``root`` with the repository's dvc.yaml, .gitignore, code and
+    ``params``, on branch ``main`` (nothing run, nothing committed yet)."""
     for name in ("dvc.yaml", ".dvcignore", ".gitignore"):
         shutil.copy(REPO / name, root / name)
     for code in ("pipeline", "schemas", "stages"):  # the stages' code dependencies
@@ -70,7 +70,13 @@ def reproduce(root: Path, params: dict[str, Any]) -> tuple[Path, str]:
     git(root, "config", "user.email", "tests@adaptune.invalid")
     dvc(root, "init", "-q")
     dvc(root, "config", "cache.type", "hardlink,symlink")  # experiments check out in no time
-    log = dvc(root, "repro")
+    return root
+
+
+def reproduce(root: Path, params: dict[str, Any]) -> tuple[Path, str]:
+    """``project`` in ``root`` with ``params``, reproduced and committed (what `git status`
+    shows: nothing)."""
+    log = dvc(project(root, params), "repro")
     git(root, "add", "-A")
     git(root, "commit", "-q", "-m", "tiny pipeline")
     return root, log

@@ -1,11 +1,14 @@
-"""Baseline vs fixed vs adaptive on the validation sequences (the paper's Table I).
+"""Baseline vs fixed vs adaptive on the evaluated splits (the paper's Tables I and II).
 
 ``evaluate`` runs the baseline (the adapter's defaults) and the fixed parameters (the best trial
 of the joint SMBO), reads the adaptive trajectory and schedule written by the ``adaptive``
 stage, and scores all three with the same per-start-frame RTE (``length_m``), overall and per
 environment label (a segment counts for the label of its start frame), plus the KITTI devkit
-metric with the devkit lengths that fit into the sequence. The overall figure of a setting is
-the mean over all segments of all validation sequences pooled.
+metric with the devkit lengths that fit into the sequence. Several splits can be evaluated
+(``evaluate.splits``, e.g. the training and the test sequences of the KITTI protocol): every
+figure is also given per split, the devkit one pooled over the split's segments as the devkit
+pools a benchmark. The headline figures (``rte_pct``, ``ratio``) are those of the first split
+listed, all its segments pooled.
 """
 
 from __future__ import annotations
@@ -21,11 +24,11 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from pipeline.config import Section
 from pipeline.errors import InputError
-from pipeline.evaluation.kitti import LENGTHS_M
+from pipeline.evaluation.kitti import LENGTHS_M, KittiSegments
 from pipeline.evaluation.rte import per_frame_rte
 from pipeline.odometry.base import Schedule
 from pipeline.sequence import SequenceInfo, SequenceReader
@@ -37,16 +40,25 @@ SETTINGS = ("baseline", "fixed", "adaptive")
 
 
 class EvaluateSection(Section):
-    """params.yaml ``evaluate`` (also read by the ``adaptive`` stage for its split).
+    """params.yaml ``evaluate`` (also read by the ``adaptive`` stage for its splits).
 
-    split: the sequences of index.json to evaluate on; length_m: RTE segment length [m] (the
-    trials' L); kitti_lengths_m: devkit lengths to try (those longer than a sequence are left
-    out, as the devkit does).
+    splits: the splits of index.json to evaluate on, the headline one first (e.g.
+    [validation, train] for the KITTI protocol's test and training sequences); length_m: RTE
+    segment length [m] (the trials' L); kitti_lengths_m: devkit lengths to try (those longer
+    than a sequence are left out, as the devkit does).
     """
 
-    split: str = "validation"
+    splits: list[str] = Field(default_factory=lambda: ["validation"], min_length=1)
     length_m: float = Field(25.0, gt=0)
     kitti_lengths_m: tuple[float, ...] = LENGTHS_M
+
+    @field_validator("splits")
+    @classmethod
+    def _distinct(cls, v: list[str]) -> list[str]:
+        twice = sorted({s for s in v if v.count(s) > 1})
+        if twice:
+            raise ValueError(f"splits must be distinct, {twice[0]!r} is listed twice")
+        return v
 
 
 @dataclass
@@ -74,39 +86,66 @@ class SettingScore:
 
 @dataclass
 class Evaluation:
-    """Scores of every setting on every validation sequence, plus what produced them."""
+    """Scores of every setting on every evaluated sequence, plus what produced them.
+
+    split_of: sequence name -> its split; kitti_segments: sequence -> setting -> its devkit
+    segments (pooled per split by ``kitti_split``)."""
 
     algorithm: str
     length_m: float
     fixed_params: dict[str, float]
     baseline_params: dict[str, float]
+    kitti_lengths_m: tuple[float, ...] = LENGTHS_M
     scores: list[SettingScore] = field(default_factory=list)
     schedules: dict[str, Schedule] = field(default_factory=dict)
     infos: dict[str, SequenceInfo] = field(default_factory=dict)
     ground_truth: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     kitti: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
+    split_of: dict[str, str] = field(default_factory=dict)
+    kitti_segments: dict[str, dict[str, KittiSegments]] = field(default_factory=dict)
 
     @property
     def sequences(self) -> list[str]:
         return list(self.infos)
 
+    @property
+    def splits(self) -> list[str]:
+        """The evaluated splits, in the order given (the headline one first)."""
+        return list(dict.fromkeys(self.split_of[n] for n in self.sequences))
+
+    def in_split(self, split: str | None) -> list[str]:
+        """The sequences of ``split`` (None: all)."""
+        return [n for n in self.sequences if split is None or self.split_of[n] == split]
+
     def score(self, setting: str, sequence: str) -> SettingScore:
         return next(s for s in self.scores if s.setting == setting and s.sequence == sequence)
 
-    def pooled(self, setting: str) -> NDArray[np.float64]:
-        """Per-start-frame RTE [%] of ``setting`` over all sequences, concatenated."""
-        return np.concatenate([s.t_err_pct for s in self.scores if s.setting == setting])
+    def _of(self, setting: str, split: str | None) -> list[SettingScore]:
+        names = set(self.in_split(split))
+        return [s for s in self.scores if s.setting == setting and s.sequence in names]
 
-    def overall(self, setting: str) -> float:
-        """Mean RTE [%] of ``setting`` over the segments of all sequences pooled."""
-        return _mean(self.pooled(setting))
+    def pooled(self, setting: str, split: str | None = None) -> NDArray[np.float64]:
+        """Per-start-frame RTE [%] of ``setting`` over the sequences of ``split`` (None: all),
+        concatenated."""
+        return np.concatenate([s.t_err_pct for s in self._of(setting, split)])
 
-    def overall_per_label(self, setting: str) -> dict[str, float]:
-        """Mean RTE [%] of ``setting`` per environment label, all sequences pooled."""
+    def overall(self, setting: str, split: str | None = None) -> float:
+        """Mean RTE [%] of ``setting`` over the segments of ``split`` (None: all) pooled."""
+        return _mean(self.pooled(setting, split))
+
+    def overall_per_label(self, setting: str, split: str | None = None) -> dict[str, float]:
+        """Mean RTE [%] of ``setting`` per environment label, ``split`` (None: all) pooled."""
         labels = np.concatenate([[lab or "" for lab in s.labels]
-                                 for s in self.scores if s.setting == setting])
-        errs = self.pooled(setting)
+                                 for s in self._of(setting, split)])
+        errs = self.pooled(setting, split)
         return {lab: _mean(errs[labels == lab]) for lab in dict.fromkeys(labels.tolist()) if lab}
+
+    def kitti_split(self, setting: str, split: str) -> dict[str, float]:
+        """The devkit metric of ``setting`` over every segment of the ``split`` sequences pooled
+        (as the devkit pools a benchmark): t_err [%], r_err [deg/100 m], segment count."""
+        seg = KittiSegments.concat([self.kitti_segments[n][setting]
+                                    for n in self.in_split(split)])
+        return _kitti_summary(seg)
 
 
 def _mean(values: NDArray[np.float64]) -> float:
@@ -135,12 +174,13 @@ def best_fixed_params(trials_dir: Path,
 def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, float],
              adaptive_dir: Path, out_dir: Path, settings: EvaluateSection,
              adapter_options: Mapping[str, object] | None = None,
-             fixed_dir: Path | None = None) -> Evaluation:
+             fixed_dir: Path | None = None,
+             split_of: Mapping[str, str] | None = None) -> Evaluation:
     """Run baseline and fixed, load adaptive, score all three on every sequence.
 
     ``fixed_dir``: the joint study's output, whose stored parameter space (its defaults: the
     baseline) is used; None: the adapter's built-in space.
-
+    split_of: sequence name -> split (default: every sequence in ``settings.splits[0]``).
     The baseline and fixed trajectories go to ``out_dir/<sequence>/<setting>.parquet``.
     """
     from pipeline.odometry import get_adapter
@@ -152,11 +192,12 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
     if fixed_dir is not None:
         adapter = with_space(adapter, read_space(fixed_dir, algorithm))
     result = Evaluation(algorithm, settings.length_m, adapter.space.validate(fixed_params),
-                        adapter.space.defaults())
+                        adapter.space.defaults(), settings.kitti_lengths_m)
     for path in sequences:
         name = path.stem
         gt, info = _ground_truth(path)
         result.infos[name], result.ground_truth[name] = info, gt
+        result.split_of[name] = (split_of or {}).get(name, settings.splits[0])
         labels = [info.label_of(i) for i in range(len(gt))]
         runs = {"baseline": _run_fixed(adapter, path, result.baseline_params, out_dir, "baseline"),
                 "fixed": _run_fixed(adapter, path, result.fixed_params, out_dir, "fixed"),
@@ -166,8 +207,10 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
             result.scores.append(SettingScore(setting, name, t_err, labels, wall, traj))
             log.info("%s %s: %.3f %% RTE (%.1f s)", name, setting, result.scores[-1].rte_pct, wall)
         result.schedules[name] = Schedule.read(adaptive_dir / name / "schedule.parquet")
-        result.kitti[name] = _kitti_scores(gt, {s: t for s, (t, _) in runs.items()},
-                                           settings.kitti_lengths_m)
+        result.kitti_segments[name] = _kitti_segments(
+            gt, {s: t for s, (t, _) in runs.items()}, settings.kitti_lengths_m)
+        result.kitti[name] = {s: _kitti_summary(seg)
+                              for s, seg in result.kitti_segments[name].items()}
     return result
 
 
@@ -205,18 +248,19 @@ def _read_adaptive(folder: Path, algorithm: str) -> tuple[Trajectory, float]:
     return read_trajectory(folder / "trajectory.parquet"), float(meta["wall_time_s"])
 
 
-def _kitti_scores(gt: NDArray[np.float64], trajectories: Mapping[str, Trajectory],
-                  lengths_m: tuple[float, ...]) -> dict[str, dict[str, float]]:
-    """Devkit t_err [%], r_err [deg/100 m] and segment count per setting (lengths that fit)."""
+def _kitti_segments(gt: NDArray[np.float64], trajectories: Mapping[str, Trajectory],
+                    lengths_m: tuple[float, ...]) -> dict[str, KittiSegments]:
+    """Devkit segments of every setting (the lengths that fit)."""
     from pipeline.evaluation.kitti import kitti_errors
 
-    out = {}
-    for setting, traj in trajectories.items():
-        seg = kitti_errors(gt, traj.T_world_lidar, lengths_m)
-        out[setting] = {"t_err_pct": seg.t_err_pct,
-                        "r_err_deg_per_100m": 100.0 * seg.r_err_deg_per_m,
-                        "segments": len(seg)}
-    return out
+    return {setting: kitti_errors(gt, traj.T_world_lidar, lengths_m)
+            for setting, traj in trajectories.items()}
+
+
+def _kitti_summary(seg: KittiSegments) -> dict[str, float]:
+    """Devkit t_err [%], r_err [deg/100 m] and segment count of pooled segments."""
+    return {"t_err_pct": seg.t_err_pct, "r_err_deg_per_100m": 100.0 * seg.r_err_deg_per_m,
+            "segments": len(seg)}
 
 
 # ------------------------------------------------------------------------------- metrics
@@ -236,18 +280,38 @@ def trials_summary(studies: Mapping[str, Path]) -> dict[str, dict[str, float]]:
     return out
 
 
+def _ratio(values: Mapping[str, float]) -> dict[str, float]:
+    return {"adaptive_vs_baseline": values["adaptive"] / values["baseline"],
+            "adaptive_vs_fixed": values["adaptive"] / values["fixed"]}
+
+
+def split_metrics(ev: Evaluation, split: str) -> dict[str, Any]:
+    """The figures of one split: its sequences, RTE [%] pooled (overall, per label), the
+    ratios, and the devkit metric pooled over the split's segments with its ratios."""
+    rte = {s: ev.overall(s, split) for s in SETTINGS}
+    kitti = {s: ev.kitti_split(s, split) for s in SETTINGS}
+    return {"sequences": ev.in_split(split), "rte_pct": rte, "ratio": _ratio(rte),
+            "rte_pct_per_label": {s: ev.overall_per_label(s, split) for s in SETTINGS},
+            "kitti": kitti,
+            "kitti_ratio": _ratio({s: k["t_err_pct"] for s, k in kitti.items()})}
+
+
 def metrics(ev: Evaluation, trials: Mapping[str, Mapping[str, float]]) -> dict[str, Any]:
-    """The JSON of ``dvc metrics show``: RTE per setting (overall, per label, per sequence),
-    ratios, KITTI metric, failed-trial counts and wall times."""
-    overall = {s: ev.overall(s) for s in SETTINGS}
+    """The JSON of ``dvc metrics show``: RTE per setting (headline split: overall, per label;
+    per split; per sequence), ratios, KITTI metric, failed-trial counts and wall times."""
+    splits = {split: split_metrics(ev, split) for split in ev.splits}
+    head = splits[ev.splits[0]]
     return {
         "algorithm": ev.algorithm,
         "length_m": ev.length_m,
-        "rte_pct": overall,
-        "ratio": {"adaptive_vs_baseline": overall["adaptive"] / overall["baseline"],
-                  "adaptive_vs_fixed": overall["adaptive"] / overall["fixed"]},
-        "rte_pct_per_label": {s: ev.overall_per_label(s) for s in SETTINGS},
+        "headline_split": ev.splits[0],
+        "kitti_lengths_m": list(ev.kitti_lengths_m),
+        "rte_pct": head["rte_pct"],
+        "ratio": head["ratio"],
+        "rte_pct_per_label": head["rte_pct_per_label"],
+        "splits": splits,
         "sequences": {name: {
+            "split": ev.split_of[name],
             "rte_pct": {s: ev.score(s, name).rte_pct for s in SETTINGS},
             "rte_pct_per_label": {s: ev.score(s, name).per_label() for s in SETTINGS},
             "kitti": ev.kitti[name],

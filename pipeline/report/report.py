@@ -29,6 +29,7 @@ from pipeline.report.evaluate import (
     metrics,
     trials_summary,
 )
+from pipeline.report.table2 import table2_json, table2_markdown
 
 
 @dataclass(frozen=True)
@@ -47,15 +48,15 @@ class EvaluationPaths:
 
 def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection,
                    adapter_options: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """Evaluate baseline, fixed and adaptive on the ``settings.split`` sequences; write
+    """Evaluate baseline, fixed and adaptive on the sequences of ``settings.splits``; write
     everything; return the metrics."""
     from pipeline.evaluation.trials import read_trials_tables
     from pipeline.sequence_index import read_index
 
     algorithm, fixed = best_fixed_params(paths.fixed)
-    sequences = read_index(paths.sequences).paths(settings.split)
-    ev = evaluate(sequences, algorithm, fixed, paths.adaptive, paths.runs, settings,
-                  adapter_options, paths.fixed)
+    split_of = read_index(paths.sequences).split_paths(settings.splits)
+    ev = evaluate(list(split_of), algorithm, fixed, paths.adaptive, paths.runs, settings,
+                  adapter_options, paths.fixed, {p.stem: split for p, split in split_of.items()})
     result = metrics(ev, trials_summary({"trials": paths.trials, "fixed": paths.fixed}))
     atomic_write_text(paths.metrics, json.dumps(json_safe(result), indent=2) + "\n")
     write_plot_data(ev, paths.plots)
@@ -157,20 +158,21 @@ def report_markdown(ev: Evaluation, m: Mapping[str, Any], pngs: Mapping[str, lis
     """report.md: the paper-style table, the parameters, trial counts and the figures."""
     labels = list(dict.fromkeys(lab for s in SETTINGS for lab in m["rte_pct_per_label"][s]))
     head = ["method", *labels, "overall"]
+    head_split = m["headline_split"]
     lines = [
         f"# adaptune: baseline vs fixed vs adaptive ({ev.algorithm})",
         "",
-        f"Validation sequences: {', '.join(ev.sequences)}. Mean translational RTE [%] of "
-        f"{ev.length_m:g} m sub-trajectories, one starting at every frame; a segment counts "
-        "for the environment of its start frame; all sequences pooled.",
+        f"Split {head_split!r}: {', '.join(ev.in_split(head_split))}. Mean translational RTE "
+        f"[%] of {ev.length_m:g} m sub-trajectories, one starting at every frame; a segment "
+        "counts for the environment of its start frame; all sequences of the split pooled.",
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),
     ]
     for s in SETTINGS:
         per = m["rte_pct_per_label"][s]
-        lines.append(f"| {s} | " + " | ".join(_fmt(per.get(lab)) for lab in labels)
-                     + f" | **{_fmt(m['rte_pct'][s])}** |")
+        cells = [s, *(_fmt(per.get(lab)) for lab in labels), f"**{_fmt(m['rte_pct'][s])}**"]
+        lines.append("| " + " | ".join(cells) + " |")
     r = m["ratio"]
     lines += [
         "",
@@ -182,6 +184,14 @@ def report_markdown(ev: Evaluation, m: Mapping[str, Any], pngs: Mapping[str, lis
         f"- fixed parameters (best of the joint SMBO): {_params(m['params']['fixed'])}",
         "- adaptive: chosen online every period from the newest scan (figures below)",
         "",
+        *_per_split(m),
+        "## KITTI devkit metric (the paper's Table II layout)",
+        "",
+        "t_err [%] of the devkit (segments of "
+        f"{', '.join(f'{x:g}' for x in ev.kitti_lengths_m)} m that fit, a start every 10 frames); "
+        "a split's average pools all its segments.",
+        "",
+        table2_markdown(table2_json([m])),
         "## Per sequence",
         "",
         "| sequence | setting | RTE [%] | KITTI t_err [%] | KITTI r_err [deg/100 m] | segments "
@@ -207,6 +217,20 @@ def report_markdown(ev: Evaluation, m: Mapping[str, Any], pngs: Mapping[str, lis
     for kind, files in pngs.items():
         lines += [f"![{captions[kind]}]({f.as_posix()})\n" for f in files]
     return "\n".join(lines) + "\n"
+
+
+def _per_split(m: Mapping[str, Any]) -> list[str]:
+    """The RTE table of every evaluated split (none when only one split is evaluated)."""
+    if len(m["splits"]) < 2:
+        return []
+    lines = ["## Per split", "", "| split | sequences | " + " | ".join(SETTINGS)
+             + " | adaptive / baseline | adaptive / fixed |", "|---|---|---|---|---|---|---|"]
+    for split, sm in m["splits"].items():
+        lines.append(f"| {split} | {', '.join(sm['sequences'])} | "
+                     + " | ".join(_fmt(sm["rte_pct"][s]) for s in SETTINGS)
+                     + f" | {_fmt(sm['ratio']['adaptive_vs_baseline'], 2)}"
+                     f" | {_fmt(sm['ratio']['adaptive_vs_fixed'], 2)} |")
+    return [*lines, ""]
 
 
 def json_safe(value: Any) -> Any:

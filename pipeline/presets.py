@@ -1,0 +1,136 @@
+"""Presets: the params.yaml values of a named protocol, as ``dvc exp run --set-param``s.
+
+``kitti_protocol`` is the paper's KITTI experiment (Koide et al. 2021, Table II): per-sequence
+SMBO on the training sequences 00-05, the joint SMBO over them, the surrogate from them, and
+baseline / fixed / adaptive scored with the KITTI devkit metric on the training AND the test
+sequences 06-10 (``evaluate.splits = [validation, train]``: the test set is the index's
+``validation`` split and the headline), L = 100 m, on the real KITTI odometry scans of a KITTI
+root (the ``ingest`` stage). Options size the run to a machine: a frame window of every
+sequence, a stride over the sequences, the SMBO budget.
+
+A preset never edits params.yaml itself: ``set_params`` lists ``section.key=value`` pairs
+(values as JSON, which YAML reads back unchanged) for ``dvc exp run --set-param``, which keeps
+params.yaml's comments and records the run as a DVC experiment.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, model_validator
+
+from pipeline.config import Section, section_data, validate_section
+from pipeline.errors import ConfigError
+
+KITTI_TRAIN = ("00", "01", "02", "03", "04", "05")
+KITTI_TEST = ("06", "07", "08", "09", "10")
+KITTI_LENGTH_M = 100.0
+
+
+class KittiProtocol(Section):
+    """The options of the KITTI protocol preset (module docstring).
+
+    source: ``real`` (``root`` = a KITTI odometry root, ROOT/sequences/NN/velodyne and
+    ROOT/poses/NN.txt);
+    train / test: sequence names; stride: every stride-th sequence of each list;
+    start / end: frame window of every sequence (KITTI frame numbers, end inclusive);
+    iterations / joint_iterations: SMBO budget per training sequence / of the joint study
+    (null keeps params.yaml's); length_m: L [m]; kitti_lengths_m: devkit lengths (null keeps
+    params.yaml's, 100..800 m).
+    """
+
+    source: Literal["real"] = "real"
+    root: str
+    train: list[str] = Field(default_factory=lambda: list(KITTI_TRAIN), min_length=1)
+    test: list[str] = Field(default_factory=lambda: list(KITTI_TEST), min_length=1)
+    stride: int = Field(1, ge=1)
+    start: int | None = Field(None, ge=0)
+    end: int | None = Field(None, ge=0)
+    algorithm: str | None = None
+    iterations: int | None = Field(None, ge=1)
+    joint_iterations: int | None = Field(None, ge=1)
+    length_m: float = Field(KITTI_LENGTH_M, gt=0)
+    kitti_lengths_m: list[float] | None = Field(None, min_length=1)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> KittiProtocol:
+        both = sorted(set(self.train) & set(self.test))
+        if both:
+            raise ValueError(f"sequence {both[0]!r} is in both train and test, got "
+                             f"(train={self.train}, test={self.test})")
+        if self.start is not None and self.end is not None and self.end < self.start:
+            raise ValueError(f"end must be >= start, got (start={self.start}, end={self.end})")
+        return self
+
+
+def kitti_protocol(protocol: KittiProtocol, params: Mapping[str, Any]) -> dict[str, Any]:
+    """The values ("section.key" -> value) that turn ``params`` (a params.yaml) into the KITTI
+    protocol. ConfigError when the result breaks a section's rules."""
+    train, test = protocol.train[:: protocol.stride], protocol.test[:: protocol.stride]
+    missing = [n for n in (*train, *test) if not (Path(protocol.root) / "sequences" / n).is_dir()]
+    if missing:
+        raise ConfigError(f"root: {Path(protocol.root) / 'sequences' / missing[0]} does not "
+                          f"exist (sequences {', '.join(missing)} missing)")
+    data: dict[str, Any] = {
+        "base.sequences": "data/kitti", "ingest.kitti_root": protocol.root,
+        "ingest.train": train, "ingest.validation": test,
+        "ingest.start": protocol.start, "ingest.end": protocol.end,
+        "base.length_m": protocol.length_m, "evaluate.splits": ["validation", "train"]}
+    if protocol.algorithm is not None:
+        data["trials.algorithm"] = protocol.algorithm
+    if protocol.iterations is not None:
+        data["trials.iterations"] = protocol.iterations
+        # hyperopt's 20 random start-up trials would be the whole of a small budget
+        startup = int(params.get("trials", {}).get("startup_trials", 20))
+        data["trials.startup_trials"] = min(startup, max(2, protocol.iterations // 4))
+    if protocol.joint_iterations is not None:
+        data["fixed.iterations"] = protocol.joint_iterations
+    if protocol.kitti_lengths_m is not None:
+        data["rte.kitti_lengths_m"] = protocol.kitti_lengths_m
+        data["evaluate.kitti_lengths_m"] = protocol.kitti_lengths_m
+    check(apply(params, data))
+    return data
+
+
+def apply(params: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of ``params`` with ``values`` ("section.key" -> value) set."""
+    out = json.loads(json.dumps(dict(params)))
+    for dotted, value in values.items():
+        section, key = dotted.split(".", 1)
+        out.setdefault(section, {})[key] = value
+    return out
+
+
+def check(params: Mapping[str, Any]) -> None:
+    """Validate every section of ``params`` that has a model; ConfigError names the value."""
+    for name, model in section_models().items():
+        if name in params:
+            validate_section(model, name, section_data(dict(params), name))
+
+
+def section_models() -> dict[str, type[Section]]:
+    """params.yaml section -> its model (the stages' sections)."""
+    from pipeline.config import BaseSection
+    from pipeline.descriptors.dataset import DescriptorsSection
+    from pipeline.evaluation.store import RteSection
+    from pipeline.generalization.suite import GeneralizeSection
+    from pipeline.report.evaluate import EvaluateSection
+    from pipeline.sim.dataset import SimulateSection
+    from pipeline.sources.dataset import IngestSection
+    from pipeline.surrogates.fit import SurrogateSection
+    from pipeline.tuning.smbo import FixedSection, TrialsSection
+
+    return {"base": BaseSection, "simulate": SimulateSection, "ingest": IngestSection,
+            "descriptors": DescriptorsSection,
+            "trials": TrialsSection, "fixed": FixedSection, "rte": RteSection,
+            "surrogate": SurrogateSection, "evaluate": EvaluateSection,
+            "generalize": GeneralizeSection}
+
+
+def set_params(values: Mapping[str, Any]) -> list[str]:
+    """``--set-param=section.key=<JSON>`` arguments of ``dvc exp run`` for ``values``."""
+    return [f"--set-param={k}={json.dumps(v, separators=(',', ':'))}" for k, v in values.items()]
+

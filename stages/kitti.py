@@ -1,0 +1,73 @@
+"""``adaptune kitti-preset`` and ``kitti-table``: the paper's KITTI protocol (Table II).
+
+``kitti-preset`` prints, one a line, the ``--set-param`` arguments of ``dvc exp run`` that turn
+params.yaml into the protocol (``pipeline.presets``); ``make kitti`` runs them. ``kitti-table``
+lays the ``evaluate`` metrics of one or more algorithms out as the paper's Table II.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from stages.common import DIR, FILE, algorithm_option, dir_option, params_option
+
+
+def _names(text: str | None) -> list[str] | None:
+    return None if text is None else [s.strip() for s in text.split(",") if s.strip()]
+
+
+@click.command("kitti-preset")
+@click.option("--root", required=True, type=DIR,
+              help="KITTI odometry root (ROOT/sequences/NN/velodyne, ROOT/poses/NN.txt).")
+@click.option("--train", default=None, help="Training sequences, comma-separated [00-05].")
+@click.option("--test", default=None, help="Test sequences, comma-separated [06-10].")
+@click.option("--stride", type=int, default=1, show_default=True,
+              help="Every stride-th sequence of the training and of the test list.")
+@click.option("--start", type=int, default=None, help="First frame of every sequence [0].")
+@click.option("--end", type=int, default=None,
+              help="Last frame of every sequence, INCLUSIVE [the last].")
+@algorithm_option("Odometry to tune [params.yaml's trials.algorithm].")
+@click.option("--iterations", type=int, default=None,
+              help="SMBO iterations per training sequence [params.yaml's].")
+@click.option("--joint-iterations", type=int, default=None,
+              help="SMBO iterations of the joint study [as --iterations].")
+@click.option("--length-m", type=float, default=100.0, show_default=True,
+              help="L, the RTE length of the SMBO objective [m].")
+@click.option("--kitti-lengths-m", default=None,
+              help="Devkit segment lengths [m], comma-separated [100,...,800].")
+@params_option
+def kitti_preset(root: Path, train: str | None, test: str | None, stride: int,
+                 start: int | None, end: int | None, algorithm: str | None,
+                 iterations: int | None, joint_iterations: int | None, length_m: float,
+                 kitti_lengths_m: str | None, params_path: Path) -> None:
+    """Print the `dvc exp run` arguments of the KITTI protocol, one a line.
+
+    \b
+    make kitti KITTI_ROOT=... runs them; by hand:
+      adaptune kitti-preset --root /data/kitti/dataset > kitti.args
+      xargs -a kitti.args -d '\\n' dvc exp run
+    """
+    from pipeline.config import read_params, validate_section
+    from pipeline.presets import KittiProtocol, kitti_protocol, set_params
+
+    raw = {"root": str(root), "train": _names(train), "test": _names(test), "stride": stride,
+           "start": start, "end": end, "algorithm": algorithm, "iterations": iterations,
+           "joint_iterations": joint_iterations, "length_m": length_m,
+           "kitti_lengths_m": _names(kitti_lengths_m)}
+    protocol = validate_section(KittiProtocol, "kitti-preset",
+                                {k: v for k, v in raw.items() if v is not None})
+    for arg in set_params(kitti_protocol(protocol, read_params(params_path))):
+        click.echo(arg)
+
+
+@click.command("kitti-table")
+@click.argument("metrics", nargs=-1, required=True, type=FILE)
+@dir_option("--out", help="Folder for table.md and table.json.")
+def kitti_table(metrics: tuple[Path, ...], out: Path) -> None:
+    """Lay the evaluate metrics JSON of every algorithm out as the paper's Table II."""
+    from pipeline.report.table2 import KITTI_SPLIT_TITLES, write_table2
+
+    table = write_table2(list(metrics), out, KITTI_SPLIT_TITLES)
+    click.echo(f"{out / 'table.md'}: {', '.join(table['algorithms'])}", err=True)

@@ -1,0 +1,137 @@
+"""The KITTI protocol preset (the paper's Table II) end to end through DVC, on real KITTI scans.
+
+What `make kitti` runs: `adaptune kitti-preset` prints the `dvc exp run --set-param`s, `dvc exp
+run` takes them (a git + DVC project), `adaptune kitti-table` lays the metrics out. Here on the
+10-frame slices of ../shared/data (01, 04 train; 06, 10 test), 3 + 2 trials, L = 4 m.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+import yaml
+from click.testing import CliRunner
+from test_pipeline_dvc import BIN, REPO, TINY_L_M, dvc, git, project, tiny_params
+
+from stages.cli import main
+
+pytestmark = pytest.mark.slow
+
+
+def _preset(*args: str) -> tuple[int, str]:
+    result = CliRunner().invoke(main, ["kitti-preset", *args])
+    return result.exit_code, result.output
+
+
+@pytest.fixture(scope="module")
+def protocol(kitti_root: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A git + DVC project on the tiny params, turned into the KITTI protocol and run."""
+    p = tiny_params()
+    p["simulate"].update(train={"cave": 1}, train_frames=10, validation_count=0)
+    p["descriptors"]["range_bins"] = 10  # the default width here
+    # searched ranges from params.yaml, wider than ndt's built-in [1, 10] m: every later stage
+    # must take them from the trials output (the baseline runs at 11 m)
+    p["trials"]["space"] = {"resolution": {"high": 12.0, "default": 11.0}}
+    root = project(tmp_path_factory.mktemp("kitti"), p)
+    git(root, "add", "-A")
+    git(root, "commit", "-qm", "tiny project")
+    args = subprocess.run(
+        [str(BIN / "adaptune"), "kitti-preset", "--root", str(kitti_root), "--train", "01,04",
+         "--test", "06,10", "--iterations", "3", "--joint-iterations", "2",
+         "--length-m", str(TINY_L_M), "--kitti-lengths-m", "2,4"],
+        cwd=root, check=True, capture_output=True, text=True).stdout.splitlines()
+    log = dvc(root, "exp", "run", *args)
+    assert "Running stage 'ingest'" in log
+    return root
+
+
+def test_the_preset_sets_the_protocol(protocol: Path, kitti_root: Path) -> None:
+    params = yaml.safe_load((protocol / "params.yaml").read_text())
+    assert params["base"] | {"seed": 0} == {"seed": 0, "length_m": TINY_L_M,
+                                            "sequences": "data/kitti"}
+    assert params["ingest"] == {"kitti_root": str(kitti_root), "train": ["01", "04"],
+                                "validation": ["06", "10"], "start": None, "end": None}
+    assert params["evaluate"]["splits"] == ["validation", "train"]
+    assert (params["trials"]["iterations"], params["trials"]["startup_trials"],
+            params["fixed"]["iterations"]) == (3, 2, 2)
+    assert params["rte"]["kitti_lengths_m"] == params["evaluate"]["kitti_lengths_m"] == [2, 4]
+    lock = yaml.safe_load((protocol / "dvc.lock").read_text())["stages"]
+    assert any(d["path"] == "data/kitti" for d in lock["trials"]["deps"])
+
+
+def test_train_and_test_sequences_are_scored(protocol: Path) -> None:
+    from pipeline.report.evaluate import SETTINGS
+    from pipeline.sequence import SequenceReader
+
+    for seq in ("01", "04", "06", "10"):
+        with SequenceReader(protocol / f"data/kitti/{seq}.mcap") as reader:
+            assert len(reader) == 10 and reader.info.sensor != "unknown"
+        assert (protocol / f"results/adaptive/{seq}/trajectory.parquet").is_file()
+    m = json.loads((protocol / "metrics/evaluation.json").read_text())
+    assert m["headline_split"] == "validation"
+    assert {s: v["sequences"] for s, v in m["splits"].items()} == {
+        "validation": ["06", "10"], "train": ["01", "04"]}
+    assert {n: s["split"] for n, s in m["sequences"].items()} == {
+        "06": "validation", "10": "validation", "01": "train", "04": "train"}
+    assert m["rte_pct"] == m["splits"]["validation"]["rte_pct"]
+    assert all(0 < v < 50 for v in m["rte_pct"].values())
+    assert m["params"]["baseline"]["resolution"] == 11.0
+    model = json.loads((protocol / "model/manifest.json").read_text())
+    (resolution,) = [s for s in model["parameter_space"] if s["name"] == "resolution"]
+    assert (resolution["high"], resolution["default"]) == (12.0, 11.0)
+    for split in m["splits"].values():  # the devkit pools the segments of the split
+        for s in SETTINGS:
+            per = [m["sequences"][n]["kitti"][s] for n in split["sequences"]]
+            n = sum(k["segments"] for k in per)
+            assert n == split["kitti"][s]["segments"] > 0
+            pooled = sum(k["t_err_pct"] * k["segments"] for k in per if k["segments"]) / n
+            assert split["kitti"][s]["t_err_pct"] == pytest.approx(pooled, rel=1e-12)
+    report = (protocol / "report/report.md").read_text()
+    assert "| ndt | baseline |" in report and "## Per split" in report
+
+
+def test_table2_lays_out_every_algorithm(protocol: Path, tmp_path: Path) -> None:
+    m = json.loads((protocol / "metrics/evaluation.json").read_text())
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({**m, "algorithm": "other"}))
+    code = CliRunner().invoke(main, ["kitti-table", str(protocol / "metrics/evaluation.json"),
+                                     str(other), "--out", str(tmp_path / "t")]).exit_code
+    assert code == 0
+    md = (tmp_path / "t/table.md").read_text().splitlines()
+    head = next(line for line in md if line.startswith("| algorithm"))
+    assert head == ("| algorithm | setting | 01 | 04 | training avg | 06 | 10 | test avg |")
+    assert [line.split("|")[1:3] for line in md if "| baseline |" in line] == [
+        [" ndt ", " baseline "], [" other ", " baseline "]]
+    table = json.loads((tmp_path / "t/table.json").read_text())
+    ndt = table["algorithms"]["ndt"]
+    assert ndt["averages"]["train"]["t_err_pct"]["fixed"] == pytest.approx(
+        m["splits"]["train"]["kitti"]["fixed"]["t_err_pct"])
+    assert ndt["sequences"]["06"]["t_err_pct"]["adaptive"] == pytest.approx(
+        m["sequences"]["06"]["kitti"]["adaptive"]["t_err_pct"])
+    # blocks of different protocols do not share a table
+    other.write_text(json.dumps({**m, "algorithm": "other", "length_m": 100.0}))
+    result = CliRunner().invoke(main, ["kitti-table", str(protocol / "metrics/evaluation.json"),
+                                       str(other), "--out", str(tmp_path / "u")])
+    assert result.exit_code == 1
+    assert result.output.strip() == (f"adaptune: error: metrics of 'other': L = 100.0 m, the "
+                                     f"others {TINY_L_M} m")
+    assert not (tmp_path / "u").exists()
+
+
+def test_preset_stride_and_bad_input(kitti_root: Path) -> None:
+    code, out = _preset("--root", str(kitti_root), "--train", "01,04", "--test", "06,10",
+                        "--stride", "2", "--params", str(REPO / "params.yaml"))
+    assert code == 0
+    assert '--set-param=ingest.train=["01"]' in out.splitlines()
+    assert '--set-param=ingest.validation=["06"]' in out.splitlines()
+    code, out = _preset("--root", str(kitti_root), "--params", str(REPO / "params.yaml"))
+    assert code == 1 and out.count("\n") == 1
+    assert out.startswith(f"adaptune: error: root: {kitti_root / 'sequences' / '00'} does not "
+                          "exist (sequences 00, 02, 03, 05, 07, 08, 09 missing)")
+    code, out = _preset("--root", str(kitti_root), "--train", "01", "--test", "01")
+    assert code == 1
+    assert out == ("adaptune: error: kitti-preset: sequence '01' is in both train and test, "
+                   "got (train=['01'], test=['01'])\n")
