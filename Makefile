@@ -31,17 +31,20 @@ repro: setup
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro
 
 # The paper's KITTI protocol (Table II): train 00-05, test 06-10, L = 100 m, the devkit metric.
-#   make kitti KITTI_ROOT=/data/kitti/dataset [KITTI_ALGORITHMS="gicp kiss_icp ndt"]
-#              [KITTI_OPTS="--start 0 --end 999 --stride 1 --iterations 64 --joint-iterations 64"]
+#   make kitti KITTI_ROOT=/data/kitti/dataset         real KITTI (a KITTI odometry root), or
+#   make kitti KITTI_SIMULATED=<folder of NN.txt>     simulated KITTI along the real trajectories
+#   [KITTI_ALGORITHMS="gicp kiss_icp ndt"] [KITTI_OPTS="--start 0 --end 999 --iterations 64"]
 # One `dvc exp run` per algorithm (adaptune kitti-preset prints its --set-params), then the
 # table of all of them: $(KITTI_OUT)/table.md and table.json.
 KITTI_ALGORITHMS ?= gicp
 KITTI_OUT ?= results/kitti
+KITTI_SOURCE = $(if $(KITTI_ROOT),--root "$(KITTI_ROOT)",--simulated "$(KITTI_SIMULATED)")
 kitti: setup
-	@test -n "$(KITTI_ROOT)" || { echo "make kitti: set KITTI_ROOT=<KITTI odometry root>" >&2; exit 1; }
+	@test -n "$(KITTI_ROOT)$(KITTI_SIMULATED)" || \
+	  { echo "make kitti: set KITTI_ROOT=<KITTI odometry root> or KITTI_SIMULATED=<folder>" >&2; exit 1; }
 	mkdir -p $(KITTI_OUT)/metrics
 	for a in $(KITTI_ALGORITHMS); do \
-	  $(BIN)/adaptune kitti-preset --root "$(KITTI_ROOT)" --algorithm $$a $(KITTI_OPTS) \
+	  $(BIN)/adaptune kitti-preset $(KITTI_SOURCE) --algorithm $$a $(KITTI_OPTS) \
 	    > $(KITTI_OUT)/$$a.args && \
 	  PATH="$(CURDIR)/$(BIN):$$PATH" xargs -a $(KITTI_OUT)/$$a.args -d '\n' $(BIN)/dvc exp run && \
 	  cp metrics/evaluation.json $(KITTI_OUT)/metrics/$$a.json || exit 1; \

@@ -32,7 +32,7 @@ class BaseSection(Section):
 
     seed: int = Field(0, ge=0)
     length_m: float = Field(25.0, gt=0)
-    sequences: Literal["data/sequences", "data/kitti"] = "data/sequences"
+    sequences: Literal["data/sequences", "data/kitti", "data/kitti_sim"] = "data/sequences"
 
 
 FROM_BASE: dict[str, tuple[str, ...]] = {

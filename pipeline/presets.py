@@ -4,9 +4,11 @@
 SMBO on the training sequences 00-05, the joint SMBO over them, the surrogate from them, and
 baseline / fixed / adaptive scored with the KITTI devkit metric on the training AND the test
 sequences 06-10 (``evaluate.splits = [validation, train]``: the test set is the index's
-``validation`` split and the headline), L = 100 m, on the real KITTI odometry scans of a KITTI
-root (the ``ingest`` stage). Options size the run to a machine: a frame window of every
-sequence, a stride over the sequences, the SMBO budget.
+``validation`` split and the headline), L = 100 m. Its data are the real KITTI odometry scans
+of a KITTI root (the ``ingest`` stage) or simulated KITTI: HDL-64E scans along the ground-truth
+trajectories (the ``simulate_kitti`` stage, pipeline/sim/kitti_world.py). Options size the run
+to a machine: a frame window of every sequence (or of single sequences, simulated KITTI), a
+stride over the sequences, the SMBO budget.
 
 A preset never edits params.yaml itself: ``set_params`` lists ``section.key=value`` pairs
 (values as JSON, which YAML reads back unchanged) for ``dvc exp run --set-param``, which keeps
@@ -34,21 +36,26 @@ class KittiProtocol(Section):
     """The options of the KITTI protocol preset (module docstring).
 
     source: ``real`` (``root`` = a KITTI odometry root, ROOT/sequences/NN/velodyne and
-    ROOT/poses/NN.txt);
+    ROOT/poses/NN.txt) or ``simulated`` (``root`` = a folder of ground-truth files NN.txt);
     train / test: sequence names; stride: every stride-th sequence of each list;
     start / end: frame window of every sequence (KITTI frame numbers, end inclusive);
+    windows: {NN: (start, end)} of single sequences (simulated KITTI only);
+    change_windows: a window of this many frames around the first change of environment of
+    every sequence (simulated KITTI only; ``pipeline.sim.kitti_world.change_window``);
     iterations / joint_iterations: SMBO budget per training sequence / of the joint study
     (null keeps params.yaml's); length_m: L [m]; kitti_lengths_m: devkit lengths (null keeps
     params.yaml's, 100..800 m).
     """
 
-    source: Literal["real"] = "real"
+    source: Literal["real", "simulated"] = "real"
     root: str
     train: list[str] = Field(default_factory=lambda: list(KITTI_TRAIN), min_length=1)
     test: list[str] = Field(default_factory=lambda: list(KITTI_TEST), min_length=1)
     stride: int = Field(1, ge=1)
     start: int | None = Field(None, ge=0)
     end: int | None = Field(None, ge=0)
+    windows: dict[str, tuple[int, int]] = Field(default_factory=dict)
+    change_windows: int | None = Field(None, ge=2)
     algorithm: str | None = None
     iterations: int | None = Field(None, ge=1)
     joint_iterations: int | None = Field(None, ge=1)
@@ -63,6 +70,10 @@ class KittiProtocol(Section):
                              f"(train={self.train}, test={self.test})")
         if self.start is not None and self.end is not None and self.end < self.start:
             raise ValueError(f"end must be >= start, got (start={self.start}, end={self.end})")
+        if (self.windows or self.change_windows) and self.source == "real":
+            raise ValueError(f"windows of single sequences need the simulated source, got "
+                             f"(source={self.source!r}, windows={self.windows}, "
+                             f"change_windows={self.change_windows})")
         return self
 
 
@@ -70,15 +81,18 @@ def kitti_protocol(protocol: KittiProtocol, params: Mapping[str, Any]) -> dict[s
     """The values ("section.key" -> value) that turn ``params`` (a params.yaml) into the KITTI
     protocol. ConfigError when the result breaks a section's rules."""
     train, test = protocol.train[:: protocol.stride], protocol.test[:: protocol.stride]
-    missing = [n for n in (*train, *test) if not (Path(protocol.root) / "sequences" / n).is_dir()]
-    if missing:
-        raise ConfigError(f"root: {Path(protocol.root) / 'sequences' / missing[0]} does not "
-                          f"exist (sequences {', '.join(missing)} missing)")
-    data: dict[str, Any] = {
-        "base.sequences": "data/kitti", "ingest.kitti_root": protocol.root,
-        "ingest.train": train, "ingest.validation": test,
-        "ingest.start": protocol.start, "ingest.end": protocol.end,
-        "base.length_m": protocol.length_m, "evaluate.splits": ["validation", "train"]}
+    _check_root(protocol, [*train, *test])
+    if protocol.source == "real":
+        data: dict[str, Any] = {
+            "base.sequences": "data/kitti", "ingest.kitti_root": protocol.root,
+            "ingest.train": train, "ingest.validation": test,
+            "ingest.start": protocol.start, "ingest.end": protocol.end}
+    else:
+        data = {"base.sequences": "data/kitti_sim", "simulate_kitti.trajectories": protocol.root,
+                "simulate_kitti.train": train, "simulate_kitti.validation": test,
+                "simulate_kitti.start": protocol.start, "simulate_kitti.end": protocol.end,
+                "simulate_kitti.windows": _windows(protocol, [*train, *test])}
+    data |= {"base.length_m": protocol.length_m, "evaluate.splits": ["validation", "train"]}
     if protocol.algorithm is not None:
         data["trials.algorithm"] = protocol.algorithm
     if protocol.iterations is not None:
@@ -93,6 +107,36 @@ def kitti_protocol(protocol: KittiProtocol, params: Mapping[str, Any]) -> dict[s
         data["evaluate.kitti_lengths_m"] = protocol.kitti_lengths_m
     check(apply(params, data))
     return data
+
+
+def _windows(protocol: KittiProtocol, names: list[str]) -> dict[str, list[int]]:
+    """The per-sequence windows of simulated KITTI: ``change_windows`` for every sequence
+    (from its ground-truth file's length), then the explicit ``windows``."""
+    from pipeline.sim.kitti_world import change_window
+
+    out: dict[str, list[int]] = {}
+    if protocol.change_windows is not None:
+        for name in names:
+            frames = _line_count(Path(protocol.root) / f"{name}.txt")
+            out[name] = list(change_window(name, frames, protocol.change_windows))
+    out |= {n: list(w) for n, w in protocol.windows.items() if n in names}
+    return out
+
+
+def _line_count(path: Path) -> int:
+    with path.open("rb") as f:
+        return sum(1 for line in f if line.strip())
+
+
+def _check_root(protocol: KittiProtocol, names: list[str]) -> None:
+    """ConfigError unless ``protocol.root`` holds every sequence of ``names``."""
+    root = Path(protocol.root)
+    where = {n: root / "sequences" / n if protocol.source == "real" else root / f"{n}.txt"
+             for n in names}
+    missing = [n for n, path in where.items() if not path.exists()]
+    if missing:
+        raise ConfigError(f"root: {where[missing[0]]} does not exist (sequences "
+                          f"{', '.join(missing)} missing)")
 
 
 def apply(params: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, Any]:
@@ -119,12 +163,13 @@ def section_models() -> dict[str, type[Section]]:
     from pipeline.generalization.suite import GeneralizeSection
     from pipeline.report.evaluate import EvaluateSection
     from pipeline.sim.dataset import SimulateSection
+    from pipeline.sim.kitti_dataset import SimulateKittiSection
     from pipeline.sources.dataset import IngestSection
     from pipeline.surrogates.fit import SurrogateSection
     from pipeline.tuning.smbo import FixedSection, TrialsSection
 
     return {"base": BaseSection, "simulate": SimulateSection, "ingest": IngestSection,
-            "descriptors": DescriptorsSection,
+            "simulate_kitti": SimulateKittiSection, "descriptors": DescriptorsSection,
             "trials": TrialsSection, "fixed": FixedSection, "rte": RteSection,
             "surrogate": SurrogateSection, "evaluate": EvaluateSection,
             "generalize": GeneralizeSection}

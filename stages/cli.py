@@ -68,6 +68,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "stages.kitti:kitti_table",
         "The paper's Table II from the evaluate metrics of each algorithm.",
     ),
+    "simulate-kitti-set": (
+        "stages.simulate:simulate_kitti_set",
+        "Simulate KITTI along its ground-truth trajectories (dvc stage).",
+    ),
     "plot-world": (
         "stages.simulate:plot_world",
         "Top-down PNG of a world, its trajectory and one scan.",

@@ -18,9 +18,22 @@ def _names(text: str | None) -> list[str] | None:
     return None if text is None else [s.strip() for s in text.split(",") if s.strip()]
 
 
+def _window(text: str) -> tuple[str, tuple[int, int]]:
+    """``NN=START:END`` -> (NN, (START, END)); ConfigError otherwise."""
+    from pipeline.errors import ConfigError
+
+    name, _, frames = text.partition("=")
+    start, _, end = frames.partition(":")
+    if not (name and start.isdigit() and end.isdigit()):
+        raise ConfigError(f"--window must be NN=START:END, got {text!r}")
+    return name, (int(start), int(end))
+
+
 @click.command("kitti-preset")
-@click.option("--root", required=True, type=DIR,
+@click.option("--root", type=DIR, default=None,
               help="KITTI odometry root (ROOT/sequences/NN/velodyne, ROOT/poses/NN.txt).")
+@click.option("--simulated", type=DIR, default=None,
+              help="Simulated KITTI instead: folder of the ground-truth files NN.txt.")
 @click.option("--train", default=None, help="Training sequences, comma-separated [00-05].")
 @click.option("--test", default=None, help="Test sequences, comma-separated [06-10].")
 @click.option("--stride", type=int, default=1, show_default=True,
@@ -28,6 +41,11 @@ def _names(text: str | None) -> list[str] | None:
 @click.option("--start", type=int, default=None, help="First frame of every sequence [0].")
 @click.option("--end", type=int, default=None,
               help="Last frame of every sequence, INCLUSIVE [the last].")
+@click.option("--window", "windows", multiple=True,
+              help="NN=START:END, the frames of one sequence (simulated KITTI), repeatable.")
+@click.option("--change-windows", type=int, default=None,
+              help="Windows of N frames around each sequence's first change of environment "
+              "(simulated KITTI).")
 @algorithm_option("Odometry to tune [params.yaml's trials.algorithm].")
 @click.option("--iterations", type=int, default=None,
               help="SMBO iterations per training sequence [params.yaml's].")
@@ -38,22 +56,29 @@ def _names(text: str | None) -> list[str] | None:
 @click.option("--kitti-lengths-m", default=None,
               help="Devkit segment lengths [m], comma-separated [100,...,800].")
 @params_option
-def kitti_preset(root: Path, train: str | None, test: str | None, stride: int,
-                 start: int | None, end: int | None, algorithm: str | None,
+def kitti_preset(root: Path | None, simulated: Path | None, train: str | None,
+                 test: str | None, stride: int, start: int | None, end: int | None,
+                 windows: tuple[str, ...], change_windows: int | None, algorithm: str | None,
                  iterations: int | None, joint_iterations: int | None, length_m: float,
                  kitti_lengths_m: str | None, params_path: Path) -> None:
     """Print the `dvc exp run` arguments of the KITTI protocol, one a line.
 
     \b
-    make kitti KITTI_ROOT=... runs them; by hand:
+    make kitti KITTI_ROOT=... (or KITTI_SIMULATED=...) runs them; by hand:
       adaptune kitti-preset --root /data/kitti/dataset > kitti.args
       xargs -a kitti.args -d '\\n' dvc exp run
     """
     from pipeline.config import read_params, validate_section
+    from pipeline.errors import ConfigError
     from pipeline.presets import KittiProtocol, kitti_protocol, set_params
 
-    raw = {"root": str(root), "train": _names(train), "test": _names(test), "stride": stride,
-           "start": start, "end": end, "algorithm": algorithm, "iterations": iterations,
+    if (root is None) == (simulated is None):
+        raise ConfigError("give either --root (real KITTI) or --simulated (simulated KITTI)")
+    raw = {"source": "real" if root else "simulated", "root": str(root or simulated),
+           "train": _names(train), "test": _names(test), "stride": stride, "start": start,
+           "end": end, "windows": dict(_window(w) for w in windows),
+           "change_windows": change_windows, "algorithm": algorithm,
+           "iterations": iterations,
            "joint_iterations": joint_iterations, "length_m": length_m,
            "kitti_lengths_m": _names(kitti_lengths_m)}
     protocol = validate_section(KittiProtocol, "kitti-preset",

@@ -1,4 +1,5 @@
-"""``adaptune simulate``, ``simulate-set`` (the dvc stage) and ``plot-world``."""
+"""``adaptune simulate``, ``simulate-set`` and ``simulate-kitti-set`` (the dvc stages) and
+``plot-world``."""
 
 from __future__ import annotations
 
@@ -90,6 +91,24 @@ def simulate_set(params_path: Path | None, out: Path) -> None:
     for s in done:
         click.echo(f"{s.path}: {s.frames} frames, {s.length_m:.0f} m", err=True)
     click.echo(f"{out / 'index.json'}: {len(done)} sequences", err=True)
+
+
+@click.command("simulate-kitti-set")
+@params_option
+@dir_option("--out", help="Folder for <NN>.mcap and index.json (data/kitti_sim).")
+def simulate_kitti_set(params_path: Path, out: Path) -> None:
+    """Simulate the KITTI sequences of the params section ``simulate_kitti`` (dvc stage)."""
+    from pipeline.config import BaseSection, load_section
+    from pipeline.sim.kitti_dataset import SimulateKittiSection
+    from pipeline.sim.kitti_dataset import simulate_kitti_set as run
+
+    section = load_section(params_path, "simulate_kitti", SimulateKittiSection)
+    base = load_section(params_path, "base", BaseSection)
+    done = run(section, base.seed, out, progress=sys.stderr.isatty())
+    for s in done:
+        labels = ", ".join(f"{x.label} {x.start}-{x.end}" for x in s.labels)
+        click.echo(f"{s.path}: {s.frames} frames, {s.length_m:.0f} m, {labels}")
+    click.echo(f"{out / 'index.json'}: {len(done)} sequences")
 
 
 @click.command("plot-world")

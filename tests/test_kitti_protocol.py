@@ -121,6 +121,20 @@ def test_table2_lays_out_every_algorithm(protocol: Path, tmp_path: Path) -> None
     assert not (tmp_path / "u").exists()
 
 
+def test_preset_of_simulated_kitti(kitti_trajectories: Path) -> None:
+    code, out = _preset("--simulated", str(kitti_trajectories), "--change-windows", "250",
+                        "--window", "06=0:99", "--params", str(REPO / "params.yaml"))
+    assert code == 0
+    args = dict(line.removeprefix("--set-param=").split("=", 1) for line in out.splitlines())
+    assert args["base.sequences"] == '"data/kitti_sim"'
+    assert json.loads(args["simulate_kitti.train"]) == ["00", "01", "02", "03", "04", "05"]
+    windows = json.loads(args["simulate_kitti.windows"])
+    assert windows["05"] == [600, 849]  # residential -> urban at 700
+    assert windows["04"] == [0, 249] and windows["06"] == [0, 99]
+    code, out = _preset("--root", str(kitti_trajectories), "--window", "06=0:99")
+    assert code == 1 and "windows of single sequences need the simulated source" in out
+
+
 def test_preset_stride_and_bad_input(kitti_root: Path) -> None:
     code, out = _preset("--root", str(kitti_root), "--train", "01,04", "--test", "06,10",
                         "--stride", "2", "--params", str(REPO / "params.yaml"))

@@ -21,8 +21,8 @@ import numpy as np
 from pipeline.io_utils import atomic_path
 from pipeline.report.evaluate import SETTINGS, Evaluation
 from pipeline.sequence import EnvLabel
+from pipeline.sim.plot import LABEL_COLOURS
 
-LABEL_COLOURS = {"cave": "tab:brown", "open": "tab:green", "street": "tab:blue"}
 SETTING_COLOURS = {"ground truth": "black", "baseline": "tab:gray", "fixed": "tab:orange",
                    "adaptive": "tab:red"}
 

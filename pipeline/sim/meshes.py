@@ -7,6 +7,7 @@ orientation, so winding is not kept consistent.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import numpy as np
@@ -78,7 +79,14 @@ def cylinder(base: F64, radius: float, height: float, sides: int = 10) -> tuple[
 
 
 def icosphere(subdivisions: int = 2) -> tuple[F64, I64]:
-    """Unit sphere (vertices on the unit sphere, triangles) by subdividing an icosahedron."""
+    """Unit sphere (vertices on the unit sphere, triangles) by subdividing an icosahedron
+    (computed once per subdivision level; the caller gets its own copies)."""
+    v, f = _icosphere(subdivisions)
+    return v.copy(), f.copy()
+
+
+@functools.lru_cache(maxsize=4)
+def _icosphere(subdivisions: int) -> tuple[F64, I64]:
     p = (1 + 5**0.5) / 2
     v = np.array(
         [

@@ -9,7 +9,10 @@ import numpy as np
 from pipeline.io_utils import atomic_path
 from pipeline.sim.simulate import SimSpec, iter_scans, make_world, world_points
 
-LABEL_COLOURS = {"cave": "tab:brown", "open": "tab:green", "street": "tab:blue"}
+LABEL_COLOURS = {"cave": "tab:brown", "open": "tab:green", "street": "tab:blue",
+                 "urban": "tab:red", "residential": "tab:cyan", "rural": "tab:olive",
+                 "highway": "tab:orange"}
+"""The colour of every environment label (toy worlds and simulated KITTI) in every figure."""
 
 
 def plot_world(

@@ -17,7 +17,13 @@ from pipeline.io_utils import refuse_input_as_output
 from pipeline.sequence import EnvLabel, Scan, SequenceInfo, SequenceWriter
 from pipeline.sim.raycast import Raycaster
 from pipeline.sim.sensors import SENSOR_TITLES, SensorModel, get_sensor
-from pipeline.sim.worlds import DEFAULT_SEGMENTS, World, build_world, check_world_args
+from pipeline.sim.worlds import (
+    DEFAULT_SEGMENTS,
+    WORLDS,
+    World,
+    build_world,
+    check_world_args,
+)
 
 log = logging.getLogger(__name__)
 
@@ -115,28 +121,32 @@ def simulate_sequence(
     spec: SimSpec, out_path: str | Path, name: str | None = None, progress: bool = False
 ) -> SimSummary:
     """Simulate ``spec`` and write the sequence MCAP at ``out_path`` (atomically)."""
-    from tqdm import tqdm
-
     refuse_input_as_output(out_path, [spec.kitti_trajectory])
     world = make_world(spec)
-    sensor = spec.sensor_model()
-    name = name or Path(out_path).stem
-    labels = label_ranges(world.poses.frame_labels)
     source = "simulation:" + (
         "kitti-trajectory " + Path(spec.kitti_trajectory).name
         if spec.kitti_trajectory
         else spec.world
     )
-    info = SequenceInfo(
-        name=name,
-        sensor=SENSOR_TITLES[spec.sensor],
-        source=source,
-        labels=labels,
-        extra=_extra(spec, world),
-    )
+    return write_world(world, spec.sensor_model(), spec.seed, out_path,
+                       name or Path(out_path).stem, source, _extra(spec, world), progress,
+                       spec.motion_distortion)
+
+
+def write_world(world: World, sensor: SensorModel, seed: int, out_path: str | Path, name: str,
+                source: str, extra: dict[str, str], progress: bool = False,
+                motion_distortion: bool = False) -> SimSummary:
+    """Ray-cast every frame of ``world`` (noise from ``seed``, sweeps with ``motion_distortion``,
+    as ``iter_scans``) into the sequence MCAP ``out_path`` (atomically), labels per frame range
+    from the world's poses."""
+    from tqdm import tqdm
+
+    labels = label_ranges(world.poses.frame_labels)
+    info = SequenceInfo(name=name, sensor=SENSOR_TITLES[sensor.name], source=source,
+                        labels=labels, extra=extra)
     points = 0
     with SequenceWriter(out_path, info) as w:
-        scans = iter_scans(world, sensor, spec.seed, motion_distortion=spec.motion_distortion)
+        scans = iter_scans(world, sensor, seed, motion_distortion=motion_distortion)
         for scan in tqdm(scans, total=world.frames, desc=name, disable=not progress, leave=False):
             w.add(scan.stamp_ns, scan.points_lidar, scan.T_world_lidar, scan.time_s)
             points += len(scan.points_lidar)
@@ -164,12 +174,13 @@ def _extra(spec: SimSpec, world: World) -> dict[str, str]:
 
 
 def spec_of(info: SequenceInfo) -> SimSpec | None:
-    """The SimSpec a simulated sequence was made from (its metadata), or None for other data
-    or a street driven along a KITTI trajectory (whose pose file is not recorded)."""
+    """The SimSpec a simulated sequence was made from (its metadata), or None for other data,
+    a street driven along a KITTI trajectory or simulated KITTI (whose pose files are not
+    recorded)."""
     extra = info.extra
     if not info.source.startswith("simulation:") or "world" not in extra:
         return None
-    if info.source.startswith("simulation:kitti-trajectory"):
+    if info.source.startswith("simulation:kitti-trajectory") or extra["world"] not in WORLDS:
         return None
     segments = tuple(s for s in extra.get("segments", "").split(",") if s) or DEFAULT_SEGMENTS
     return SimSpec(extra["world"], int(extra["seed"]), info.frame_count,

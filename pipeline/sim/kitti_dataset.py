@@ -1,0 +1,131 @@
+"""Simulated KITTI: the ``simulate_kitti`` stage's data set (pipeline/sim/kitti_world.py).
+
+``simulate_kitti_set`` writes ``<out>/<NN>.mcap`` for every KITTI sequence named in the params
+section ``simulate_kitti`` (HDL-64E scans ray-cast along the sequence's ground-truth trajectory
+``<trajectories>/NN.txt`` through its simulated-KITTI world, environment labels per frame) and
+``<out>/index.json`` ({"train": [...], "validation": [...]}), the layout of the ``ingest`` and
+``simulate`` stages. Without a trajectories folder it writes an empty index.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from pipeline.config import Section
+from pipeline.errors import InputError
+from pipeline.sequence_index import write_index
+from pipeline.sim.kitti_world import SCHEDULES
+from pipeline.sim.simulate import SimSummary, derive_seed
+
+log = logging.getLogger(__name__)
+
+
+class SimulateKittiSection(Section):
+    """params.yaml ``simulate_kitti``: simulated KITTI sequences and their split.
+
+    trajectories: folder of KITTI ground-truth files NN.txt (and NN_times.txt); null = none.
+    start / end: frame window of every sequence (KITTI frame numbers, end inclusive, cut to the
+    sequence's length); windows: {NN: [start, end]} for single sequences (overrides start/end).
+    seed: null = derived from base.seed and the sequence name; motion_distortion: every scan a
+    sweep with per-point times (``SimSpec.motion_distortion``), as a real HDL-64E records.
+    """
+
+    trajectories: str | None = None
+    train: list[str] = Field(default_factory=list)
+    validation: list[str] = Field(default_factory=list)
+    start: int | None = Field(None, ge=0)
+    end: int | None = Field(None, ge=0)
+    windows: dict[str, tuple[int, int]] = Field(default_factory=dict)
+    sensor: Literal["hdl64", "hdl32", "vlp16"] = "hdl64"
+    range_noise_m: float = Field(0.02, ge=0.0, le=0.5)
+    dropout: float = Field(0.01, ge=0.0, lt=1.0)
+    seed: int | None = Field(None, ge=0)
+    motion_distortion: bool = False
+
+    @field_validator("train", "validation")
+    @classmethod
+    def _known(cls, v: list[str]) -> list[str]:
+        bad = [s for s in v if s not in SCHEDULES]
+        if bad:
+            raise ValueError(f"unknown KITTI sequence {bad[0]!r} (known: {', '.join(SCHEDULES)})")
+        return v
+
+    @model_validator(mode="after")
+    def _consistent(self) -> SimulateKittiSection:
+        if self.trajectories is not None and not self.train:
+            raise ValueError(f"train must name KITTI sequences when trajectories is set, got "
+                             f"(trajectories={self.trajectories!r}, train={self.train})")
+        both = sorted(set(self.train) & set(self.validation))
+        if both:
+            raise ValueError(f"sequence {both[0]!r} is in both train and validation, got "
+                             f"(train={self.train}, validation={self.validation})")
+        if self.start is not None and self.end is not None and self.end <= self.start:
+            raise ValueError(f"end must be > start, got (start={self.start}, end={self.end})")
+        for name, (a, b) in self.windows.items():
+            if name not in [*self.train, *self.validation]:
+                raise ValueError(f"window of {name!r}, which is in neither train nor validation")
+            if not 0 <= a < b:
+                raise ValueError(f"window of {name!r} must be [start, end] with 0 <= start < end, "
+                                 f"got [{a}, {b}]")
+        return self
+
+    def window(self, name: str, frames: int) -> tuple[int, int]:
+        """(first, last) frame (inclusive) of sequence ``name`` of ``frames`` frames;
+        InputError when the window does not overlap the sequence."""
+        first, last = self.windows.get(name, (self.start or 0, frames - 1 if self.end is None
+                                              else self.end))
+        last = min(last, frames - 1)
+        if first >= last:
+            raise InputError(f"sequence {name} has {frames} frames, the window starts at "
+                             f"frame {first}")
+        return first, last
+
+
+def simulate_kitti_set(section: SimulateKittiSection, base_seed: int, out_dir: str | Path,
+                       progress: bool = False) -> list[SimSummary]:
+    """Simulate the configured sequences into ``out_dir`` (module docstring)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    done = []
+    if section.trajectories is None:
+        log.info("simulate_kitti: no trajectories configured, writing an empty data set")
+    for name in [*section.train, *section.validation]:
+        done.append(simulate_kitti_sequence(section, name, base_seed, out_dir / f"{name}.mcap",
+                                            progress))
+    write_index(out_dir, {"train": list(section.train), "validation": list(section.validation)})
+    return done
+
+
+def simulate_kitti_sequence(section: SimulateKittiSection, name: str, base_seed: int,
+                            out_path: Path, progress: bool = False) -> SimSummary:
+    """One simulated KITTI sequence (its window) into ``out_path``."""
+    from pipeline.sim.kitti import kitti_lidar_poses
+    from pipeline.sim.kitti_world import build_kitti_world
+    from pipeline.sim.sensors import get_sensor
+    from pipeline.sim.simulate import write_world
+
+    assert section.trajectories is not None
+    trajectory = Path(section.trajectories) / f"{name}.txt"
+    frames = len(kitti_lidar_poses(trajectory)[0])
+    first, last = section.window(name, frames)
+    seed = derive_seed(base_seed if section.seed is None else section.seed, name)
+    world = build_kitti_world(trajectory, name, seed, first, last)
+    sensor = get_sensor(section.sensor).with_noise(section.range_noise_m, section.dropout)
+    extra = {"world": "kitti", "kitti_sequence": name, "first_frame": str(first),
+             "last_frame": str(last), "seed": str(seed), "sensor_model": section.sensor,
+             "range_noise_m": str(sensor.range_noise_m), "dropout": str(sensor.dropout),
+             "mesh_triangles": str(len(world.triangles)),
+             "motion_distortion": (
+                 f"sweep: points fired over 1/{sensor.rate_hz:g} s from the stamp, per-point "
+                 "time [s] in the PointCloud2 field 'time'" if section.motion_distortion
+                 else "none (instantaneous scans)")}
+    summary = write_world(world, sensor, seed, out_path, name,
+                          f"simulation:kitti {trajectory.name}", extra, progress,
+                          section.motion_distortion)
+    log.info("%s: frames %d-%d, %.0f m, %s", name, first, last, summary.length_m,
+             ", ".join(f"{x.label} {x.start}-{x.end}" for x in summary.labels))
+    return summary
