@@ -76,39 +76,39 @@ def simulate(name: str | None, out: Path, **world: Any) -> None:
     )
 
 
+def _simulate_data_set(params_path: Path | None, out: Path, section_name: str, model: Any,
+                       run: Any) -> None:
+    """Load ``section_name`` (``model``) and ``base``, run ``run`` into ``out``, summarise."""
+    from pipeline.config import BaseSection, load_section
+
+    section = load_section(params_path, section_name, model)
+    base = load_section(params_path, "base", BaseSection)
+    done = run(section, base.seed, out, progress=sys.stderr.isatty())
+    for s in done:
+        labels = ", ".join(f"{x.label} {x.start}-{x.end}" for x in s.labels)
+        click.echo(f"{s.path}: {s.frames} frames, {s.length_m:.0f} m, {labels}", err=True)
+    click.echo(f"{out / 'index.json'}: {len(done)} sequences", err=True)
+
+
 @click.command("simulate-set")
 @params_option
 @dir_option("--out", help="Folder for <name>.mcap and index.json (data/sequences).")
 def simulate_set(params_path: Path | None, out: Path) -> None:
     """Simulate the toy data set of the params section ``simulate`` (dvc stage)."""
-    from pipeline.config import BaseSection, load_section
-    from pipeline.sim.dataset import SimulateSection
-    from pipeline.sim.dataset import simulate_set as run
+    from pipeline.sim.dataset import SimulateSection, simulate_set
 
-    section = load_section(params_path, "simulate", SimulateSection)
-    base = load_section(params_path, "base", BaseSection)
-    done = run(section, base.seed, out, progress=sys.stderr.isatty())
-    for s in done:
-        click.echo(f"{s.path}: {s.frames} frames, {s.length_m:.0f} m", err=True)
-    click.echo(f"{out / 'index.json'}: {len(done)} sequences", err=True)
+    _simulate_data_set(params_path, out, "simulate", SimulateSection, simulate_set)
 
 
 @click.command("simulate-kitti-set")
 @params_option
 @dir_option("--out", help="Folder for <NN>.mcap and index.json (data/kitti_sim).")
-def simulate_kitti_set(params_path: Path, out: Path) -> None:
+def simulate_kitti_set(params_path: Path | None, out: Path) -> None:
     """Simulate the KITTI sequences of the params section ``simulate_kitti`` (dvc stage)."""
-    from pipeline.config import BaseSection, load_section
-    from pipeline.sim.kitti_dataset import SimulateKittiSection
-    from pipeline.sim.kitti_dataset import simulate_kitti_set as run
+    from pipeline.sim.kitti_dataset import SimulateKittiSection, simulate_kitti_set
 
-    section = load_section(params_path, "simulate_kitti", SimulateKittiSection)
-    base = load_section(params_path, "base", BaseSection)
-    done = run(section, base.seed, out, progress=sys.stderr.isatty())
-    for s in done:
-        labels = ", ".join(f"{x.label} {x.start}-{x.end}" for x in s.labels)
-        click.echo(f"{s.path}: {s.frames} frames, {s.length_m:.0f} m, {labels}")
-    click.echo(f"{out / 'index.json'}: {len(done)} sequences")
+    _simulate_data_set(params_path, out, "simulate_kitti", SimulateKittiSection,
+                       simulate_kitti_set)
 
 
 @click.command("plot-world")
