@@ -102,7 +102,7 @@ def test_simulate_kitti_set_writes_labelled_hdl64_sequences(tmp_path: Path,
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump({"base": {"seed": 3}, "simulate_kitti": {
         "trajectories": str(kitti_trajectories), "train": ["05"], "validation": ["04"],
-        "start": 697, "end": 702, "windows": {"04": [268, 280]}}}))
+        "start": 697, "end": 702, "windows": {"04": [268, 280]}, "motion_distortion": True}}))
     out = tmp_path / "sim"
     result = CliRunner().invoke(main, ["simulate-kitti-set", "--params", str(params),
                                        "--out", str(out)])
@@ -114,7 +114,9 @@ def test_simulate_kitti_set_writes_labelled_hdl64_sequences(tmp_path: Path,
         assert [(x.start, x.end, x.label) for x in r.info.labels] == [
             (0, 2, "residential"), (3, 5, "urban")]
         assert r.info.extra["first_frame"] == "697" and r.ground_truth() is not None
-        assert len(next(iter(r)).points_lidar) > 50_000
+        scan = next(iter(r))
+        assert len(scan.points_lidar) > 50_000
+        assert scan.time_s is not None and 0.0 <= scan.time_s.min() < scan.time_s.max() < 0.1
     with SequenceReader(out / "04.mcap") as r:  # the window is cut to the sequence's end
         assert len(r) == 3 and r.info.labels[0].label == "rural"
 
