@@ -11,7 +11,7 @@ to a machine: a frame window of every sequence (or of single sequences, simulate
 stride over the sequences, the SMBO budget.
 
 A preset never edits params.yaml itself: ``set_params`` lists ``section.key=value`` pairs
-(values as JSON, which YAML reads back unchanged) for ``dvc exp run --set-param``, which keeps
+for ``dvc exp run --set-param`` (values in its override grammar, Hydra's), which keeps
 params.yaml's comments and records the run as a DVC experiment.
 """
 
@@ -109,7 +109,7 @@ def kitti_protocol(protocol: KittiProtocol, params: Mapping[str, Any]) -> dict[s
     return data
 
 
-def _windows(protocol: KittiProtocol, names: list[str]) -> dict[str, list[int]]:
+def _windows(protocol: KittiProtocol, names: list[str]) -> list[list[Any]]:
     """The per-sequence windows of simulated KITTI: ``change_windows`` for every sequence
     (from its ground-truth file's length), then the explicit ``windows``."""
     from pipeline.sim.kitti_world import change_window
@@ -120,7 +120,7 @@ def _windows(protocol: KittiProtocol, names: list[str]) -> dict[str, list[int]]:
             frames = _line_count(Path(protocol.root) / f"{name}.txt")
             out[name] = list(change_window(name, frames, protocol.change_windows))
     out |= {n: list(w) for n, w in protocol.windows.items() if n in names}
-    return out
+    return [[name, *window] for name, window in out.items()]
 
 
 def _line_count(path: Path) -> int:
@@ -176,6 +176,21 @@ def section_models() -> dict[str, type[Section]]:
 
 
 def set_params(values: Mapping[str, Any]) -> list[str]:
-    """``--set-param=section.key=<JSON>`` arguments of ``dvc exp run`` for ``values``."""
-    return [f"--set-param={k}={json.dumps(v, separators=(',', ':'))}" for k, v in values.items()]
+    """``--set-param=section.key=<value>`` arguments of ``dvc exp run`` for ``values``, in the
+    override grammar DVC parses them with (Hydra's: JSON, but dictionary keys unquoted)."""
+    return [f"--set-param={k}={override_value(v)}" for k, v in values.items()]
+
+
+def override_value(value: Any) -> str:
+    """``value`` (JSON data) in Hydra's override grammar: ``{00:[368,447]}``, ``["00"]``, "x",
+    null. ConfigError for a dictionary key that grammar cannot write unquoted."""
+    if isinstance(value, Mapping):
+        bad = [k for k in value if not (isinstance(k, str) and k.replace("_", "a").isalnum())]
+        if bad:
+            raise ConfigError(f"dictionary key {bad[0]!r} cannot be a --set-param key (letters, "
+                              "digits and _ only)")
+        return "{" + ",".join(f"{k}:{override_value(v)}" for k, v in value.items()) + "}"
+    if isinstance(value, list | tuple):
+        return "[" + ",".join(override_value(v) for v in value) + "]"
+    return json.dumps(value)
 

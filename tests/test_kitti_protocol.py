@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import subprocess
 from pathlib import Path
+from typing import Any
 
 import pytest
 import yaml
@@ -121,16 +122,34 @@ def test_table2_lays_out_every_algorithm(protocol: Path, tmp_path: Path) -> None
     assert not (tmp_path / "u").exists()
 
 
-def test_preset_of_simulated_kitti(kitti_trajectories: Path) -> None:
+def overrides(out: str, tmp_path: Path) -> dict[str, Any]:
+    """params.yaml after the preset's ``--set-param``s, applied as `dvc exp run` applies them
+    (DVC's Hydra overrides), to a params.yaml with a stale window of sequence 99."""
+    from dvc.utils.hydra import apply_overrides
+
+    params = yaml.safe_load((REPO / "params.yaml").read_text())
+    params["simulate_kitti"]["windows"] = [["99", 0, 9]]
+    (tmp_path / "params.yaml").write_text(yaml.safe_dump(params))
+    apply_overrides(tmp_path / "params.yaml",
+                    [line.removeprefix("--set-param=") for line in out.splitlines()])
+    return yaml.safe_load((tmp_path / "params.yaml").read_text())
+
+
+def test_preset_of_simulated_kitti(kitti_trajectories: Path, tmp_path: Path) -> None:
+    from pipeline.sim.kitti_dataset import SimulateKittiSection
+
     code, out = _preset("--simulated", str(kitti_trajectories), "--change-windows", "250",
                         "--window", "06=0:99", "--params", str(REPO / "params.yaml"))
     assert code == 0
-    args = dict(line.removeprefix("--set-param=").split("=", 1) for line in out.splitlines())
-    assert args["base.sequences"] == '"data/kitti_sim"'
-    assert json.loads(args["simulate_kitti.train"]) == ["00", "01", "02", "03", "04", "05"]
-    windows = json.loads(args["simulate_kitti.windows"])
-    assert windows["05"] == [600, 849]  # residential -> urban at 700
-    assert windows["04"] == [0, 249] and windows["06"] == [0, 99]
+    params = overrides(out, tmp_path)
+    assert params["base"]["sequences"] == "data/kitti_sim"
+    assert params["simulate_kitti"]["train"] == ["00", "01", "02", "03", "04", "05"]
+    # as the stage reads it; the stale window is gone
+    windows = {n: (a, b) for n, a, b in
+               SimulateKittiSection.model_validate(params["simulate_kitti"]).windows}
+    assert set(windows) == {f"{i:02d}" for i in range(11)}
+    assert windows["05"] == (600, 849)  # residential -> urban at 700
+    assert windows["04"] == (0, 249) and windows["06"] == (0, 99)
     code, out = _preset("--root", str(kitti_trajectories), "--window", "06=0:99")
     assert code == 1 and "windows of single sequences need the simulated source" in out
 

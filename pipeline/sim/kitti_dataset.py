@@ -29,7 +29,9 @@ class SimulateKittiSection(Section):
 
     trajectories: folder of KITTI ground-truth files NN.txt (and NN_times.txt); null = none.
     start / end: frame window of every sequence (KITTI frame numbers, end inclusive, cut to the
-    sequence's length); windows: {NN: [start, end]} for single sequences (overrides start/end).
+    sequence's length); windows: [[NN, start, end], ...] for single sequences (override
+    start/end; a list, not a mapping: `dvc exp run -S` merges mappings and reads the key 10 as a
+    number, which DVC cannot sort beside "09").
     seed: null = derived from base.seed and the sequence name; motion_distortion: every scan a
     sweep with per-point times (``SimSpec.motion_distortion``), as a real HDL-64E records.
     """
@@ -39,7 +41,7 @@ class SimulateKittiSection(Section):
     validation: list[str] = Field(default_factory=list)
     start: int | None = Field(None, ge=0)
     end: int | None = Field(None, ge=0)
-    windows: dict[str, tuple[int, int]] = Field(default_factory=dict)
+    windows: list[tuple[str, int, int]] = Field(default_factory=list)
     sensor: Literal["hdl64", "hdl32", "vlp16"] = "hdl64"
     range_noise_m: float = Field(0.02, ge=0.0, le=0.5)
     dropout: float = Field(0.01, ge=0.0, lt=1.0)
@@ -65,7 +67,11 @@ class SimulateKittiSection(Section):
                              f"(train={self.train}, validation={self.validation})")
         if self.start is not None and self.end is not None and self.end <= self.start:
             raise ValueError(f"end must be > start, got (start={self.start}, end={self.end})")
-        for name, (a, b) in self.windows.items():
+        names = [name for name, _, _ in self.windows]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"sequence {twice[0]!r} has two windows, got {self.windows}")
+        for name, a, b in self.windows:
             if name not in [*self.train, *self.validation]:
                 raise ValueError(f"window of {name!r}, which is in neither train nor validation")
             if not 0 <= a < b:
@@ -76,8 +82,8 @@ class SimulateKittiSection(Section):
     def window(self, name: str, frames: int) -> tuple[int, int]:
         """(first, last) frame (inclusive) of sequence ``name`` of ``frames`` frames;
         InputError when the window does not overlap the sequence."""
-        first, last = self.windows.get(name, (self.start or 0, frames - 1 if self.end is None
-                                              else self.end))
+        default = (self.start or 0, frames - 1 if self.end is None else self.end)
+        first, last = {n: (a, b) for n, a, b in self.windows}.get(name, default)
         last = min(last, frames - 1)
         if first >= last:
             raise InputError(f"sequence {name} has {frames} frames, the window starts at "

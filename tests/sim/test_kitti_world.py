@@ -102,7 +102,7 @@ def test_simulate_kitti_set_writes_labelled_hdl64_sequences(tmp_path: Path,
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump({"base": {"seed": 3}, "simulate_kitti": {
         "trajectories": str(kitti_trajectories), "train": ["05"], "validation": ["04"],
-        "start": 697, "end": 702, "windows": {"04": [268, 280]}, "motion_distortion": True}}))
+        "start": 697, "end": 702, "windows": [["04", 268, 280]], "motion_distortion": True}}))
     out = tmp_path / "sim"
     result = CliRunner().invoke(main, ["simulate-kitti-set", "--params", str(params),
                                        "--out", str(out)])
@@ -126,9 +126,10 @@ def test_simulate_kitti_set_writes_labelled_hdl64_sequences(tmp_path: Path,
      "simulate_kitti: train must name KITTI sequences when trajectories is set"),
     ({"train": ["12"]}, "simulate_kitti.train: unknown KITTI sequence '12'"),
     ({"train": ["01"], "validation": ["01"]}, "sequence '01' is in both train and validation"),
-    ({"train": ["01"], "windows": {"02": [0, 5]}},
+    ({"train": ["01"], "windows": [["02", 0, 5]]},
      "window of '02', which is in neither train nor validation"),
-    ({"train": ["01"], "windows": {"01": [5, 5]}}, "window of '01' must be [start, end]"),
+    ({"train": ["01"], "windows": [["01", 5, 5]]}, "window of '01' must be [start, end]"),
+    ({"train": ["01"], "windows": [["01", 0, 5], ["01", 6, 9]]}, "'01' has two windows"),
 ])
 def test_simulate_kitti_set_refuses_bad_params(tmp_path: Path, section: dict,
                                                message: str) -> None:
