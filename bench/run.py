@@ -53,6 +53,7 @@ def run_module(name: str) -> list[Row]:
     spec = importlib.util.spec_from_file_location(path.stem, path)
     assert spec and spec.loader
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up there
     spec.loader.exec_module(module)
     rows: list[Row] = module.run()
     return rows
