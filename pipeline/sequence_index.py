@@ -16,6 +16,20 @@ from pipeline.errors import InputError
 INDEX_NAME = "index.json"
 
 
+def check_split(source_key: str, source: object, train: list[str],
+                validation: list[str]) -> None:
+    """ValueError unless the split of a data-set section (``ingest``, ``simulate_kitti``) is
+    consistent: ``train`` names sequences when the section's source ``source_key`` is set, and
+    no sequence is in both ``train`` and ``validation``."""
+    if source is not None and not train:
+        raise ValueError(f"train must name KITTI sequences when {source_key} is set, got "
+                         f"({source_key}={source!r}, train={train})")
+    both = sorted(set(train) & set(validation))
+    if both:
+        raise ValueError(f"sequence {both[0]!r} is in both train and validation, got "
+                         f"(train={train}, validation={validation})")
+
+
 @dataclass(frozen=True)
 class SequenceIndex:
     """The splits of one sequences folder (names in file order, every split a list)."""

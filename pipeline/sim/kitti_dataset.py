@@ -17,7 +17,7 @@ from pydantic import Field, field_validator, model_validator
 
 from pipeline.config import Section
 from pipeline.errors import InputError
-from pipeline.sequence_index import write_index
+from pipeline.sequence_index import check_split, write_index
 from pipeline.sim.kitti_world import SCHEDULES
 from pipeline.sim.simulate import SimSummary, derive_seed
 
@@ -58,13 +58,7 @@ class SimulateKittiSection(Section):
 
     @model_validator(mode="after")
     def _consistent(self) -> SimulateKittiSection:
-        if self.trajectories is not None and not self.train:
-            raise ValueError(f"train must name KITTI sequences when trajectories is set, got "
-                             f"(trajectories={self.trajectories!r}, train={self.train})")
-        both = sorted(set(self.train) & set(self.validation))
-        if both:
-            raise ValueError(f"sequence {both[0]!r} is in both train and validation, got "
-                             f"(train={self.train}, validation={self.validation})")
+        check_split("trajectories", self.trajectories, self.train, self.validation)
         if self.start is not None and self.end is not None and self.end <= self.start:
             raise ValueError(f"end must be > start, got (start={self.start}, end={self.end})")
         names = [name for name, _, _ in self.windows]

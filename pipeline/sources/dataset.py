@@ -14,7 +14,7 @@ from pathlib import Path
 from pydantic import Field, model_validator
 
 from pipeline.config import Section
-from pipeline.sequence_index import write_index
+from pipeline.sequence_index import check_split, write_index
 from pipeline.sources.base import IngestReport
 from pipeline.sources.kitti import ingest_kitti
 
@@ -35,12 +35,7 @@ class IngestSection(Section):
 
     @model_validator(mode="after")
     def _consistent(self) -> IngestSection:
-        if self.kitti_root is not None and not self.train:
-            raise ValueError(f"train must name KITTI sequences when kitti_root is set, "
-                             f"got (kitti_root={self.kitti_root!r}, train={self.train})")
-        both = sorted(set(self.train) & set(self.validation))
-        if both:
-            raise ValueError(f"sequence {both[0]!r} is in both train and validation")
+        check_split("kitti_root", self.kitti_root, self.train, self.validation)
         if self.start is not None and self.end is not None and self.end < self.start:
             raise ValueError(f"end must be >= start, got (start={self.start}, end={self.end})")
         return self
