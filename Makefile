@@ -4,7 +4,7 @@ PY := $(VENV)/bin/python
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test lint bench repro kitti clean
+.PHONY: setup test fuzz lint bench repro kitti clean
 
 setup: $(STAMP)
 
@@ -18,6 +18,13 @@ $(STAMP): pyproject.toml
 
 test: setup
 	$(BIN)/pytest -q
+
+# the fuzz suite of tests/fuzz at length: FUZZ_EXAMPLES examples a target, random seeds
+# (make test runs it small and seeded); a failure prints the blob that replays it
+FUZZ_EXAMPLES ?= 2000
+fuzz: setup
+	ADAPTUNE_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) nice -n 10 $(BIN)/pytest -q tests/fuzz \
+		--hypothesis-show-statistics --durations=0
 
 lint: setup
 	$(BIN)/ruff check pipeline stages schemas tests bench

@@ -8,7 +8,11 @@ from __future__ import annotations
 
 
 class AdaptuneError(Exception):
-    """Root of every error adaptune raises on purpose."""
+    """Root of every error adaptune raises on purpose. Its message is one line: line breaks
+    of a wrapped library message (a YAML or Parquet parser's) become spaces."""
+
+    def __str__(self) -> str:
+        return " ".join(line.strip() for line in super().__str__().splitlines() if line.strip())
 
 
 class ConfigError(AdaptuneError):

@@ -76,14 +76,20 @@ def refuse_non_rotations(R: F64, what: str, lines: list[int] | None = None) -> N
 def poses_from_quaternions(xyz: F64, q_xyzw: F64, what: str,
                            lines: list[int] | None = None) -> F64:
     """(M, 4, 4) poses of translations (M, 3) and quaternions (M, 4) x, y, z, w; InputError
-    naming the first quaternion whose norm is not 1 within 1e-2 (zero included)."""
+    naming the first quaternion whose norm is not 1 within 1e-2 (zero and NaN included) or
+    the first translation that is not finite."""
     norm = np.linalg.norm(q_xyzw, axis=1)
-    bad = np.abs(norm - 1.0) > 1e-2
+    bad = ~(np.abs(norm - 1.0) <= 1e-2)  # NaN is bad too
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         where = f"line {lines[k]}" if lines is not None else f"pose {k}"
         raise InputError(f"{what} {where}: the quaternion has norm {norm[k]:.6g}, a rotation "
                          "needs a unit quaternion (norm 1 within 1e-2)")
+    far = ~np.isfinite(xyz).all(axis=1)
+    if far.any():
+        k = int(np.flatnonzero(far)[0])
+        where = f"line {lines[k]}" if lines is not None else f"pose {k}"
+        raise InputError(f"{what} {where}: the translation is not finite ({xyz[k].tolist()})")
     return pose_from_xyz_quat(xyz, q_xyzw)
 
 

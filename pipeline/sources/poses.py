@@ -69,7 +69,8 @@ def read_extrinsic(value: str | Path) -> NDArray[np.float64]:
         except OSError:  # a name too long
             is_file = False
         if not is_file:
-            raise InputError(f"{text[:80]}: --extrinsic is neither 12 or 16 numbers nor a file")
+            raise InputError(f"--extrinsic {text[:80]!r} is neither 12 or 16 numbers nor a "
+                             "file")
         content = path.read_text(encoding="utf-8-sig", errors="replace")
         if re.search(r"^\s*(Tr|Tr_velo_to_cam)\s*:", content, re.MULTILINE):
             return read_kitti_calib(path)

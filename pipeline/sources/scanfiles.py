@@ -175,11 +175,11 @@ def _pcd_ascii(path: Path, body: bytes, header: PcdHeader) -> NDArray:
     """The records of an ascii PCD body, counted and parsed strictly."""
     n_values = sum(int(np.prod(header.dtype[k].shape or (1,))) for k in range(len(header.names)))
     try:
-        table = np.loadtxt(body.decode("ascii").splitlines(), dtype=np.float64, ndmin=2)
+        lines = [ln for ln in body.decode("ascii").splitlines() if ln.strip()]
+        table = (np.loadtxt(lines, dtype=np.float64, ndmin=2) if lines
+                 else np.zeros((0, n_values)))  # loadtxt warns on no data
     except (ValueError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: malformed ascii PCD data ({exc})") from None
-    if len(table) == 0:
-        table = np.zeros((0, n_values))
     if table.shape != (header.points, n_values):
         raise InputError(f"{path}: PCD has {table.shape[0]}x{table.shape[1]} values, the "
                          f"header says {header.points} points x {n_values} values")
