@@ -38,9 +38,14 @@ def data_root() -> Path:
 
 
 def format_table(rows: list[Row]) -> str:
-    """A fixed-width text table of ``rows``."""
+    """A fixed-width text table of ``rows`` (pipeline.text_table, the CLI's renderer)."""
+    import pyarrow as pa
+
+    from pipeline.text_table import format_table as render
+
     head = ("figure", "value", "unit", "reference (same run / paper)", "target")
     body = [(r.figure, f"{r.value:.4g}", r.unit, r.reference, r.target) for r in rows]
-    widths = [max(len(str(x)) for x in col) for col in zip(head, *body, strict=False)]
-    line = lambda cells: "  ".join(str(c).ljust(w) for c, w in zip(cells, widths, strict=True))  # noqa: E731
-    return "\n".join([line(head), line(["-" * w for w in widths]), *map(line, body)])
+    columns = list(zip(*body, strict=True)) if body else [()] * len(head)
+    return render(pa.table({h: [str(c) for c in col] for h, col in zip(head, columns,
+                                                                       strict=True)}),
+                  footer=False)

@@ -35,6 +35,9 @@ def info(path: Path, as_json: bool) -> None:
         ("schema version", s.schema_version),
         *((key.replace("_", " "), value) for key, value in sorted(s.details.items())),
     ]
-    width = max(len(k) for k, _ in rows)
-    for key, value in rows:
-        click.echo(f"{key.ljust(width)}  {value}")
+    import pyarrow as pa
+
+    from pipeline.text_table import format_table
+
+    click.echo(format_table(pa.table({"field": [str(k) for k, _ in rows],
+                                      "value": [str(v) for _, v in rows]}), footer=False))

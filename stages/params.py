@@ -47,11 +47,15 @@ def params(algorithm: str, options: tuple[str, ...], params_path: Path | None,
         click.echo(json.dumps({"algorithm": adapter.name, "source": source,
                                "parameters": specs}, indent=2))
         return
-    head = ("name", "low", "high", "default", "kind", "scale", "unit")
-    rows = [head] + [(str(s["name"]), f"{s['low']:g}", f"{s['high']:g}", f"{s['default']:g}",
-                      str(s["kind"]), "log" if s["log"] else "linear", str(s["unit"]))
-                     for s in specs]
-    widths = [max(len(r[i]) for r in rows) for i in range(len(head))]
+    import pyarrow as pa
+
+    from pipeline.text_table import format_table
+
+    table = pa.table({
+        "name": [str(s["name"]) for s in specs], "low": [f"{s['low']:g}" for s in specs],
+        "high": [f"{s['high']:g}" for s in specs],
+        "default": [f"{s['default']:g}" for s in specs], "kind": [str(s["kind"]) for s in specs],
+        "scale": ["log" if s["log"] else "linear" for s in specs],
+        "unit": [str(s["unit"]) for s in specs]})
     click.echo(f"{adapter.name}: {len(specs)} parameters ({source} ranges)")
-    for row in rows:
-        click.echo("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip())
+    click.echo(format_table(table, footer=False))

@@ -23,6 +23,7 @@ import pyarrow as pa
 
 from pipeline.errors import ConfigError, InputError, QueryError
 from pipeline.io_utils import atomic_path, input_file
+from pipeline.text_table import format_table
 
 if TYPE_CHECKING:
     import duckdb
@@ -130,25 +131,6 @@ def render(table: pa.Table, fmt: str) -> bytes:
     return (text if not text or text.endswith("\n") else text + "\n").encode()
 
 
-def format_table(table: pa.Table) -> str:
-    """Fixed-width text table: header, rule, one line per row (all rows)."""
-    names = table.column_names
-    if not names:
-        return ""
-    cols = [[_cell(v) for v in table.column(n).to_pylist()] for n in names]
-    widths = [max([len(n), *map(len, c)]) for n, c in zip(names, cols, strict=True)]
-    numeric = [pa.types.is_integer(t) or pa.types.is_floating(t) or pa.types.is_decimal(t)
-               for t in table.schema.types]
-
-    def line(cells: list[str]) -> str:
-        return "  ".join(c.rjust(w) if num else c.ljust(w)
-                         for c, w, num in zip(cells, widths, numeric, strict=True)).rstrip()
-
-    rows = [line(list(r)) for r in zip(*cols, strict=True)] if cols else []
-    footer = f"({table.num_rows} row{'s' if table.num_rows != 1 else ''})"
-    return "\n".join([line(names), line(["-" * w for w in widths]), *rows, footer])
-
-
 def format_csv(table: pa.Table) -> str:
     """CSV with a header line."""
     import pyarrow.csv as pcsv
@@ -162,14 +144,6 @@ def format_json(table: pa.Table) -> str:
     """A JSON array of row objects (NaN and infinities become null)."""
     rows = [{k: _json_value(v) for k, v in r.items()} for r in table.to_pylist()]
     return json.dumps(rows, indent=1, default=str) + "\n"
-
-
-def _cell(v: Any) -> str:
-    if v is None:
-        return "NULL"
-    if isinstance(v, float):
-        return f"{v:.6g}"
-    return str(v)
 
 
 def _json_value(v: Any) -> Any:

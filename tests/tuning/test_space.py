@@ -33,6 +33,7 @@ def test_params_lists_the_built_in_and_the_overridden_ranges(tmp_path: Path) -> 
     assert res.output.splitlines() == [
         "ndt: 2 parameters (built-in ranges)",
         "name               low  high  default  kind   scale   unit",
+        "-----------------  ---  ----  -------  -----  ------  ----",
         "resolution         1    10    4        float  linear  m",
         "keyframe_interval  0    10    4        float  linear  m"]
     params = params_file(tmp_path, "ndt", {"resolution": {"low": 0.5, "high": 12, "log": True}})
