@@ -78,7 +78,8 @@ def poses_from_quaternions(xyz: F64, q_xyzw: F64, what: str,
     """(M, 4, 4) poses of translations (M, 3) and quaternions (M, 4) x, y, z, w; InputError
     naming the first quaternion whose norm is not 1 within 1e-2 (zero and NaN included) or
     the first translation that is not finite."""
-    norm = np.linalg.norm(q_xyzw, axis=1)
+    with np.errstate(all="ignore"):  # a huge quaternion: refused below, no warning
+        norm = np.linalg.norm(q_xyzw, axis=1)
     bad = ~(np.abs(norm - 1.0) <= 1e-2)  # NaN is bad too
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
@@ -104,7 +105,7 @@ def not_rotations(R: F64, tol: float = 1e-3) -> NDArray[np.bool_]:
     """(...,) True where a (..., 3, 3) matrix is not a rotation: R^T R != I (beyond ``tol``,
     element-wise) or det(R) != +1 (zero, scaled, reflected or sheared matrices)."""
     R = np.asarray(R, dtype=np.float64)
-    with np.errstate(over="ignore", invalid="ignore"):  # huge entries: flagged, not warned
+    with np.errstate(all="ignore"):  # huge or NaN entries: not a rotation, no warning
         gram = np.swapaxes(R, -1, -2) @ R
         off = np.abs(gram - np.eye(3)).max(axis=(-1, -2))
         det = np.linalg.det(R)

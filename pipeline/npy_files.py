@@ -75,6 +75,7 @@ def parse_npy(data: bytes, what: str | Path) -> NDArray[Any]:
     only, and the header's shape must account for exactly the bytes that follow it (checked
     before anything is allocated). ArtifactError otherwise."""
     import io
+    import tokenize
 
     fmt = np.lib.format
     fp = io.BytesIO(data)
@@ -86,7 +87,7 @@ def parse_npy(data: bytes, what: str | Path) -> NDArray[Any]:
             shape, fortran, dtype = fmt.read_array_header_2_0(fp)
         else:
             raise ValueError(f"npy format version {version}")
-    except (ValueError, SyntaxError, TypeError) as exc:
+    except (ValueError, SyntaxError, TypeError, tokenize.TokenError) as exc:  # a bad header
         raise ArtifactError(f"{what}: not a plain numpy array ({exc})") from None
     if dtype.hasobject or dtype.kind not in "biuf" or dtype.subdtype is not None:
         raise ArtifactError(f"{what}: dtype {dtype} is not a plain number type")

@@ -84,8 +84,10 @@ def arrays(draw: st.DrawFn, like: np.ndarray) -> np.ndarray:
     if out.size:
         flat = out.reshape(-1)
         for _ in range(draw(st.integers(1, 3))):
-            flat[draw(st.integers(0, out.size - 1))] = draw(
-                st.sampled_from([np.nan, np.inf, -1, 0, 1e30, 2**31]))
+            kind = out.dtype.kind
+            bad = [np.nan, np.inf, -1.0, 0.0, 1e30] if kind == "f" else [0, 1] if kind == "b" \
+                else [0, 1, int(np.iinfo(out.dtype).max), int(np.iinfo(out.dtype).min)]
+            flat[draw(st.integers(0, out.size - 1))] = draw(st.sampled_from(bad))
     return out
 
 

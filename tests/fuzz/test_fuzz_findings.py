@@ -103,3 +103,21 @@ def test_an_empty_ascii_pcd_reads_without_a_warning(tmp_path: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert read_pcd(path).points.shape == (0, 4)
+
+
+def test_an_npy_header_numpy_cannot_tokenize_is_an_artifact_error() -> None:
+    from pipeline.errors import ArtifactError
+    from pipeline.npy_files import parse_npy
+
+    header = b"{'descr': '<f8', 'fortran_order': False, 'shape': (2,\x00 }"
+    data = b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header + bytes(16)
+    with pytest.raises(ArtifactError) as exc:
+        parse_npy(data, "x.npy")
+    assert "not a plain numpy array" in one_line(exc)
+
+
+def test_a_huge_extrinsic_is_refused_without_a_warning() -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(InputError):
+            read_extrinsic(" ".join(["1e300"] * 12))
