@@ -27,6 +27,8 @@ BIN = Path(sys.executable).parent
 pytestmark = pytest.mark.slow
 
 TINY_L_M = 4.0
+TCP_LINE = "trials.dask=tcp://SCHEDULER:8786,trials.workers=8"
+"""The README's line for trials on a Dask cluster (its own section)."""
 
 
 def tiny_params() -> dict[str, Any]:
@@ -278,11 +280,12 @@ def test_metrics_and_plot_data_are_committed(repro: tuple[Path, str]) -> None:
 
 
 def readme_variations() -> dict[str, list[str]]:
-    """The README's `dvc exp run` lines (its "Variations" block), keyed by what they set."""
-    text = (REPO / "README.md").read_text()
-    block = text.split("Variations:", 1)[1].split("```sh", 1)[1].split("```", 1)[0]
+    """The README's `dvc exp run` lines (in every ``sh`` block), keyed by what they set."""
+    blocks = [b.split("```", 1)[0] for b in (REPO / "README.md").read_text().split("```sh")[1:]]
     lines = {}
-    for line in block.replace("\\\n", " ").splitlines():
+    for line in "\n".join(blocks).replace("\\\n", " ").splitlines():
+        if not line.startswith("dvc exp run "):
+            continue
         words = shlex.split(line, comments=True)
         if words[:3] == ["dvc", "exp", "run"]:
             sets = dict(w.split("=", 1) for w in words[4::2])
@@ -321,7 +324,7 @@ def exp_metrics(root: Path) -> dict[str, dict[str, Any]]:
 
 def test_readme_variations_are_the_ones_tested() -> None:
     assert set(readme_variations()) == {"trials.algorithm=gicp", "trials.algorithm=kiss_icp",
-                                        "trials.dask=local", "kitti"}
+                                        "trials.dask=local", "kitti", TCP_LINE}
 
 
 def test_gicp_on_dask_experiment(repro: tuple[Path, str]) -> None:
@@ -337,12 +340,15 @@ def test_gicp_on_dask_experiment(repro: tuple[Path, str]) -> None:
 
 
 def test_kitti_and_kiss_icp_experiment_with_a_new_length(repro: tuple[Path, str],
-                                                         kitti_root: Path) -> None:
+                                                         kitti_root: Path,
+                                                         tmp_path: Path) -> None:
     """The README's KITTI line (the kitti_mini slices, L shrunk to fit their 10 frames) with its
-    kiss_icp line, the default descriptor width and a widened search range, in the workspace:
-    ingest runs, every stage reads the new L, and `dvc metrics diff main` and `dvc exp diff`
-    compare the experiments' metrics."""
+    kiss_icp line and its Dask-cluster line (a scheduler and a worker on 127.0.0.1), the
+    default descriptor width and a widened search range, in the workspace: ingest runs, every
+    stage reads the new L, and `dvc metrics diff main` and `dvc exp diff` compare the
+    experiments' metrics."""
     import duckdb
+    from dask_cluster import tcp_cluster
 
     from pipeline.sequence import SequenceReader
 
@@ -352,12 +358,20 @@ def test_kitti_and_kiss_icp_experiment_with_a_new_length(repro: tuple[Path, str]
     args = tiny(lines["kitti"], **{
         "base.length_m": str(new_l), "ingest.kitti_root": str(kitti_root),
         "ingest.train": '["01","06"]', "ingest.validation": '["04"]'})
-    log = exp_run(root, "kitti-kiss", *args, *lines["trials.algorithm=kiss_icp"],
-                  "-S", "descriptors.range_bins=10",  # the default descriptor width here
-                  # searched ranges wider than kiss_icp's built-in max_range [20, 200] m: every
-                  # later stage must take them from the trials output (the baseline runs at 220)
-                  "-S", "+trials.space.max_range={high: 250.0, default: 220.0}",
-                  temp=False)
+    with tcp_cluster(tmp_path, 1) as (address, _):
+        log = exp_run(root, "kitti-kiss", *args, *lines["trials.algorithm=kiss_icp"],
+                      *tiny(lines[TCP_LINE], **{"trials.dask": address}),
+                      "-S", "descriptors.range_bins=10",  # the default descriptor width
+                      # searched ranges wider than kiss_icp's built-in max_range [20, 200] m:
+                      # every later stage takes them from the trials output (baseline at 220)
+                      "-S", "+trials.space.max_range={high: 250.0, default: 220.0}",
+                      temp=False)
+        from distributed import Client
+
+        with Client(address, timeout="20s") as client:  # the trials ran on the cluster
+            transitions = client.run_on_scheduler(
+                lambda dask_scheduler: dask_scheduler.transition_counter)
+        assert transitions > 0
     for stage in ("ingest", "descriptors", "trials", "fixed", "rte", "surrogate", "adaptive",
                   "evaluate"):
         assert f"Running stage '{stage}'" in log

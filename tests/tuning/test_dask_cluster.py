@@ -7,12 +7,7 @@ in the table exactly once, scored as a run without the kill scores it.
 
 from __future__ import annotations
 
-import contextlib
-import json
-import os
-import signal
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from concurrent.futures import Executor
@@ -21,50 +16,17 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 from conftest import settings
+from dask_cluster import stop, tcp_cluster
 
 from pipeline.tuning.smbo import run_trials
 from pipeline.tuning.table import JOINT, trials_path
-
-DASK = Path(sys.executable).with_name("dask")
-
-
-def start(args: list[str], log: Path) -> subprocess.Popen[bytes]:
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}  # tuning_adapters too
-    return subprocess.Popen([str(DASK), *args], stdout=subprocess.DEVNULL,
-                            stderr=log.open("wb"), env=env, start_new_session=True)
-
-
-def stop(proc: subprocess.Popen[bytes]) -> None:
-    """SIGKILL the process group (the worker's nanny, its worker process, trial servers)."""
-    with contextlib.suppress(ProcessLookupError):
-        os.killpg(proc.pid, signal.SIGKILL)
-    proc.wait()
 
 
 @pytest.fixture
 def cluster(tmp_path: Path) -> Iterator[tuple[str, list[subprocess.Popen[bytes]]]]:
     """(scheduler address, [worker 1, worker 2]): plain workers, random free ports."""
-    info = tmp_path / "scheduler.json"
-    procs = [start(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-                    "--scheduler-file", str(info)], tmp_path / "scheduler.log")]
-    try:
-        deadline = time.monotonic() + 30
-        while not info.is_file() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        address = json.loads(info.read_text())["address"]
-        assert address.startswith("tcp://127.0.0.1:")
-        workers = [start(["worker", address, "--nworkers", "1", "--nthreads", "1",
-                          "--no-dashboard", "--name", f"w{i}", "--local-directory",
-                          str(tmp_path / f"w{i}")], tmp_path / f"w{i}.log") for i in (1, 2)]
-        procs += workers
-        from distributed import Client
-
-        with Client(address, timeout="20s") as client:
-            client.wait_for_workers(2, timeout=30)
+    with tcp_cluster(tmp_path, 2) as (address, workers):
         yield address, workers
-    finally:
-        for proc in procs:
-            stop(proc)
 
 
 def table(out: Path, algorithm: str, study: str) -> dict[str, list]:
