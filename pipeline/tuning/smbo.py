@@ -314,9 +314,11 @@ def propose(search: TpeSearch, tid: int, done: dict[int, TrialResult],
 
 def make_job(study: Study, adapter: Adapter, tid: int, seed: int, params: Params, out_dir: Path,
              settings: TrialsSection, **pruning: Any) -> TrialJob:
-    """The picklable job of one trial (``pruning``: its checkpoints and thresholds)."""
-    return TrialJob(adapter=settings.algorithm, algorithm=adapter.name, sequences=study.sequences,
-                    trial=tid, seed=seed, params=dict(params), out_dir=str(out_dir),
+    """The picklable job of one trial (``pruning``: its checkpoints and thresholds); its paths
+    are absolute, as a Dask worker started in another folder (or machine) needs them."""
+    sequences = tuple((name, str(Path(path).resolve())) for name, path in study.sequences)
+    return TrialJob(adapter=settings.algorithm, algorithm=adapter.name, sequences=sequences,
+                    trial=tid, seed=seed, params=dict(params), out_dir=str(out_dir.resolve()),
                     length_m=settings.length_m, penalty_pct=settings.penalty_pct,
                     jump_limit_m=settings.jump_limit_m, time_limit_s=settings.time_limit_s,
                     adapter_options=dict(settings.adapter_options),
