@@ -80,7 +80,7 @@ def cloud_layouts(draw: st.DrawFn) -> dict[str, Any]:
     height, width = draw(st.integers(0, 3)), draw(st.integers(0, 6))
     consistent = draw(st.booleans())  # sizes that fit, or any
     step = 16 if consistent or not draw(RARELY) else draw(SMALL)
-    row_step = step * width if consistent or not draw(RARELY) else draw(SMALL)
+    row_step = step * width % 2**32 if consistent or not draw(RARELY) else draw(SMALL)
     need = row_step * max(height - 1, 0) + width * step if height * width else 0
     size = min(need, 4096) if consistent else draw(st.integers(0, 200))
     if draw(st.booleans()):  # coordinates of a scan in metres
