@@ -279,6 +279,9 @@ def test_metrics_and_plot_data_are_committed(repro: tuple[Path, str]) -> None:
     assert git(root, "status", "--porcelain") == ""
 
 
+PAPER_SELECTOR = "surrogate.k=5,surrogate.window=1"
+
+
 def readme_variations() -> dict[str, list[str]]:
     """The README's `dvc exp run` lines (in every ``sh`` block), keyed by what they set."""
     blocks = [b.split("```", 1)[0] for b in (REPO / "README.md").read_text().split("```sh")[1:]]
@@ -324,16 +327,23 @@ def exp_metrics(root: Path) -> dict[str, dict[str, Any]]:
 
 def test_readme_variations_are_the_ones_tested() -> None:
     assert set(readme_variations()) == {"trials.algorithm=gicp", "trials.algorithm=kiss_icp",
-                                        "trials.dask=local", "kitti", TCP_LINE}
+                                        "trials.dask=local", "kitti", TCP_LINE, PAPER_SELECTOR}
 
 
 def test_gicp_on_dask_experiment(repro: tuple[Path, str]) -> None:
-    """The README's gicp and Dask lines as one experiment (to keep the suite short), in a
-    temporary copy: `dvc exp show` sees its metrics, the workspace stays as committed."""
+    """The README's gicp, Dask and paper-selector lines as one experiment (to keep the suite
+    short), in a temporary copy: `dvc exp show` sees its metrics and params, the workspace stays
+    as committed."""
     root, _ = repro
     lines = readme_variations()
-    exp_run(root, "gicp-dask", *lines["trials.algorithm=gicp"], *lines["trials.dask=local"])
+    exp_run(root, "gicp-dask", *lines["trials.algorithm=gicp"], *lines["trials.dask=local"],
+            *lines[PAPER_SELECTOR])
     metrics = exp_metrics(root)["gicp-dask"]
+    shown = json.loads(dvc(root, "exp", "show", "--json"))
+    (params,) = [rev["data"]["params"]["params.yaml"]["data"] for commit in shown
+                 for exp in commit.get("experiments") or [] for rev in exp["revs"]
+                 if rev["name"] == "gicp-dask"]
+    assert (params["surrogate"]["k"], params["surrogate"]["window"]) == (5, 1)
     assert metrics["algorithm"] == "gicp" and metrics["length_m"] == TINY_L_M
     assert all(0 < v < 100 for v in metrics["rte_pct"].values()), metrics
     assert git(root, "status", "--porcelain") == ""
