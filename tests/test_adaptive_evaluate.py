@@ -113,6 +113,22 @@ def test_evaluate_without_a_successful_joint_trial(tmp_path: Path, validation_se
     assert code == 1 and "no successful joint trial" in out
 
 
+def test_trials_summary_counts_pruned_trials_apart_from_failed(tmp_path: Path) -> None:
+    from pipeline.odometry import get_adapter
+    from pipeline.report.evaluate import trials_summary
+    from pipeline.tuning.table import trials_path, write_trials
+
+    space = get_adapter("ndt").space
+    results = [TrialResult(i, status, "" if status == "ok" else "x", 1.5, 1.0, 7,
+                           space.defaults())
+               for i, status in enumerate(["ok", "pruned", "pruned", "failed", "lost"])]
+    write_trials(trials_path(tmp_path, "ndt", "cave_0"), space, results,
+                 {"space": space.to_json()})
+    summary = trials_summary({"trials": tmp_path})["trials"]
+    counts = tuple(summary[k] for k in ("trials", "failed", "pruned", "lost"))
+    assert counts == (5, 1, 2, 1)
+
+
 def test_evaluate_refuses_an_adaptive_run_of_another_algorithm(tmp_path: Path,
                                                                validation_set: Path) -> None:
     fixed = _joint_table(tmp_path / "fixed")

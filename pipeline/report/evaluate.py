@@ -267,7 +267,8 @@ def _kitti_summary(seg: KittiSegments) -> dict[str, float]:
 
 
 def trials_summary(studies: Mapping[str, Path]) -> dict[str, dict[str, float]]:
-    """Trial counts, failures and total wall time [s] of every SMBO output folder."""
+    """Trial counts by status (failed: the odometry failed; pruned: stopped early as hopeless;
+    lost: to the machinery) and total wall time [s] of every SMBO output folder."""
     from pipeline.evaluation.trials import read_trials_tables
 
     out = {}
@@ -275,7 +276,8 @@ def trials_summary(studies: Mapping[str, Path]) -> dict[str, dict[str, float]]:
         rows = read_trials_tables(folder).to_pylist()
         out[study] = {"studies": len({(r["algorithm"], r["sequence"]) for r in rows}),
                       "trials": len(rows),
-                      "failed": sum(r["status"] != "ok" for r in rows),
+                      **{status: sum(r["status"] == status for r in rows)
+                         for status in ("failed", "pruned", "lost")},
                       "wall_time_s": float(sum(r["wall_time_s"] for r in rows))}
     return out
 
