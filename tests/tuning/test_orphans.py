@@ -102,8 +102,16 @@ def dirs(tmp_path: Path) -> Iterator[tuple[Path, Path]]:
 
 
 def cli(*args: str) -> subprocess.Popen[bytes]:
+    """``adaptune ARGS`` with Ctrl-C as a user's shell gives it (default action, unblocked),
+    whatever the test process inherited or set (a background job ignores SIGINT)."""
     return subprocess.Popen([sys.executable, "-m", "stages.cli", *args],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            preexec_fn=_default_ctrl_c)
+
+
+def _default_ctrl_c() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
