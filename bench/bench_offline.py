@@ -31,8 +31,8 @@ WITHOUT, WITH = "without savings", "with savings"
 
 
 def run() -> list[Row]:
+    from pipeline.executor import open_executor
     from pipeline.sim.simulate import SimSpec, simulate_sequence
-    from pipeline.tuning.smbo import open_executor
 
     with tempfile.TemporaryDirectory() as tmp:
         seqs = [simulate_sequence(SimSpec(world, 1, FRAMES), Path(tmp) / f"{world}_0.mcap").path

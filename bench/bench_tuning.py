@@ -23,12 +23,13 @@ N_FRAMES = 300
 
 
 def run() -> list[Row]:
+    from pipeline.executor import open_executor
     from pipeline.odometry.base import Schedule
     from pipeline.odometry.registry import get_adapter
     from pipeline.sequence import SequenceReader
     from pipeline.sim.simulate import SimSpec, simulate_sequence
     from pipeline.tuning.job import TrialJob
-    from pipeline.tuning.smbo import TrialsSection, open_executor, run_trials
+    from pipeline.tuning.smbo import TrialsSection, run_trials
     from pipeline.tuning.worker import run_trial
 
     with tempfile.TemporaryDirectory() as tmp:

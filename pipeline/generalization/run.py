@@ -85,15 +85,11 @@ def run_suite(section: GeneralizeSection, inputs: SuiteInputs, out_dir: Path) ->
     worlds = suite_worlds(section)
     log.info("suite %s: %d worlds (%d frames), %d workers", section.suite, len(worlds),
              sum(w.spec.frames for w in worlds), section.workers)
-    with atomic_dir(out_dir) as tmp:
-        if section.workers == 1 or len(worlds) == 1:
-            return [_logged(score_world(w, inputs, tmp), i, len(worlds))
-                    for i, w in enumerate(worlds)]
-        from pipeline.tuning.smbo import open_executor  # spawned workers that end with us
+    from pipeline.executor import map_in_processes  # spawned workers that end with us
 
-        with open_executor(min(section.workers, len(worlds))) as pool:
-            futures = [pool.submit(score_world, w, inputs, tmp) for w in worlds]
-            return [_logged(f.result(), i, len(worlds)) for i, f in enumerate(futures)]
+    with atomic_dir(out_dir) as tmp:
+        return map_in_processes(score_world, [(w, inputs, tmp) for w in worlds], section.workers,
+                                on_done=lambda i, score: _logged(score, i, len(worlds)))
 
 
 def _logged(score: WorldScore, i: int, n: int) -> WorldScore:

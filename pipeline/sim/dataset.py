@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import logging
+import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import Field, field_validator
 
@@ -15,11 +17,13 @@ from pipeline.sim.simulate import SimSpec, SimSummary, derive_seed, simulate_seq
 from pipeline.sim.worlds import WORLDS
 
 log = logging.getLogger(__name__)
+PROGRESS = logging.getLogger("pipeline.progress")  # shown at any CLI verbosity (stages/cli.py)
 
 
 class SimulateSection(Section):
     """params.yaml section ``simulate``. Seeds derive from ``base.seed`` and the sequence name
-    unless ``seed`` is given here."""
+    unless ``seed`` is given here; ``workers``: sequences simulated at a time (processes; the
+    output does not depend on it)."""
 
     seed: int | None = Field(None, ge=0)
     sensor: Literal["hdl32", "hdl64", "vlp16"] = "hdl32"
@@ -31,6 +35,7 @@ class SimulateSection(Section):
     validation_count: int = Field(1, ge=0)
     validation_frames: int = Field(1050, ge=30)
     validation_segments: list[str] = Field(default_factory=lambda: list(LABELS), min_length=1)
+    workers: int = Field(2, ge=1)
 
     @field_validator("train")
     @classmethod
@@ -87,13 +92,41 @@ def simulate_set(
     section: SimulateSection, base_seed: int, out_dir: str | Path, progress: bool = False
 ) -> list[SimSummary]:
     """Write ``out_dir``/<name>.mcap for every sequence and ``out_dir``/index.json
-    ({"train": [...], "validation": [...]}); returns what was written."""
+    ({"train": [...], "validation": [...]}); returns what was written, in index order.
+
+    ``section.workers`` sequences at a time in spawned processes, the longest first; each
+    sequence depends only on its own spec, so the files are the same whatever ``workers``.
+    ``progress``: a bar per sequence (one worker only); a log line per finished sequence
+    otherwise."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    specs = dataset_specs(section, base_seed)
+    bars = progress and section.workers == 1
+    jobs = [(spec, out_dir / f"{name}.mcap", name, bars) for name, (_, spec) in specs.items()]
+    longest_first = sorted(range(len(jobs)), key=lambda i: -jobs[i][0].frames)
+    summaries = simulate_all(simulate_sequence, jobs, section.workers, not bars, longest_first)
     index: dict[str, list[str]] = {"train": [], "validation": []}
-    done = []
-    for name, (split, spec) in dataset_specs(section, base_seed).items():
-        done.append(simulate_sequence(spec, out_dir / f"{name}.mcap", name=name, progress=progress))
+    for name, (split, _) in specs.items():
         index[split].append(name)
     write_index(out_dir, index)
-    return done
+    return summaries
+
+
+def simulate_all(fn: Callable[..., SimSummary], jobs: Sequence[tuple[Any, ...]], workers: int,
+                 log_lines: bool, order: Sequence[int] | None = None) -> list[SimSummary]:
+    """``[fn(*job) for job in jobs]``, ``workers`` at a time in spawned processes, started in
+    ``order`` (``pipeline.executor.map_in_processes``); with ``log_lines`` a progress line per
+    finished sequence."""
+    from pipeline.executor import map_in_processes
+
+    t0 = time.monotonic()
+    finished = 0
+
+    def done(i: int, summary: SimSummary) -> None:
+        nonlocal finished
+        finished += 1
+        if log_lines:
+            PROGRESS.info("simulate [%d/%d] %s: %d frames, %.0f m, %.0f s", finished, len(jobs),
+                          summary.name, summary.frames, summary.length_m, time.monotonic() - t0)
+
+    return map_in_processes(fn, jobs, workers, done, order)

@@ -18,6 +18,7 @@ from pydantic import Field, field_validator, model_validator
 from pipeline.config import Section
 from pipeline.errors import InputError
 from pipeline.sequence_index import check_split, write_index
+from pipeline.sim.dataset import simulate_all
 from pipeline.sim.kitti_world import SCHEDULES
 from pipeline.sim.simulate import SimSummary, derive_seed
 
@@ -33,7 +34,8 @@ class SimulateKittiSection(Section):
     start/end; a list, not a mapping: `dvc exp run -S` merges mappings and reads the key 10 as a
     number, which DVC cannot sort beside "09").
     seed: null = derived from base.seed and the sequence name; motion_distortion: every scan a
-    sweep with per-point times (``SimSpec.motion_distortion``), as a real HDL-64E records.
+    sweep with per-point times (``SimSpec.motion_distortion``), as a real HDL-64E records;
+    workers: sequences simulated at a time (processes; the output does not depend on it).
     """
 
     trajectories: str | None = None
@@ -47,6 +49,7 @@ class SimulateKittiSection(Section):
     dropout: float = Field(0.01, ge=0.0, lt=1.0)
     seed: int | None = Field(None, ge=0)
     motion_distortion: bool = False
+    workers: int = Field(2, ge=1)
 
     @field_validator("train", "validation")
     @classmethod
@@ -90,12 +93,12 @@ def simulate_kitti_set(section: SimulateKittiSection, base_seed: int, out_dir: s
     """Simulate the configured sequences into ``out_dir`` (module docstring)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    done = []
     if section.trajectories is None:
         log.info("simulate_kitti: no trajectories configured, writing an empty data set")
-    for name in [*section.train, *section.validation]:
-        done.append(simulate_kitti_sequence(section, name, base_seed, out_dir / f"{name}.mcap",
-                                            progress))
+    bars = progress and section.workers == 1
+    jobs = [(section, name, base_seed, out_dir / f"{name}.mcap", bars)
+            for name in [*section.train, *section.validation]]
+    done = simulate_all(simulate_kitti_sequence, jobs, section.workers, not bars)
     write_index(out_dir, {"train": list(section.train), "validation": list(section.validation)})
     return done
 

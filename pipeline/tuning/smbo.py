@@ -23,10 +23,9 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-import multiprocessing
 import os
-from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,6 +35,7 @@ from pydantic import Field, field_validator
 
 from pipeline.config import Section
 from pipeline.errors import ConfigError, InfrastructureError, InputError
+from pipeline.executor import open_executor
 from pipeline.io_utils import exclusive_folder
 from pipeline.odometry.base import Adapter, Params, with_space
 from pipeline.tuning.fingerprint import check_fingerprint, study_fingerprint
@@ -374,60 +374,6 @@ class TrialExecutor:
 
     def __exit__(self, *exc: object) -> None:
         self._stack.__exit__(*exc)  # type: ignore[arg-type]
-
-
-@contextlib.contextmanager
-def open_executor(workers: int, dask: str | None = None) -> Iterator[Executor]:
-    """A concurrent.futures Executor with ``workers`` processes, shut down on exit.
-
-    ``dask=None``: ProcessPoolExecutor (spawn context; its workers end with this process).
-    ``"local"``: a Dask LocalCluster (``workers`` processes, one thread each). An address: a
-    client of that scheduler, whose workers may be started the plain way (``dask worker
-    tcp://...``): trial servers are started with subprocess, which daemonic processes may do.
-    """
-    if dask is None:
-        from pipeline.lifetime import become_pool_worker
-
-        pool = ProcessPoolExecutor(max_workers=workers,
-                                   mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=become_pool_worker, initargs=(os.getpid(),))
-        try:
-            yield pool
-        except BaseException:  # Ctrl-C, SIGTERM, an error: do not wait for running trials
-            for proc in list((getattr(pool, "_processes", None) or {}).values()):
-                proc.kill()  # their trial servers and tools end with them
-            raise
-        finally:
-            pool.shutdown(wait=True, cancel_futures=True)
-        return
-    with _dask_client(workers, dask) as client:
-        # pure=False: a trial run again (lost) is a new task, never the stored result
-        yield client.get_executor(pure=False)
-
-
-@contextlib.contextmanager
-def _dask_client(workers: int, address: str) -> Iterator[Any]:
-    """A client of a new LocalCluster (``"local"``) or of the scheduler at ``address``."""
-    from distributed import Client, LocalCluster
-
-    if address == "local":
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
-        client = Client(cluster)
-        try:
-            yield client
-        finally:
-            client.close()
-            cluster.close()
-        return
-    try:
-        client = Client(address, timeout="10s")
-    except (OSError, TimeoutError) as exc:
-        raise ConfigError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
-    try:
-        yield client
-    finally:
-        client.close()
 
 
 def check_shared(executor: Executor, paths: Sequence[str | Path], out_dir: str | Path) -> None:

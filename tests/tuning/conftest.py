@@ -13,7 +13,8 @@ sys.path.insert(0, str(Path(__file__).parent))  # tuning_adapters, also for spaw
 
 import tuning_adapters
 
-from pipeline.tuning.smbo import TrialsSection, open_executor
+from pipeline.executor import open_executor
+from pipeline.tuning.smbo import TrialsSection
 
 
 @pytest.fixture(scope="session")

@@ -1,0 +1,100 @@
+"""Worker processes for independent jobs: ``open_executor`` (a process pool or Dask) and
+``map_in_processes`` (every job of a list, ``workers`` at a time, results in list order).
+
+Pool workers are spawned (no forked state) and end when this process ends, for any reason
+(``pipeline/lifetime.py``; docs/design.md, "Processes").
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import os
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from typing import Any, TypeVar
+
+from pipeline.errors import ConfigError
+
+R = TypeVar("R")
+
+
+@contextlib.contextmanager
+def open_executor(workers: int, dask: str | None = None) -> Iterator[Executor]:
+    """A concurrent.futures Executor with ``workers`` processes, shut down on exit.
+
+    ``dask=None``: ProcessPoolExecutor (spawn context; its workers end with this process).
+    ``"local"``: a Dask LocalCluster (``workers`` processes, one thread each). An address: a
+    client of that scheduler, whose workers may be started the plain way (``dask worker
+    tcp://...``): trial servers are started with subprocess, which daemonic processes may do.
+    """
+    if dask is None:
+        from pipeline.lifetime import become_pool_worker
+
+        pool = ProcessPoolExecutor(max_workers=workers,
+                                   mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=become_pool_worker, initargs=(os.getpid(),))
+        try:
+            yield pool
+        except BaseException:  # Ctrl-C, SIGTERM, an error: do not wait for running trials
+            for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                proc.kill()  # their trial servers and tools end with them
+            raise
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+        return
+    with _dask_client(workers, dask) as client:
+        # pure=False: a trial run again (lost) is a new task, never the stored result
+        yield client.get_executor(pure=False)
+
+
+@contextlib.contextmanager
+def _dask_client(workers: int, address: str) -> Iterator[Any]:
+    """A client of a new LocalCluster (``"local"``) or of the scheduler at ``address``."""
+    from distributed import Client, LocalCluster
+
+    if address == "local":
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+        try:
+            yield client
+        finally:
+            client.close()
+            cluster.close()
+        return
+    try:
+        client = Client(address, timeout="10s")
+    except (OSError, TimeoutError) as exc:
+        raise ConfigError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
+    try:
+        yield client
+    finally:
+        client.close()
+
+
+
+def map_in_processes(fn: Callable[..., R], jobs: Sequence[tuple[Any, ...]], workers: int,
+                     on_done: Callable[[int, R], object] | None = None,
+                     order: Sequence[int] | None = None) -> list[R]:
+    """``[fn(*job) for job in jobs]``, ``workers`` jobs at a time in spawned processes (in this
+    process when ``workers`` is 1 or there is one job). ``on_done(i, result)`` runs here as job
+    i finishes; ``order``: the order the jobs are started in (longest first keeps the workers
+    busy to the end), default the list's. ``fn`` and the jobs must be picklable; the first
+    failure ends the other jobs and is raised."""
+    order = list(range(len(jobs))) if order is None else list(order)
+    results: dict[int, R] = {}
+    if workers == 1 or len(jobs) <= 1:
+        for i in order:
+            results[i] = fn(*jobs[i])
+            if on_done is not None:
+                on_done(i, results[i])
+    else:
+        with open_executor(min(workers, len(jobs))) as pool:
+            futures = {pool.submit(fn, *jobs[i]): i for i in order}
+            for fut in as_completed(futures):
+                i = futures[fut]
+                results[i] = fut.result()
+                if on_done is not None:
+                    on_done(i, results[i])
+    return [results[i] for i in range(len(jobs))]
