@@ -107,11 +107,14 @@ class FixedSection(Section):
     warm_start: the joint study starts from what the per-sequence studies measured: after the
     baseline, its first ``warm_start`` trials are the parameter sets they predict best for all
     sequences together (``pipeline.tuning.warm_start``), not random ones; 0 = off.
+    pruning: the joint study's own pruner settings (null = ``trials.pruning``): its trials run
+    every training sequence, and its rows do not train the surrogate.
     """
 
     iterations: int | None = Field(None, ge=1)
     workers: int | None = Field(None, ge=1)
     warm_start: int = Field(0, ge=0)
+    pruning: PruningSection | None = None
 
 
 @dataclass

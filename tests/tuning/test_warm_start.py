@@ -78,3 +78,26 @@ def test_warm_start_options(sequences: list[Path], tmp_path: Path) -> None:
     params.write_text(json.dumps({"fixed": {"warm_start": -1}}))
     res = CliRunner().invoke(main, [*run, "--joint", "--warm-start", str(tmp_path)])
     assert res.exit_code == 1 and "warm_start" in res.output
+
+
+def test_the_joint_study_has_its_own_pruner(sequences: list[Path], tmp_path: Path) -> None:
+    """fixed.pruning replaces trials.pruning for the joint study only: the per-sequence
+    studies run whole (their rows train the surrogate), the joint one prunes."""
+    params = tmp_path / "params.yaml"
+    params.write_text(json.dumps({
+        "base": {"seed": 1, "length_m": 5.0},
+        "trials": {"algorithm": "tuning_adapters:drift", "iterations": 12, "workers": 1,
+                   "startup_trials": 3, "pruning": {"percentile": None}},
+        "fixed": {"pruning": {"percentile": 10.0, "checkpoints": 5, "warmup": 0.2,
+                              "min_trials": 3}}}))
+
+    def statuses(*extra: str) -> set[str]:
+        out = tmp_path / ("fixed" if extra else "trials")
+        res = CliRunner().invoke(main, ["trials", *map(str, sequences), "--out", str(out),
+                                        "--params", str(params), "--json", *extra])
+        assert res.exit_code == 0, res.output
+        tables = sorted(out.glob("trials/algorithm=drift/sequence=*/trials.parquet"))
+        return {st for t in tables for st in pq.read_table(t).column("status").to_pylist()}
+
+    assert statuses() == {"ok"}
+    assert statuses("--joint") == {"ok", "pruned"}
