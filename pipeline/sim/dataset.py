@@ -104,7 +104,8 @@ def simulate_set(
     bars = progress and section.workers == 1
     jobs = [(spec, out_dir / f"{name}.mcap", name, bars) for name, (_, spec) in specs.items()]
     longest_first = sorted(range(len(jobs)), key=lambda i: -jobs[i][0].frames)
-    summaries = simulate_all(simulate_sequence, jobs, section.workers, not bars, longest_first)
+    summaries = simulate_all(simulate_sequence, jobs, [job[1] for job in jobs], section.workers,
+                             not bars, longest_first)
     index: dict[str, list[str]] = {"train": [], "validation": []}
     for name, (split, _) in specs.items():
         index[split].append(name)
@@ -112,12 +113,15 @@ def simulate_set(
     return summaries
 
 
-def simulate_all(fn: Callable[..., SimSummary], jobs: Sequence[tuple[Any, ...]], workers: int,
-                 log_lines: bool, order: Sequence[int] | None = None) -> list[SimSummary]:
-    """``[fn(*job) for job in jobs]``, ``workers`` at a time in spawned processes, started in
-    ``order`` (``pipeline.executor.map_in_processes``); with ``log_lines`` a progress line per
-    finished sequence."""
+def simulate_all(fn: Callable[..., SimSummary], jobs: Sequence[tuple[Any, ...]],
+                 outputs: Sequence[Path], workers: int, log_lines: bool,
+                 order: Sequence[int] | None = None) -> list[SimSummary]:
+    """``[fn(*job) for job in jobs]`` (job i writes ``outputs[i]``), ``workers`` at a time in
+    spawned processes, started in ``order`` (``pipeline.executor.map_in_processes``); with
+    ``log_lines`` a progress line per finished sequence. On a failure (or Ctrl-C) the other
+    workers are killed, and the temporaries of their unfinished outputs removed."""
     from pipeline.executor import map_in_processes
+    from pipeline.io_utils import remove_stale_temps
 
     t0 = time.monotonic()
     finished = 0
@@ -129,4 +133,9 @@ def simulate_all(fn: Callable[..., SimSummary], jobs: Sequence[tuple[Any, ...]],
             PROGRESS.info("simulate [%d/%d] %s: %d frames, %.0f m, %.0f s", finished, len(jobs),
                           summary.name, summary.frames, summary.length_m, time.monotonic() - t0)
 
-    return map_in_processes(fn, jobs, workers, done, order)
+    try:
+        return map_in_processes(fn, jobs, workers, done, order)
+    except BaseException:
+        for path in outputs:  # the workers are gone: what they were writing is stale
+            remove_stale_temps(path)
+        raise

@@ -98,7 +98,8 @@ def simulate_kitti_set(section: SimulateKittiSection, base_seed: int, out_dir: s
     bars = progress and section.workers == 1
     jobs = [(section, name, base_seed, out_dir / f"{name}.mcap", bars)
             for name in [*section.train, *section.validation]]
-    done = simulate_all(simulate_kitti_sequence, jobs, section.workers, not bars)
+    done = simulate_all(simulate_kitti_sequence, jobs, [job[3] for job in jobs], section.workers,
+                        not bars)
     write_index(out_dir, {"train": list(section.train), "validation": list(section.validation)})
     return done
 

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
 from pydantic import ValidationError
 
-from pipeline.sim.dataset import SimulateSection, simulate_set
+from pipeline.errors import InputError
+from pipeline.sim.dataset import SimulateSection, simulate_all, simulate_set
+from pipeline.sim.simulate import SimSpec, SimSummary, simulate_sequence
 
 
 def test_workers_write_the_same_bytes_as_one_process(tmp_path: Path) -> None:
@@ -28,3 +31,23 @@ def test_workers_write_the_same_bytes_as_one_process(tmp_path: Path) -> None:
 def test_workers_must_be_at_least_one() -> None:
     with pytest.raises(ValidationError, match="workers"):
         SimulateSection(workers=0)
+
+
+def _simulate_or_fail(spec: SimSpec, out: Path, wait_for: Path | None) -> SimSummary:
+    """In a worker: simulate, or (``wait_for``) fail once the other worker is writing
+    ``wait_for`` (its temporary exists)."""
+    if wait_for is None:
+        return simulate_sequence(spec, out)
+    for _ in range(600):
+        if list(wait_for.parent.glob(f".{wait_for.name}.*.tmp")):
+            break
+        time.sleep(0.05)
+    raise InputError("this job fails")
+
+
+def test_a_failing_job_leaves_no_temporary_of_the_others(tmp_path: Path) -> None:
+    long, bad = tmp_path / "long.mcap", tmp_path / "bad.mcap"
+    jobs = [(SimSpec("cave", 1, 500, "vlp16"), long, None), (SimSpec("cave", 2, 10), bad, long)]
+    with pytest.raises(InputError, match="this job fails"):
+        simulate_all(_simulate_or_fail, jobs, [long, bad], 2, log_lines=False)
+    assert list(tmp_path.iterdir()) == []  # the long job was killed mid-write, cleaned up
