@@ -73,7 +73,6 @@ def _dask_client(workers: int, address: str) -> Iterator[Any]:
         client.close()
 
 
-
 def map_in_processes(fn: Callable[..., R], jobs: Sequence[tuple[Any, ...]], workers: int,
                      on_done: Callable[[int, R], object] | None = None,
                      order: Sequence[int] | None = None) -> list[R]:
