@@ -73,7 +73,55 @@ def run() -> list[Row]:
                                 _overhead_pct(get_adapter("ndt"), path, scans), "%", "",
                                 "<= 5 % (incl. MCAP decode)"))
         rows.append(_street_overhead(Path(tmp)))
+        rows.extend(_ndt_against_reference(Path(tmp)))
     return rows
+
+
+def _ndt_against_reference(tmp: Path, n_frames: int = 300, n_sets: int = 8) -> list[Row]:
+    """Frames/s of ``ndt`` over a simulated cave and street with ``n_sets`` random parameter
+    sets (as a study's trials draw them; CPU time of one process), compiled
+    (pipeline/odometry/ndt_kernel.py) against the numpy reference (bench/ndt_reference.py)
+    in the same run, and the largest difference of their positions."""
+    from functools import partial
+
+    import numpy as np
+    from ndt_reference import ReferenceNdtOdometry
+
+    from pipeline.odometry import get_adapter
+    from pipeline.odometry.base import Schedule, run_streaming
+    from pipeline.sequence import SequenceReader
+    from pipeline.sim.simulate import SimSpec, simulate_sequence
+
+    rng = np.random.default_rng(16)
+    sets = [{"resolution": float(r), "keyframe_interval": float(k)}
+            for r, k in rng.uniform([1.0, 0.0], [10.0, 10.0], (n_sets, 2))]
+    cpu = {"compiled": 0.0, "reference": 0.0}
+    frames, worst_m = 0, 0.0
+    for label in ("cave", "street"):
+        path = simulate_sequence(SimSpec(label, 3, n_frames), tmp / f"{label}.mcap").path
+        with SequenceReader(path) as reader:
+            scans = list(reader)
+        adapter = get_adapter("ndt")
+        adapter.warm(scans)  # and compiles the kernels, as does the next line the reference's
+        reference = partial(ReferenceNdtOdometry, options=adapter.options,
+                            sources=adapter.sources)
+        run_streaming(reference, scans[:2], Schedule.constant(sets[0], 2))
+        for params in sets:
+            schedule = Schedule.constant(params, len(scans))
+            t0 = time.process_time()
+            new = adapter.run(scans, schedule)
+            t1 = time.process_time()
+            ref = run_streaming(reference, scans, schedule)
+            cpu["compiled"] += t1 - t0
+            cpu["reference"] += time.process_time() - t1
+            frames += len(scans)
+            worst_m = max(worst_m, float(np.abs(new.T_world_lidar[:, :3, 3]
+                                                - ref.T_world_lidar[:, :3, 3]).max()))
+    what = f"{n_sets} random parameter sets x simulated cave + street, {frames} frames"
+    return [Row(f"ndt frames/s, compiled ({what})", frames / cpu["compiled"], "frames/s",
+                f"{frames / cpu['reference']:.0f} numpy reference", ">= 2x the reference"),
+            Row("ndt compiled vs numpy reference: largest position difference", worst_m, "m",
+                "", "<= 1e-9 m")]
 
 
 def _street_overhead(tmp: Path, n_frames: int = 300) -> Row:

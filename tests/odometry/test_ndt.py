@@ -7,19 +7,24 @@ from odometry_data import Seq
 
 from pipeline.odometry import get_adapter, run_sequence
 from pipeline.odometry.base import Schedule
-from pipeline.odometry.common import DownsampleCache, se3_exp, voxel_downsample
+from pipeline.odometry.common import DownsampleCache, se3_exp, voxel_downsample, voxel_keys
 from pipeline.odometry.ndt import NdtOdometry, VoxelMap
 from pipeline.sequence import SequenceReader
 
 
-def _map_and_source(rng: np.random.Generator) -> tuple[NdtOdometry, np.ndarray]:
-    """A voxel map of a noisy box room (walls, floor) and a source cloud of the same room."""
+def _room(rng: np.random.Generator) -> np.ndarray:
+    """(18000, 3) points [m] of a noisy box room: two walls and the floor."""
     n = 6000
     u = rng.uniform(-8, 8, size=(n, 2))
     walls = [np.c_[u[:, 0], np.full(n, 8.0), u[:, 1] / 4],
              np.c_[np.full(n, -8.0), u[:, 0], u[:, 1] / 4],
              np.c_[u, np.full(n, -1.5)]]
-    room = np.vstack(walls) + rng.normal(0, 0.05, (3 * n, 3))
+    return np.vstack(walls) + rng.normal(0, 0.05, (3 * n, 3))
+
+
+def _map_and_source(rng: np.random.Generator) -> tuple[NdtOdometry, np.ndarray]:
+    """A voxel map of a noisy box room (walls, floor) and a source cloud of the same room."""
+    room = _room(rng)
     odom = NdtOdometry({"resolution": 2.0, "keyframe_interval": 4.0})
     odom.voxels = VoxelMap.build(room, 2.0, 5)
     return odom, voxel_downsample(room[::7], 0.5)
@@ -80,3 +85,65 @@ def test_cache_is_keyed_by_the_array_and_the_voxel_size(rng: np.random.Generator
     np.testing.assert_array_equal(sources.get(b[:, :3], 1.0), expected)
     assert sources.get(b[:, :3], 1.0) is not sources.get(a[:, :3], 1.0)
     np.testing.assert_array_equal(sources.get(a[:, :3], 2.0), voxel_downsample(a[:, :3], 2.0))
+
+
+def _voxels_by_numpy(points: np.ndarray, resolution: float, min_points: int) -> tuple:
+    """The voxel map by plain numpy (np.unique, batched eigh): the reference of
+    ``build_voxels``."""
+    keys, inv, counts = np.unique(voxel_keys(points, resolution), return_inverse=True,
+                                  return_counts=True)
+    keep = counts >= min_points
+    means = np.stack([np.bincount(inv, points[:, k]) for k in range(3)], 1) / counts[:, None]
+    d = points - means[inv]
+    cov = np.einsum("ni,nj->nij", d, d)
+    cov = np.stack([np.bincount(inv, cov[:, i, j]) for i in range(3) for j in range(3)], 1)
+    cov = cov.reshape(-1, 3, 3) / np.maximum(counts - 1.0, 1.0)[:, None, None]
+    evals, evecs = np.linalg.eigh(cov[keep])
+    evals = np.maximum(evals, np.maximum(0.01 * evals[:, 2:3], 1e-6))
+    inv_covs = np.einsum("kij,kj,klj->kil", evecs, 1.0 / evals, evecs)
+    return keys[keep], means[keep], inv_covs
+
+
+def test_voxel_map_matches_numpy(rng: np.random.Generator) -> None:
+    """The compiled hash-table build gives numpy's voxels: same keys (sorted), means and
+    clamped inverse covariances, also far from the origin and with degenerate (planar,
+    linear) voxels, whose eigenvalues are clamped."""
+    line = np.c_[np.linspace(0, 30, 400), np.zeros(400), np.zeros(400)] + 0.3
+    far = rng.normal(0, 3, (3000, 3)) + np.array([4000.0, -2500.0, 30.0])
+    room = _room(rng)
+    for points in (room, far, np.vstack([far, line])):
+        for resolution in (0.7, 2.0, 5.0):
+            ref = _voxels_by_numpy(points, resolution, 5)
+            got = VoxelMap.build(points, resolution, 5)
+            np.testing.assert_array_equal(got.keys, ref[0])
+            np.testing.assert_allclose(got.means, ref[1], rtol=0, atol=1e-9)
+            scale = np.abs(ref[2]).max(axis=(1, 2))[:, None, None]
+            np.testing.assert_allclose(got.inv_covs / scale, ref[2] / scale, rtol=0, atol=1e-9)
+
+
+def test_hessian_and_gradient_match_the_per_pair_sums(rng: np.random.Generator) -> None:
+    """H = sum w J^T C J and g = sum w J^T C e over the point-voxel pairs, formed directly
+    per pair in numpy, equal the kernel's per-voxel moment sums."""
+    odom, source = _map_and_source(rng)
+    T = se3_exp(np.array([0.05, -0.02, 0.3, 0.4, -0.3, 0.1]))
+    score, H, g, pairs = odom._evaluate(source, T)
+    v = odom.voxels
+    R, t = T[:3, :3], T[:3, 3]
+    q = source @ R.T + t
+    idx = np.searchsorted(v.keys, voxel_keys(q, v.resolution))
+    idx = np.minimum(idx, len(v.keys) - 1)
+    hit = v.keys[idx] == voxel_keys(q, v.resolution)
+    p, q, idx = source[hit], q[hit], idx[hit]
+    C, e = v.inv_covs[idx], q - v.means[idx]
+    m = np.einsum("ni,nij,nj->n", e, C, e)
+    w = -odom.d1 * odom.d2 * np.exp(-0.5 * odom.d2 * m)
+    cross = np.zeros((len(p), 3, 3))  # -[p]x
+    cross[:, 0, 1], cross[:, 0, 2], cross[:, 1, 2] = p[:, 2], -p[:, 1], p[:, 0]
+    cross -= cross.transpose(0, 2, 1)
+    J = np.concatenate([R @ cross, np.broadcast_to(R, (len(p), 3, 3))], axis=2)
+    H_ref = np.einsum("n,nia,nij,njb->ab", w, J, C, J)
+    g_ref = np.einsum("n,nia,nij,nj->a", w, J, C, e)
+    assert pairs == len(p) > 1000
+    np.testing.assert_allclose(score, np.sum(-odom.d1 * np.exp(-0.5 * odom.d2 * m)), rtol=1e-12)
+    np.testing.assert_allclose(H, H_ref, rtol=1e-9, atol=1e-9 * np.abs(H_ref).max())
+    np.testing.assert_allclose(g, g_ref, rtol=1e-9, atol=1e-9 * np.abs(g_ref).max())
