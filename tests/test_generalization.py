@@ -13,6 +13,7 @@ import pytest
 
 from pipeline.config import validate_section
 from pipeline.errors import ConfigError
+from pipeline.generalization.run import WorldScore
 from pipeline.generalization.suite import GeneralizeSection, suite_worlds, world_of
 from pipeline.generalization.summary import ratio_summary
 from pipeline.sim.raycast import Raycaster
@@ -77,6 +78,16 @@ def test_ratio_summary() -> None:
     lo, hi = s["median_interval"]
     assert 0.5 <= lo <= s["median"] <= hi <= 1.2
     assert ratio_summary(names, [0.5, 0.8, 1.2, 0.6, math.nan], 500, seed=1) == s
+
+
+def test_each_ratio_divides_by_its_own_setting() -> None:
+    """adaptive / baseline divides by the baseline's RTE, adaptive / fixed by the fixed
+    parameters' (the two were swapped in metrics/generalization.json until issue 16)."""
+    score = WorldScore("w", ("cave", "street"), "hdl32", 100, 1,
+                       {"baseline": 2.0, "fixed": 4.0, "adaptive": 1.0}, {}, 0, 0.0)
+    assert score.ratios() == {"adaptive_vs_baseline": 0.5, "adaptive_vs_fixed": 0.25,
+                              "adaptive_vs_best": 0.5}
+    assert score.best_fixed_setting == "baseline"
 
 
 @pytest.mark.parametrize(("data", "message"), [

@@ -51,7 +51,7 @@ class WorldScore:
 
     def ratios(self) -> dict[str, float]:
         """adaptive / baseline, adaptive / fixed and adaptive / min(baseline, fixed)."""
-        a, b, f = (self.rte_pct[s] for s in SETTINGS[::-1])
+        a, b, f = (self.rte_pct[s] for s in ("adaptive", "baseline", "fixed"))
         return {"adaptive_vs_baseline": _ratio(a, b), "adaptive_vs_fixed": _ratio(a, f),
                 "adaptive_vs_best": _ratio(a, min(b, f))}
 
