@@ -395,3 +395,29 @@ def test_the_forest_runtime_predicts_like_scikit_learn(kitti_root: Path) -> None
     queries = np.hstack([E, np.random.default_rng(2).random((len(E), 2))])
     np.testing.assert_allclose(exported.predict(queries), estimator.predict(queries), rtol=1e-12)
     assert len(exported.roots) == 6 and exported.to_json()["nodes"] == len(exported.feature)
+
+
+@pytest.mark.parametrize("grouped", [True, False])
+def test_the_cross_validation_knn_equals_a_flat_knn(grouped: bool) -> None:
+    """GroupedKnnRegressor (the selector's exact grouped search, used by the
+    leave-one-sequence-out CV) predicts the kNN mean of scikit-learn's flat search, on rows
+    that group by trial set and (fallback) on rows that do not."""
+    from sklearn.neighbors import KNeighborsRegressor
+
+    from pipeline.surrogates.knn import GroupedKnnRegressor
+
+    rng = np.random.default_rng(3)
+    blocks = []
+    for _ in range(3 if grouped else 70):  # sequences (groups), each its own trials
+        trials = rng.uniform(0, 3, (6, 2))
+        for _ in range(9 if grouped else 1):  # frames
+            e = rng.normal(size=4)
+            blocks.append(np.hstack([np.repeat(e[None], len(trials), 0), trials]))
+    rows = np.vstack(blocks)
+    t = rng.lognormal(size=len(rows))
+    queries = np.hstack([np.repeat(rng.normal(size=(5, 4)), 7, 0), rng.uniform(0, 3, (35, 2))])
+    ours = GroupedKnnRegressor(5, 2).fit(rows, t)
+    assert (ours.groups is not None) == grouped
+    np.testing.assert_allclose(ours.predict(queries),
+                               KNeighborsRegressor(n_neighbors=5).fit(rows, t).predict(queries),
+                               rtol=1e-12)

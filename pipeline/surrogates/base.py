@@ -120,8 +120,9 @@ class Surrogate(Protocol):
         ...
 
     @classmethod
-    def regressor(cls, section: SurrogateSection) -> Regressor:
-        """A fresh estimator of this kind (leave-one-sequence-out cross-validation)."""
+    def regressor(cls, section: SurrogateSection, n_params: int) -> Regressor:
+        """A fresh estimator of this kind (leave-one-sequence-out cross-validation) on flat
+        rows [E_s, X_s] whose last ``n_params`` columns are X_s."""
         ...
 
     def predict(self, features: NDArray[np.float64]) -> NDArray[np.float64]:

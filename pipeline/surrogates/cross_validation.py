@@ -4,7 +4,8 @@ Every training sequence in turn is held out: a ``Regressor`` of the configured s
 fitted on the other sequences' rows and predicts the held-out rows. Reported in y units
 (% RTE): MAE and RMSE; and a regret: for every held-out frame, the trial the surrogate ranks
 best among that frame's trials against the best trial of that frame (mean of y_chosen - y_best,
-and of y_best, y_chosen).
+and of y_best, y_chosen). Trials predicted exactly alike (the same k neighbours) tie; y_chosen
+is then their mean y, what a random pick among them gives on average.
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ def cross_validate(
         if len(frames) > settings.cv_max_frames:
             frames = rng.choice(frames, settings.cv_max_frames, replace=False)
         test &= np.isin(rows.frames, frames)
-        model = kind.regressor(settings).fit(feats[train], t[train])
+        model = kind.regressor(settings, rows.U.shape[1]).fit(feats[train], t[train])
         pred_y = from_target(model.predict(feats[test]), settings.target)
         true_y = rows.y[test]
         err = pred_y - true_y
@@ -68,8 +69,9 @@ def cross_validate(
         for f in np.unique(fr):
             sel = fr == f
             yt, yp = true_y[sel], pred_y[sel]
-            regrets.append(yt[np.argmin(yp)] - yt.min())
-            chosen.append(yt[np.argmin(yp)])
+            y_chosen = float(yt[yp == yp.min()].mean())  # exact ties: their mean, not the first
+            regrets.append(y_chosen - yt.min())
+            chosen.append(y_chosen)
             best.append(yt.min())
     if not errs:
         return _empty()

@@ -72,7 +72,7 @@ class ForestSurrogate:
                                      max_samples=max_samples, random_state=section.seed)
 
     @classmethod
-    def regressor(cls, section: SurrogateSection) -> Regressor:
+    def regressor(cls, section: SurrogateSection, n_params: int) -> Regressor:
         return _ForestRegressor(section)
 
     @classmethod

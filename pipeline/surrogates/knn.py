@@ -14,7 +14,14 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.surrogates.base import Arrays, ArraySpec, Query, Regressor, TrainingSet
+from pipeline.surrogates.base import (
+    Arrays,
+    ArraySpec,
+    Query,
+    Regressor,
+    TrainingSet,
+    environment_d2,
+)
 from pipeline.surrogates.knn_search import (
     GroupedNeighbourhood,
     Neighbourhood,
@@ -52,11 +59,8 @@ class KnnSurrogate:
                    training.rows_x, training.rows_t)
 
     @classmethod
-    def regressor(cls, section: SurrogateSection) -> Regressor:
-        from sklearn.neighbors import KNeighborsRegressor
-
-        regressor: Regressor = KNeighborsRegressor(n_neighbors=section.k)
-        return regressor
+    def regressor(cls, section: SurrogateSection, n_params: int) -> Regressor:
+        return GroupedKnnRegressor(section.k, n_params)
 
     def predict(self, features: NDArray[np.float64]) -> NDArray[np.float64]:
         """Exact kNN mean over every row (a kd-tree of the joint features): (n,)."""
@@ -98,6 +102,55 @@ class KnnSurrogate:
                options: Mapping[str, Any]) -> KnnSearch:
         return KnnSearch(self, candidates_u, x_scale, int(options.get("subset_rows", 4096)),
                          bool(options.get("grouped", True)))
+
+
+class GroupedKnnRegressor:
+    """The kNN mean over flat rows [E_s, X_s] (the cross-validation's view), searched as the
+    selector searches: exactly, by frame groups (``pipeline.surrogates.knn_search``).
+
+    ``fit`` groups the rows into frames (rows with the same E_s, in row order within a frame)
+    and the frames into groups sharing one block of trial vectors; ``predict`` answers all
+    queries of one E_s at once. Training rows that do not group (more than ``MAX_GROUPS``
+    blocks, as pruned trials give) are searched by scikit-learn's kd-tree instead. Both give
+    the Euclidean kNN mean of the k nearest rows (ties at the k-th distance aside).
+    """
+
+    def __init__(self, k: int, n_params: int) -> None:
+        self.k = k
+        self.n_params = n_params
+        self.groups: TrialGroups | None = None
+        self.fallback: Regressor | None = None
+
+    def fit(self, features: NDArray[np.float64], t: NDArray[np.float64]) -> GroupedKnnRegressor:
+        """Fit on (M, D + P) rows and their (M,) targets; returns itself."""
+        d = features.shape[1] - self.n_params
+        env, frame = np.unique(features[:, :d], axis=0, return_inverse=True)
+        frame = frame.reshape(-1)
+        order = np.argsort(frame, kind="stable")
+        offsets = np.concatenate([[0], np.cumsum(np.bincount(frame, minlength=len(env)))])
+        model = KnnSurrogate(min(self.k, len(t)), "log", env, offsets.astype(np.int64),
+                             features[order, d:], t[order])
+        self.groups = TrialGroups.build(model, features[:1, d:], 1.0)
+        if self.groups is None:
+            from sklearn.neighbors import KNeighborsRegressor
+
+            self.fallback = KNeighborsRegressor(n_neighbors=self.k).fit(features, t)
+        return self
+
+    def predict(self, features: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(n, D + P) rows -> (n,) kNN mean targets."""
+        if self.fallback is not None:
+            return np.asarray(self.fallback.predict(features), np.float64)
+        assert self.groups is not None, "fit first"
+        d = features.shape[1] - self.n_params
+        out = np.empty(len(features))
+        queries, which = np.unique(features[:, :d], axis=0, return_inverse=True)
+        by_query = np.argsort(which.reshape(-1), kind="stable")
+        bounds = np.cumsum(np.bincount(which.reshape(-1), minlength=len(queries)))[:-1]
+        for e_s, rows in zip(queries, np.split(by_query, bounds), strict=True):
+            env_d2 = environment_d2(self.groups.model.env, e_s)
+            out[rows] = GroupedNeighbourhood(self.groups, env_d2).predict(features[rows, d:]).t
+        return out
 
 
 class KnnSearch:
