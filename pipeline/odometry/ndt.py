@@ -8,8 +8,9 @@ Algorithm, per scan:
 2. Target: the keyframe (a full scan, stored in world coordinates) in a voxel grid of side
    ``resolution``; per voxel with >= ``min_points`` points the mean and the covariance,
    regularised by clamping its eigenvalues to >= 1 % of the largest (Magnusson's rule),
-   and its inverse. Voxel keys are packed integer coordinates, kept sorted; a source point
-   finds its voxel by binary search (and, with ``neighbors=7``, the 6 face neighbours).
+   and its inverse. Voxel keys are packed integer coordinates, kept sorted and in a hash
+   table; a source point finds its voxel by hashing (and, with ``neighbors=7``, the 6 face
+   neighbours).
 3. Pose: Gauss-Newton on the NDT score sum_k -d1 exp(-d2/2 e_k^T S_k^-1 e_k) (the outlier
    ratio 0.55 gives d1, d2 as in Magnusson's thesis), i.e. iteratively reweighted least
    squares with weights -d1 d2/2 exp(...), Levenberg damping (a step is kept only when the
@@ -53,7 +54,13 @@ from pipeline.odometry.common import (
     parse_options,
     vector_norm,
 )
-from pipeline.odometry.ndt_kernel import build_voxels, ndt_align, ndt_terms, transform_points
+from pipeline.odometry.ndt_kernel import (
+    build_voxels,
+    key_table,
+    ndt_align,
+    ndt_terms,
+    transform_points,
+)
 from pipeline.sequence import Scan
 from pipeline.trajectory import Trajectory
 
@@ -88,19 +95,22 @@ class NdtOptions(Section):
 
 @dataclass
 class VoxelMap:
-    """NDT voxels of one keyframe: sorted keys (K,), means (K, 3), inverse covariances (K, 3, 3)."""
+    """NDT voxels of one keyframe: sorted keys (K,), means (K, 3), inverse covariances
+    (K, 3, 3), and the hash table of the keys (``ndt_kernel.key_table``)."""
 
     resolution: float
     keys: NDArray[np.int64]
     means: F64
     inv_covs: F64
+    slot_key: NDArray[np.int64]
+    slot_index: NDArray[np.int64]
 
     @classmethod
     def build(cls, points_world: F64, resolution: float, min_points: int) -> VoxelMap:
         """Voxel statistics of ``points_world`` (M, 3) [m] at ``resolution`` [m]."""
         keys, means, inv_covs = build_voxels(np.ascontiguousarray(points_world, np.float64),
                                              float(resolution), int(min_points))
-        return cls(resolution, keys, means, inv_covs)
+        return cls(resolution, keys, means, inv_covs, *key_table(keys))
 
     def __len__(self) -> int:
         return len(self.keys)
@@ -171,8 +181,8 @@ class NdtOdometry:
         and the number of point-voxel pairs (``ndt_terms``)."""
         assert self.voxels is not None
         v = self.voxels
-        return ndt_terms(source, T, v.keys, v.means, v.inv_covs, 1.0 / v.resolution,
-                         self._offsets, self.d1, self.d2)
+        return ndt_terms(source, T, v.slot_key, v.slot_index, v.means, v.inv_covs,
+                         1.0 / v.resolution, self._offsets, self.d1, self.d2)
 
     def _align(self, source: F64, guess: F64) -> F64:
         """Levenberg-damped Gauss-Newton from ``guess`` (``ndt_kernel.ndt_align``); the best
@@ -180,7 +190,8 @@ class NdtOdometry:
         point-voxel pairs were found)."""
         assert self.voxels is not None
         v = self.voxels
-        T, optimised = ndt_align(source, guess, v.keys, v.means, v.inv_covs, 1.0 / v.resolution,
+        T, optimised = ndt_align(source, guess, v.slot_key, v.slot_index, v.means, v.inv_covs,
+                                 1.0 / v.resolution,
                                  self._offsets, self.d1, self.d2, self.options.max_iterations,
                                  self.options.convergence)
         if not optimised:

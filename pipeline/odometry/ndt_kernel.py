@@ -165,6 +165,42 @@ def build_voxels(points_world: F64, resolution: float,
 
 
 @numba.njit(cache=True, nogil=True)
+def key_table(keys: NDArray[np.int64]) -> tuple[NDArray[np.int64],
+                                               NDArray[np.int64]]:  # pragma: no cover
+    """Open-addressing hash table of the voxel ``keys`` (K,): slot keys and slot indices into
+    ``keys`` (S,), S a power of two >= 2K, empty slots -1 (``find_voxel`` reads it). A source
+    point finds its voxel in about one probe instead of a binary search's log2(K)."""
+    size = 2
+    while size < 2 * len(keys):
+        size *= 2
+    mask = np.int64(size - 1)
+    slot_key = np.full(size, _EMPTY, np.int64)
+    slot_index = np.full(size, -1, np.int64)
+    for i in range(len(keys)):
+        h = _hash_slot(keys[i], mask)
+        while slot_key[h] != _EMPTY:
+            h = (h + 1) & mask
+        slot_key[h] = keys[i]
+        slot_index[h] = i
+    return slot_key, slot_index
+
+
+@numba.njit(cache=True, nogil=True)
+def find_voxel(slot_key: NDArray[np.int64], slot_index: NDArray[np.int64],
+               key: np.int64) -> np.int64:  # pragma: no cover - compiled
+    """Index of ``key`` in the keys of ``key_table``, -1 when it is not a map voxel."""
+    mask = np.int64(len(slot_key) - 1)
+    h = _hash_slot(key, mask)
+    while True:
+        k = slot_key[h]
+        if k == key:
+            return slot_index[h]
+        if k == _EMPTY:
+            return np.int64(-1)
+        h = (h + 1) & mask
+
+
+@numba.njit(cache=True, nogil=True)
 def transform_points(points: NDArray[np.float32], T: F64) -> F64:  # pragma: no cover
     """(N, 3) float64 points R p + t of the first three columns of ``points`` (N, >= 3)."""
     n = points.shape[0]
@@ -183,13 +219,14 @@ _CROSS = np.array([[[1, 2, -1], [2, 1, 1]],
 
 
 @numba.njit(cache=True, nogil=True)
-def ndt_terms(source: F64, T: F64, keys: NDArray[np.int64], means: F64, inv_covs: F64,
-              inv_res: float, offsets: NDArray[np.int64], d1: float,
+def ndt_terms(source: F64, T: F64, slot_key: NDArray[np.int64], slot_index: NDArray[np.int64],
+              means: F64, inv_covs: F64, inv_res: float, offsets: NDArray[np.int64], d1: float,
               d2: float) -> tuple[float, F64, F64, int]:  # pragma: no cover - compiled
     """Score, Hessian (6, 6) and gradient (6,) of the NDT objective, and the pair count.
 
-    source (N, 3) points p [m] in the sensor frame; T (4, 4) the pose (R, t); keys (K,) the
-    sorted packed voxel keys of the map, means (K, 3) mu, inv_covs (K, 3, 3) C; inv_res =
+    source (N, 3) points p [m] in the sensor frame; T (4, 4) the pose (R, t); slot_key,
+    slot_index the ``key_table`` of the map's voxel keys, means (K, 3) mu, inv_covs (K, 3, 3)
+    C; inv_res =
     1 / resolution [1/m]; offsets (O, 3) voxel offsets searched around a point.
 
     Every point q = R p + t is paired with each map voxel of its own (and offset) voxel.
@@ -209,7 +246,7 @@ def ndt_terms(source: F64, T: F64, keys: NDArray[np.int64], means: F64, inv_covs
     """
     R = T[:3, :3]
     t = T[:3, 3]
-    n_keys = keys.shape[0]
+    n_keys = means.shape[0]
     cap = min(source.shape[0] * offsets.shape[0], n_keys)
     slot = np.full(n_keys, -1, np.int64)
     Ms = np.empty((cap, 3, 3))
@@ -230,8 +267,8 @@ def ndt_terms(source: F64, T: F64, keys: NDArray[np.int64], means: F64, inv_covs
                         np.int64(np.floor(qz * inv_res)) + offsets[o, 2]):
                 idx = min(max(idx + KEY_OFFSET, np.int64(0)), np.int64(KEY_MAX))
                 key = (key << np.int64(21)) | idx
-            v = np.searchsorted(keys, key)
-            if v >= n_keys or keys[v] != key:
+            v = find_voxel(slot_key, slot_index, key)
+            if v < 0:
                 continue
             k = slot[v]
             if k < 0:
@@ -392,7 +429,8 @@ def compose_se3_exp(T: F64, xi: F64) -> F64:  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def ndt_align(source: F64, guess: F64, keys: NDArray[np.int64], means: F64, inv_covs: F64,
+def ndt_align(source: F64, guess: F64, slot_key: NDArray[np.int64],
+              slot_index: NDArray[np.int64], means: F64, inv_covs: F64,
               inv_res: float, offsets: NDArray[np.int64], d1: float, d2: float,
               max_iterations: int, convergence: float) -> tuple[F64, bool]:  # pragma: no cover
     """Levenberg-damped Gauss-Newton on the NDT score from ``guess`` (4, 4): the best pose
@@ -400,7 +438,8 @@ def ndt_align(source: F64, guess: F64, keys: NDArray[np.int64], means: F64, inv_
     returned as is). A step is kept only when the score rises (the damping then shrinks
     tenfold, else grows tenfold, giving up above 1e3); stop when |step| < ``convergence``."""
     T = guess.copy()
-    score, H, g, n = ndt_terms(source, T, keys, means, inv_covs, inv_res, offsets, d1, d2)
+    score, H, g, n = ndt_terms(source, T, slot_key, slot_index, means, inv_covs, inv_res,
+                               offsets, d1, d2)
     if n < 6:
         return T, False
     lam = 1e-4
@@ -413,7 +452,8 @@ def ndt_align(source: F64, guess: F64, keys: NDArray[np.int64], means: F64, inv_
             break
         xi = -step
         cand = compose_se3_exp(T, xi)
-        c_score, c_H, c_g, c_n = ndt_terms(source, cand, keys, means, inv_covs, inv_res,
+        c_score, c_H, c_g, c_n = ndt_terms(source, cand, slot_key, slot_index, means, inv_covs,
+                                           inv_res,
                                            offsets, d1, d2)
         if c_score > score and c_n >= 6:
             T, score, H, g = cand, c_score, c_H, c_g
