@@ -191,9 +191,8 @@ class NdtOdometry:
         assert self.voxels is not None
         v = self.voxels
         T, optimised = ndt_align(source, guess, v.slot_key, v.slot_index, v.means, v.inv_covs,
-                                 1.0 / v.resolution,
-                                 self._offsets, self.d1, self.d2, self.options.max_iterations,
-                                 self.options.convergence)
+                                 1.0 / v.resolution, self._offsets, self.d1, self.d2,
+                                 self.options.max_iterations, self.options.convergence)
         if not optimised:
             log.debug("ndt: fewer than 6 correspondences, keeping the prediction")
             return T

@@ -23,12 +23,15 @@ _JACOBI_SWEEPS = 32
 
 
 @numba.njit(cache=True, nogil=True)
-def _voxel_key(x: float, y: float, z: float, inv_res: float) -> np.int64:  # pragma: no cover
-    """Packed key of the voxel holding (x, y, z) [m] (``common.voxel_keys`` for one point)."""
+def _voxel_key(x: float, y: float, z: float, inv_res: float, offsets: NDArray[np.int64],
+               o: int) -> np.int64:  # pragma: no cover - compiled
+    """Packed key of the voxel holding (x, y, z) [m], shifted by ``offsets[o]`` voxels
+    (offsets (O, 3); ``common.voxel_keys`` for one point when the offset is zero)."""
     key = np.int64(0)
-    for c in (x, y, z):
-        idx = np.int64(np.floor(c * inv_res)) + KEY_OFFSET
-        idx = min(max(idx, np.int64(0)), np.int64(KEY_MAX))
+    for idx in (np.int64(np.floor(x * inv_res)) + offsets[o, 0],
+                np.int64(np.floor(y * inv_res)) + offsets[o, 1],
+                np.int64(np.floor(z * inv_res)) + offsets[o, 2]):
+        idx = min(max(idx + KEY_OFFSET, np.int64(0)), np.int64(KEY_MAX))
         key = (key << np.int64(21)) | idx
     return key
 
@@ -92,6 +95,26 @@ def _hash_slot(key: np.int64, mask: np.int64) -> np.int64:  # pragma: no cover -
 
 
 @numba.njit(cache=True, nogil=True)
+def _table_size(n: int) -> int:  # pragma: no cover - compiled
+    """Slots of a hash table for n keys: the smallest power of two >= max(2n, 2)."""
+    size = 2
+    while size < 2 * n:
+        size *= 2
+    return size
+
+
+@numba.njit(cache=True, nogil=True)
+def _probe(table_key: NDArray[np.int64], key: np.int64) -> np.int64:  # pragma: no cover
+    """The slot of ``key`` in the open-addressing table ``table_key`` (linear probing), or
+    the empty slot where it belongs."""
+    mask = np.int64(len(table_key) - 1)
+    h = _hash_slot(key, mask)
+    while table_key[h] != _EMPTY and table_key[h] != key:
+        h = (h + 1) & mask
+    return h
+
+
+@numba.njit(cache=True, nogil=True)
 def build_voxels(points_world: F64, resolution: float,
                  min_points: int) -> tuple[NDArray[np.int64], F64, F64]:  # pragma: no cover
     """NDT voxels of ``points_world`` (M, 3) [m] at ``resolution`` [m]: sorted keys (K,),
@@ -103,10 +126,8 @@ def build_voxels(points_world: F64, resolution: float,
     origin; only the occupied voxels are then sorted by key."""
     n = points_world.shape[0]
     inv_res = 1.0 / resolution
-    size = 1
-    while size < 2 * n:
-        size *= 2
-    mask = np.int64(size - 1)
+    no_offset = np.zeros((1, 3), np.int64)
+    size = _table_size(n)
     table_key = np.full(size, _EMPTY, np.int64)
     table_voxel = np.empty(size, np.int64)
     voxel_key = np.empty(n, np.int64)
@@ -116,10 +137,8 @@ def build_voxels(points_world: F64, resolution: float,
     used = 0
     for i in range(n):
         x, y, z = points_world[i, 0], points_world[i, 1], points_world[i, 2]
-        key = _voxel_key(x, y, z, inv_res)
-        h = _hash_slot(key, mask)
-        while table_key[h] != _EMPTY and table_key[h] != key:
-            h = (h + 1) & mask
+        key = _voxel_key(x, y, z, inv_res, no_offset, 0)
+        h = _probe(table_key, key)
         if table_key[h] == _EMPTY:
             table_key[h] = key
             table_voxel[h] = used
@@ -170,16 +189,11 @@ def key_table(keys: NDArray[np.int64]) -> tuple[NDArray[np.int64],
     """Open-addressing hash table of the voxel ``keys`` (K,): slot keys and slot indices into
     ``keys`` (S,), S a power of two >= 2K, empty slots -1 (``find_voxel`` reads it). A source
     point finds its voxel in about one probe instead of a binary search's log2(K)."""
-    size = 2
-    while size < 2 * len(keys):
-        size *= 2
-    mask = np.int64(size - 1)
+    size = _table_size(len(keys))
     slot_key = np.full(size, _EMPTY, np.int64)
     slot_index = np.full(size, -1, np.int64)
-    for i in range(len(keys)):
-        h = _hash_slot(keys[i], mask)
-        while slot_key[h] != _EMPTY:
-            h = (h + 1) & mask
+    for i in range(len(keys)):  # keys are distinct: each lands in an empty slot
+        h = _probe(slot_key, keys[i])
         slot_key[h] = keys[i]
         slot_index[h] = i
     return slot_key, slot_index
@@ -188,16 +202,9 @@ def key_table(keys: NDArray[np.int64]) -> tuple[NDArray[np.int64],
 @numba.njit(cache=True, nogil=True)
 def find_voxel(slot_key: NDArray[np.int64], slot_index: NDArray[np.int64],
                key: np.int64) -> np.int64:  # pragma: no cover - compiled
-    """Index of ``key`` in the keys of ``key_table``, -1 when it is not a map voxel."""
-    mask = np.int64(len(slot_key) - 1)
-    h = _hash_slot(key, mask)
-    while True:
-        k = slot_key[h]
-        if k == key:
-            return slot_index[h]
-        if k == _EMPTY:
-            return np.int64(-1)
-        h = (h + 1) & mask
+    """Index of ``key`` in the keys of ``key_table``, -1 when it is not a map voxel (an empty
+    slot's index is -1)."""
+    return slot_index[_probe(slot_key, key)]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -226,8 +233,7 @@ def ndt_terms(source: F64, T: F64, slot_key: NDArray[np.int64], slot_index: NDAr
 
     source (N, 3) points p [m] in the sensor frame; T (4, 4) the pose (R, t); slot_key,
     slot_index the ``key_table`` of the map's voxel keys, means (K, 3) mu, inv_covs (K, 3, 3)
-    C; inv_res =
-    1 / resolution [1/m]; offsets (O, 3) voxel offsets searched around a point.
+    C; inv_res = 1 / resolution [1/m]; offsets (O, 3) voxel offsets searched around a point.
 
     Every point q = R p + t is paired with each map voxel of its own (and offset) voxel.
     With e = q - mu and m = e^T C e a pair contributes the score -d1 exp(-d2 m / 2); with the
@@ -261,13 +267,7 @@ def ndt_terms(source: F64, T: F64, slot_key: NDArray[np.int64], slot_index: NDAr
         qy = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1]
         qz = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2]
         for o in range(offsets.shape[0]):
-            key = np.int64(0)
-            for idx in (np.int64(np.floor(qx * inv_res)) + offsets[o, 0],
-                        np.int64(np.floor(qy * inv_res)) + offsets[o, 1],
-                        np.int64(np.floor(qz * inv_res)) + offsets[o, 2]):
-                idx = min(max(idx + KEY_OFFSET, np.int64(0)), np.int64(KEY_MAX))
-                key = (key << np.int64(21)) | idx
-            v = find_voxel(slot_key, slot_index, key)
+            v = find_voxel(slot_key, slot_index, _voxel_key(qx, qy, qz, inv_res, offsets, o))
             if v < 0:
                 continue
             k = slot[v]
