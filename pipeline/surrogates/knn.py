@@ -124,12 +124,9 @@ class GroupedKnnRegressor:
     def fit(self, features: NDArray[np.float64], t: NDArray[np.float64]) -> GroupedKnnRegressor:
         """Fit on (M, D + P) rows and their (M,) targets; returns itself."""
         d = features.shape[1] - self.n_params
-        env, frame = np.unique(features[:, :d], axis=0, return_inverse=True)
-        frame = frame.reshape(-1)
-        order = np.argsort(frame, kind="stable")
-        offsets = np.concatenate([[0], np.cumsum(np.bincount(frame, minlength=len(env)))])
-        model = KnnSurrogate(min(self.k, len(t)), "log", env, offsets.astype(np.int64),
-                             features[order, d:], t[order])
+        env, order, offsets = _by_environment(features[:, :d])
+        model = KnnSurrogate(min(self.k, len(t)), "log", env, offsets, features[order, d:],
+                             t[order])
         self.groups = TrialGroups.build(model, features[:1, d:], 1.0)
         if self.groups is None:
             from sklearn.neighbors import KNeighborsRegressor
@@ -144,13 +141,23 @@ class GroupedKnnRegressor:
         assert self.groups is not None, "fit first"
         d = features.shape[1] - self.n_params
         out = np.empty(len(features))
-        queries, which = np.unique(features[:, :d], axis=0, return_inverse=True)
-        by_query = np.argsort(which.reshape(-1), kind="stable")
-        bounds = np.cumsum(np.bincount(which.reshape(-1), minlength=len(queries)))[:-1]
-        for e_s, rows in zip(queries, np.split(by_query, bounds), strict=True):
+        queries, order, offsets = _by_environment(features[:, :d])
+        for e_s, rows in zip(queries, np.split(order, offsets[1:-1]), strict=True):
             env_d2 = environment_d2(self.groups.model.env, e_s)
             out[rows] = GroupedNeighbourhood(self.groups, env_d2).predict(features[rows, d:]).t
         return out
+
+
+def _by_environment(
+    E: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.int64]]:
+    """Rows grouped by equal environment E (M, D): the distinct environments (G, D), the row
+    order that groups them (M,) (rows keep their order within a group) and the group
+    offsets (G + 1,) into it."""
+    env, which = np.unique(E, axis=0, return_inverse=True)
+    which = which.reshape(-1)
+    offsets = np.concatenate([[0], np.cumsum(np.bincount(which, minlength=len(env)))])
+    return env, np.argsort(which, kind="stable"), offsets.astype(np.int64)
 
 
 class KnnSearch:
