@@ -132,20 +132,25 @@ def build_voxels(points_world: F64, resolution: float,
     table_voxel = np.empty(size, np.int64)
     voxel_key = np.empty(n, np.int64)
     ref = np.empty((n, 3))
-    count = np.zeros(n, np.int64)
-    sums = np.zeros((n, 9))  # d0 d1 d2 d0d0 d0d1 d0d2 d1d1 d1d2 d2d2, d = point - ref
+    count = np.empty(n, np.int64)  # rows 0..used-1 are zeroed when their voxel is made
+    sums = np.empty((n, 9))  # d0 d1 d2 d0d0 d0d1 d0d2 d1d1 d1d2 d2d2, d = point - ref
     used = 0
+    last_key, v = _EMPTY, np.int64(0)
     for i in range(n):
         x, y, z = points_world[i, 0], points_world[i, 1], points_world[i, 2]
         key = _voxel_key(x, y, z, inv_res, no_offset, 0)
-        h = _probe(table_key, key)
-        if table_key[h] == _EMPTY:
-            table_key[h] = key
-            table_voxel[h] = used
-            voxel_key[used] = key
-            ref[used, 0], ref[used, 1], ref[used, 2] = x, y, z
-            used += 1
-        v = table_voxel[h]
+        if key != last_key:  # a scan's consecutive points often share a voxel
+            h = _probe(table_key, key)
+            if table_key[h] == _EMPTY:
+                table_key[h] = key
+                table_voxel[h] = used
+                voxel_key[used] = key
+                ref[used, 0], ref[used, 1], ref[used, 2] = x, y, z
+                count[used] = 0
+                sums[used, :] = 0.0
+                used += 1
+            v = table_voxel[h]
+            last_key = key
         count[v] += 1
         d0, d1, d2 = x - ref[v, 0], y - ref[v, 1], z - ref[v, 2]
         sums[v, 0] += d0
@@ -229,7 +234,22 @@ _CROSS = np.array([[[1, 2, -1], [2, 1, 1]],
 def ndt_terms(source: F64, T: F64, slot_key: NDArray[np.int64], slot_index: NDArray[np.int64],
               means: F64, inv_covs: F64, inv_res: float, offsets: NDArray[np.int64], d1: float,
               d2: float) -> tuple[float, F64, F64, int]:  # pragma: no cover - compiled
-    """Score, Hessian (6, 6) and gradient (6,) of the NDT objective, and the pair count.
+    """Score, Hessian (6, 6) and gradient (6,) of the NDT objective, and the pair count:
+    ``ndt_moments`` then ``ndt_assemble`` (whose docstrings give the formulas)."""
+    score, pairs, Ms, cs, moments, used = ndt_moments(source, T, slot_key, slot_index, means,
+                                                      inv_covs, inv_res, offsets, d1, d2)
+    H, g = ndt_assemble(Ms, cs, moments, used)
+    return score, H, g, pairs
+
+
+@numba.njit(cache=True, nogil=True)
+def ndt_moments(source: F64, T: F64, slot_key: NDArray[np.int64], slot_index: NDArray[np.int64],
+                means: F64, inv_covs: F64, inv_res: float, offsets: NDArray[np.int64], d1: float,
+                d2: float) -> tuple[float, int, F64, F64, F64, int]:  # pragma: no cover
+    """The pass over the points of the NDT objective: score, pair count, and per paired voxel
+    k < used its M (used, 3, 3), c (used, 3) and moments (used, 10), from which
+    ``ndt_assemble`` forms the Hessian and gradient (``ndt_align`` does so only for a step it
+    keeps).
 
     source (N, 3) points p [m] in the sensor frame; T (4, 4) the pose (R, t); slot_key,
     slot_index the ``key_table`` of the map's voxel keys, means (K, 3) mu, inv_covs (K, 3, 3)
@@ -294,6 +314,13 @@ def ndt_terms(source: F64, T: F64, slot_key: NDArray[np.int64], slot_index: NDAr
             moments[k, 7] += w * e1 * e1
             moments[k, 8] += w * e1 * e2
             moments[k, 9] += w * e2 * e2
+    return score, pairs, Ms, cs, moments, used
+
+
+@numba.njit(cache=True, nogil=True)
+def ndt_assemble(Ms: F64, cs: F64, moments: F64, used: int) -> tuple[F64, F64]:  # pragma: no cover
+    """Hessian (6, 6) and gradient (6,) from the first ``used`` voxels of ``ndt_moments``,
+    summed in the order the voxels were first paired."""
     H = np.zeros((6, 6))
     g = np.zeros(6)
     P = np.empty((3, 3))
@@ -302,7 +329,7 @@ def ndt_terms(source: F64, T: F64, slot_key: NDArray[np.int64], slot_index: NDAr
     for a in range(6):
         for b in range(a):
             H[a, b] = H[b, a]
-    return score, H, g, pairs
+    return H, g
 
 
 @numba.njit(cache=True, nogil=True)
@@ -452,11 +479,12 @@ def ndt_align(source: F64, guess: F64, slot_key: NDArray[np.int64],
             break
         xi = -step
         cand = compose_se3_exp(T, xi)
-        c_score, c_H, c_g, c_n = ndt_terms(source, cand, slot_key, slot_index, means, inv_covs,
-                                           inv_res,
-                                           offsets, d1, d2)
+        c_score, c_n, Ms, cs, moments, used = ndt_moments(source, cand, slot_key, slot_index,
+                                                          means, inv_covs, inv_res, offsets,
+                                                          d1, d2)
         if c_score > score and c_n >= 6:
-            T, score, H, g = cand, c_score, c_H, c_g
+            H, g = ndt_assemble(Ms, cs, moments, used)  # only for a kept step
+            T, score = cand, c_score
             lam = max(lam * 0.1, 1e-7)
             if math.sqrt(xi[0] ** 2 + xi[1] ** 2 + xi[2] ** 2 + xi[3] ** 2 + xi[4] ** 2
                          + xi[5] ** 2) < convergence:

@@ -147,3 +147,55 @@ def test_hessian_and_gradient_match_the_per_pair_sums(rng: np.random.Generator) 
     np.testing.assert_allclose(score, np.sum(-odom.d1 * np.exp(-0.5 * odom.d2 * m)), rtol=1e-12)
     np.testing.assert_allclose(H, H_ref, rtol=1e-9, atol=1e-9 * np.abs(H_ref).max())
     np.testing.assert_allclose(g, g_ref, rtol=1e-9, atol=1e-9 * np.abs(g_ref).max())
+
+
+def _levenberg_by_hand(odom: NdtOdometry, source: np.ndarray, guess: np.ndarray,
+                       max_iterations: int, convergence: float) -> tuple[np.ndarray, int]:
+    """The damped Gauss-Newton loop ``ndt_align`` documents, written out in Python over the
+    full ``ndt_terms`` at every candidate; also returns the number of rejected steps."""
+    from pipeline.odometry.ndt_kernel import compose_se3_exp, solve6
+
+    T = guess.copy()
+    score, H, g, _ = odom._evaluate(source, T)
+    lam, rejected = 1e-4, 0
+    for _ in range(max_iterations):
+        damped = H.copy()
+        damped[np.diag_indices(6)] += lam * np.maximum(np.diag(H), 1e-9)
+        step, ok = solve6(damped, g)
+        assert ok
+        cand = compose_se3_exp(T, -step)
+        c_score, c_H, c_g, c_n = odom._evaluate(source, cand)
+        if c_score > score and c_n >= 6:
+            T, score, H, g = cand, c_score, c_H, c_g
+            lam = max(lam * 0.1, 1e-7)
+            if np.sqrt(np.sum(step**2)) < convergence:
+                break
+        else:
+            rejected += 1
+            lam *= 10.0
+            if lam > 1e3:
+                break
+    return T, rejected
+
+
+def test_align_equals_the_levenberg_loop_with_every_term(rng: np.random.Generator) -> None:
+    """``ndt_align`` assembles the Hessian and gradient only for the steps it keeps; the pose
+    it returns is bit for bit the loop's that assembles them at every candidate, also when
+    steps are rejected."""
+    from pipeline.odometry.ndt_kernel import ndt_align
+
+    odom, source = _map_and_source(rng)
+    v = odom.voxels
+    rejected_total = 0
+    for xi in ([0.05, -0.02, 0.3, 0.4, -0.3, 0.1], [0.0, 0.0, 0.02, 0.05, 0.0, 0.0],
+               [0.1, 0.1, -0.4, 1.2, 0.8, -0.2]):
+        guess = se3_exp(np.array(xi))
+        for convergence in (1e-3, 1e-9):  # 1e-9: runs into rejected steps near the optimum
+            ref, rejected = _levenberg_by_hand(odom, source, guess, 15, convergence)
+            got, optimised = ndt_align(source, guess, v.slot_key, v.slot_index, v.means,
+                                       v.inv_covs, 1.0 / v.resolution, odom._offsets, odom.d1,
+                                       odom.d2, 15, convergence)
+            assert optimised
+            np.testing.assert_array_equal(got, ref)
+            rejected_total += rejected
+    assert rejected_total > 0
