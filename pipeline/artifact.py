@@ -281,6 +281,8 @@ def _validate_selection(sel: Any, space: list[dict[str, Any]]) -> None:
         _integer(sel["window"], "selection.window", 1, MAX_WINDOW)
     if sel.get("anchor_margin") is not None:
         _number(sel["anchor_margin"], "selection.anchor_margin", 0.0)
+    if "risk" in sel:  # absent: 0.0 (artifacts from before the setting)
+        _number(sel["risk"], "selection.risk", 0.0)
     chosen = sel.get("novelty_fallback_params")
     if chosen is None:
         return

@@ -23,6 +23,10 @@ Selection (x_t = argmin_x S(E_t, x), S = the artifact's surrogate), every ``peri
    (``pipeline.surrogates.knn_search``); for the forest a walk of its trees. With ``window``
    W > 1 the selector minimises the mean of S over the environments of the last W familiar
    scans (the paper's "environment descriptor sequence"; a novel scan empties the window).
+   Risk (``risk``, kNN only; 0: off): S is then mean + risk * std of the k neighbours' targets
+   (population std; ``knn_search.canonical_value``, computed by both searches), so a parameter
+   vector whose neighbours disagree pays for their spread; the window, the anchor and the
+   hysteresis below all compare these risk-adjusted values.
 5. argmin over the (certified) candidates (the artifact's candidate set: every distinct trial
    parameter vector plus a Sobol set), then a pattern search (``refine_iters`` rounds, step
    halving, moves accepted only to certified points that are better by more than TIE_TOL)
@@ -186,8 +190,9 @@ TIE_TOL = 1e-9
 
 class Selector:
     """Online parameter selection from scans (module docstring). Settings default to the
-    manifest's ``selection`` block; ``window`` and ``anchor_margin`` default to the paper's
-    selection (one scan, no anchor) for artifacts that do not name them."""
+    manifest's ``selection`` block; ``window``, ``anchor_margin`` and ``risk`` default to the
+    paper's selection (one scan, no anchor, the plain mean) for artifacts that do not name
+    them. ConfigError when ``risk`` > 0 for a surrogate that cannot weigh it."""
 
     def __init__(
         self,
@@ -201,7 +206,10 @@ class Selector:
         grouped: bool = True,
         window: int | None = None,
         anchor_margin: float | None = None,
+        risk: float | None = None,
     ) -> None:
+        from pipeline.surrogates import check_risk
+
         sel = model.selection
         self.model = model
         self.period_s = float(sel["period_s"] if period_s is None else period_s)
@@ -214,12 +222,18 @@ class Selector:
         self.window = int(sel.get("window", 1) if window is None else window)
         margin = sel.get("anchor_margin") if anchor_margin is None else anchor_margin
         self.anchor_margin = None if margin is None else float(margin)
+        self.risk = float(sel.get("risk", 0.0) if risk is None else risk)
+        try:
+            check_risk(model.surrogate.type, self.risk)
+        except ValueError as exc:
+            raise ConfigError(f"surrogate.{exc}") from None
         novelty = sel.get("novelty_distance")
         self.novelty_distance = math.inf if novelty is None else float(novelty)
         self.n_starts = n_starts
         self.candidates = np.unique(model.snap(model.candidates_u), axis=0)
         self.search = model.surrogate.search(
-            self.candidates, model.x_scale, {"subset_rows": self.subset_rows, "grouped": grouped})
+            self.candidates, model.x_scale,
+            {"subset_rows": self.subset_rows, "grouped": grouped, "risk": self.risk})
         fallback = model.fallback()
         self.anchor_u = model.to_unit(np.array([[fallback[n] for n in model.names]]))[0]
         self.current_u: NDArray[np.float64] | None = None

@@ -8,6 +8,8 @@ them; this package's import stays light (numpy, scipy), since the runtime loads 
 
 from __future__ import annotations
 
+import math
+
 from pipeline.surrogates.base import Surrogate
 from pipeline.surrogates.forest import ForestSurrogate
 from pipeline.surrogates.knn import KnnSurrogate
@@ -26,3 +28,14 @@ def surrogate_class(type_name: str) -> type[Surrogate]:
     except KeyError:
         raise KeyError(f"unknown surrogate type {type_name!r} "
                        f"(known: {', '.join(SURROGATES)})") from None
+
+
+def check_risk(type_name: str, risk: float) -> None:
+    """ValueError unless the surrogate ``type_name`` can weigh the selection setting ``risk``
+    (mean + risk * std of the k neighbours' targets): risk > 0 needs a ``risk_aware`` one."""
+    if not math.isfinite(risk) or risk < 0:
+        raise ValueError(f"risk must be a finite number >= 0, got {risk!r}")
+    aware = [name for name, cls in SURROGATES.items() if cls.risk_aware]
+    if risk > 0 and type_name not in aware:
+        raise ValueError(f"risk > 0 needs model {' or '.join(aware)}, "
+                         f"got (model={type_name}, risk={risk:g})")

@@ -108,11 +108,14 @@ class Surrogate(Protocol):
     """A fitted surrogate S(E_s, X_s) ~ t (module docstring).
 
     ``type`` is the manifest's ``model.type``; ``files`` the artifact arrays it adds to the
-    common ones (env.npy, env_frames.npy, candidates.npy, pca_*.npy), with their specs.
+    common ones (env.npy, env_frames.npy, candidates.npy, pca_*.npy), with their specs;
+    ``risk_aware``: its search honours the selector's ``risk`` option (mean + risk * std of the
+    neighbours' targets; ``pipeline.surrogates.check_risk``).
     """
 
     type: ClassVar[str]
     files: ClassVar[dict[str, ArraySpec]]
+    risk_aware: ClassVar[bool]
 
     @classmethod
     def fit(cls, training: TrainingSet, section: SurrogateSection) -> Surrogate:
@@ -147,6 +150,6 @@ class Surrogate(Protocol):
     def search(self, candidates_u: NDArray[np.float64], x_scale: float,
                options: Mapping[str, Any]) -> Search:
         """Prepare the queries over ``candidates_u`` (C, P) in the cube; X_s = x_scale * u.
-        ``options``: the selector's settings (``subset_rows``, ``grouped``); each surrogate
-        uses those it knows."""
+        ``options``: the selector's settings (``subset_rows``, ``grouped``, ``risk``); each
+        surrogate uses those it knows."""
         ...

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from pipeline.config import Section
 from pipeline.errors import ConfigError
@@ -66,6 +66,7 @@ class SurrogateSection(Section):
     refine_iters: int = Field(4, ge=0)
     window: int = Field(5, ge=1, le=60)
     anchor_margin: float | None = Field(None, ge=0)
+    risk: float = Field(0.0, ge=0)
     novelty_quantile: float | None = Field(1.0, gt=0, le=1)
     novelty_fallback: Literal["defaults", "fixed", "auto"] = "auto"
     forest: ForestSection = ForestSection.model_validate({})
@@ -79,6 +80,13 @@ class SurrogateSection(Section):
             raise ValueError(f"model must be one of {list(SURROGATES)}, got {v!r}")
         return v
 
+    @model_validator(mode="after")
+    def _risk_needs_a_risk_aware_model(self) -> SurrogateSection:
+        from pipeline.surrogates import check_risk
+
+        check_risk(self.model, self.risk)
+        return self
+
     def selection(self) -> dict[str, Any]:
         """The manifest's ``selection`` block (the runtime's defaults)."""
         return {
@@ -89,6 +97,7 @@ class SurrogateSection(Section):
             "refine_iters": self.refine_iters,
             "window": self.window,
             "anchor_margin": self.anchor_margin,
+            "risk": self.risk,
         }
 
 

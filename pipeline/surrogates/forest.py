@@ -40,6 +40,7 @@ class ForestSurrogate:
     """The exported forest (module docstring): N nodes of T trees."""
 
     type: ClassVar[str] = "forest"
+    risk_aware: ClassVar[bool] = False  # the spread of its trees is not the neighbours' spread
     files: ClassVar[dict[str, ArraySpec]] = {
         "forest_feature.npy": ArraySpec(1, "i"), "forest_threshold.npy": ArraySpec(1),
         "forest_left.npy": ArraySpec(1, "i"), "forest_right.npy": ArraySpec(1, "i"),

@@ -39,6 +39,7 @@ class KnnSurrogate:
     frame, rows_x (M, P) X_s, rows_t (M,) t (``TrainingSet``)."""
 
     type: ClassVar[str] = "knn"
+    risk_aware: ClassVar[bool] = True  # its search weighs the neighbours' spread (``risk``)
     files: ClassVar[dict[str, ArraySpec]] = {
         "env_offsets.npy": ArraySpec(1, "i"),
         "rows_x.npy": ArraySpec(2),
@@ -101,7 +102,7 @@ class KnnSurrogate:
     def search(self, candidates_u: NDArray[np.float64], x_scale: float,
                options: Mapping[str, Any]) -> KnnSearch:
         return KnnSearch(self, candidates_u, x_scale, int(options.get("subset_rows", 4096)),
-                         bool(options.get("grouped", True)))
+                         bool(options.get("grouped", True)), float(options.get("risk", 0.0)))
 
 
 class GroupedKnnRegressor:
@@ -161,16 +162,18 @@ def _by_environment(
 
 
 class KnnSearch:
-    """The exact grouped search when the frames group, else the certified kd-tree."""
+    """The exact grouped search when the frames group, else the certified kd-tree; both give
+    mean + risk * std of the k neighbours' targets (``knn_search.canonical_value``)."""
 
     def __init__(self, model: KnnSurrogate, candidates_u: NDArray[np.float64], x_scale: float,
-                 subset_rows: int, grouped: bool = True) -> None:
+                 subset_rows: int, grouped: bool = True, risk: float = 0.0) -> None:
         self.model = model
         self.x_scale = x_scale
         self.subset_rows = subset_rows
+        self.risk = risk
         self.groups = TrialGroups.build(model, candidates_u, x_scale) if grouped else None
 
     def at(self, e_s: NDArray[np.float64], env_d2: NDArray[np.float64]) -> Query:
         if self.groups is not None:
-            return GroupedNeighbourhood(self.groups, env_d2)
-        return Neighbourhood(self.model, env_d2, self.subset_rows, self.x_scale)
+            return GroupedNeighbourhood(self.groups, env_d2, self.risk)
+        return Neighbourhood(self.model, env_d2, self.subset_rows, self.x_scale, self.risk)

@@ -21,16 +21,18 @@ def knn_mean(
     frame_row0: NDArray[np.int64],
     rows_t: NDArray[np.float64],
     k: int,
+    risk: float = 0.0,
 ) -> NDArray[np.float64]:  # pragma: no cover - compiled
-    """Mean target of the k nearest rows of each query point: (n,).
+    """Mean (+ risk * std) of the targets of the k nearest rows of each query point: (n,).
 
     trial_d2, trial_pos (n, G, k): squared distances (ascending, inf-padded) and block positions
     of each query's k nearest trial vectors in group g; frame_d2, frame_row0 (G, k): squared
     E-distances (ascending, inf-padded) and first rows of the group's k nearest frames; rows_t
     (M,) the targets. A row's squared joint distance is trial_d2 + frame_d2. Both lists are
     sorted, so a group is left as soon as its next pair cannot beat the k-th best so far.
-    The mean is ``knn_search.canonical_mean`` of the k targets (the same bits for the same
-    neighbours, whatever order they were found in).
+    The value is ``knn_search.canonical_value`` of the k targets (the same bits for the same
+    neighbours, whatever order they were found in): their mean, plus risk times their
+    population std when risk > 0.
     """
     n, n_groups, width = trial_d2.shape
     out = np.empty(n)
@@ -55,9 +57,17 @@ def knn_mean(
                         m -= 1
                     best_d[m] = d
                     best_r[m] = frame_row0[g, j] + trial_pos[c, g, a]
-        ordered = np.sort(rows_t[best_r])  # canonical: see knn_search.canonical_mean
+        ordered = np.sort(rows_t[best_r])  # canonical: see knn_search.canonical_value
         total = 0.0
-        for m in range(k):  # left to right, as canonical_mean
+        for m in range(k):  # left to right, as canonical_value
             total += ordered[m]
-        out[c] = total / k
+        mean = total / k
+        if risk == 0.0:
+            out[c] = mean
+            continue
+        squares = 0.0
+        for m in range(k):
+            dev = ordered[m] - mean
+            squares += dev * dev
+        out[c] = mean + risk * np.sqrt(squares / k)
     return out

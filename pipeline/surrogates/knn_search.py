@@ -14,6 +14,10 @@ of the candidate set are static (found once per selector); per selection only th
 frames of each group are found and the pairs merged (``pipeline.surrogates.knn_kernel`` in
 numba, ``knn_mean_numpy`` without numba).
 
+Risk (the selector's ``risk`` >= 0, pipeline/runtime.py): every search gives the value
+mean + risk * std of the k neighbours' targets (population std), ``canonical_value``; risk 0 is
+the plain kNN mean, to the last bit.
+
 Certified (``Neighbourhood``), for an artifact whose frames do not form at most ``MAX_GROUPS``
 groups: the frames nearest to E_s are taken until ``subset_rows`` rows are gathered, a cKDTree
 over those rows' (x_i, dE_i) answers the k nearest rows, and a value is *certified exact* when
@@ -45,8 +49,9 @@ class Neighbourhood:
     search)."""
 
     def __init__(self, model: KnnSurrogate, d2: NDArray[np.float64], subset_rows: int,
-                 x_scale: float) -> None:
-        """d2 (n_env,): squared E-distances of the training frames to E_s."""
+                 x_scale: float, risk: float = 0.0) -> None:
+        """d2 (n_env,): squared E-distances of the training frames to E_s; risk: the weight of
+        the neighbours' spread (``canonical_value``)."""
         counts = np.diff(model.env_offsets)
         n_env = len(d2)
         order = np.argsort(d2)
@@ -69,11 +74,13 @@ class Neighbourhood:
         # in half the time of the balanced one and queries as fast (make bench)
         self.tree = cKDTree(pts, leafsize=32, balanced_tree=False, compact_nodes=False)
         self.x_scale = x_scale
+        self.risk = risk
 
     def predict(self, U: NDArray[np.float64]) -> Prediction:
         """Prediction at unit points U (C, P)."""
         dist, idx = self._query(U, math.inf)
-        return Prediction(canonical_mean(self.t[idx]), dist[:, -1] ** 2 <= self.boundary2)
+        return Prediction(canonical_value(self.t[idx], self.risk),
+                          dist[:, -1] ** 2 <= self.boundary2)
 
     def certified(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
         """``predict(U).t`` where it is certified exact, inf elsewhere: (C,).
@@ -83,7 +90,7 @@ class Neighbourhood:
         dist, idx = self._query(U, math.sqrt(self.boundary2) * (1.0 + 1e-9) + 1e-12)
         exact = dist[:, -1] ** 2 <= self.boundary2
         t = np.full(len(U), np.inf)
-        t[exact] = canonical_mean(self.t[idx[exact]])
+        t[exact] = canonical_value(self.t[idx[exact]], self.risk)
         return t
 
     def candidate_values(self, candidates: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -183,9 +190,12 @@ class TrialGroups:
 class GroupedNeighbourhood:
     """TrialGroups at one environment E_s: the exact kNN over every row."""
 
-    def __init__(self, groups: TrialGroups, env_d2: NDArray[np.float64]) -> None:
-        """env_d2 (n_env,): squared E-distances of the training frames to E_s."""
+    def __init__(self, groups: TrialGroups, env_d2: NDArray[np.float64],
+                 risk: float = 0.0) -> None:
+        """env_d2 (n_env,): squared E-distances of the training frames to E_s; risk: the
+        weight of the neighbours' spread (``canonical_value``)."""
         self.groups = groups
+        self.risk = risk
         self.frame_d2, self.frame_row0 = groups.nearest_frames(env_d2)
         self.rows_searched = len(groups.model.rows_t)  # all of them
 
@@ -209,7 +219,7 @@ class GroupedNeighbourhood:
     ) -> NDArray[np.float64]:
         return _knn_mean_kernel()(
             trial_d2, trial_pos, self.frame_d2, self.frame_row0, self.groups.model.rows_t,
-            self.groups.k,
+            self.groups.k, self.risk,
         )
 
 
@@ -218,7 +228,8 @@ I64: TypeAlias = NDArray[np.int64]
 
 
 def knn_mean_numpy(
-    trial_d2: F64, trial_pos: I64, frame_d2: F64, frame_row0: I64, rows_t: F64, k: int
+    trial_d2: F64, trial_pos: I64, frame_d2: F64, frame_row0: I64, rows_t: F64, k: int,
+    risk: float = 0.0,
 ) -> F64:
     """``pipeline.surrogates.knn_kernel.knn_mean`` in numpy (same arguments, same values): (n,).
 
@@ -230,7 +241,7 @@ def knn_mean_numpy(
     d2 = (trial_d2[:, :, a] + frame_d2[None, :, j]).reshape(n, -1)
     rows = (trial_pos[:, :, a] + frame_row0[None, :, j]).reshape(n, -1)
     pick = np.argpartition(d2, k - 1, axis=1)[:, :k]
-    return canonical_mean(rows_t[np.take_along_axis(rows, pick, 1)])
+    return canonical_value(rows_t[np.take_along_axis(rows, pick, 1)], risk)
 
 
 def canonical_mean(t: F64) -> F64:
@@ -246,11 +257,31 @@ def canonical_mean(t: F64) -> F64:
     kernel's loop does: numpy's own ``sum`` adds eight partial sums pairwise from eight values
     on, which gave other last bits than the kernel for k = 20.
     """
+    return canonical_value(t, 0.0)
+
+
+def canonical_value(t: F64, risk: float) -> F64:
+    """mean + risk * std of every row of t (n, k) (population std): (n,), canonical as
+    ``canonical_mean`` is (the same neighbours give the same bits, in any order).
+
+    Both sums run over the ascending values, left to right: the mean m as ``canonical_mean``,
+    then std = sqrt(sum((t_j - m) * (t_j - m)) / k), as the numba kernel's loops do. risk 0
+    returns the mean itself (no std computed).
+    """
     ordered = np.sort(t, axis=1)
-    total = ordered[:, 0].copy()
-    for j in range(1, ordered.shape[1]):
-        total += ordered[:, j]
-    return total / t.shape[1]
+    mean = _sum_columns(ordered) / t.shape[1]
+    if risk == 0.0:
+        return mean
+    dev = ordered - mean[:, None]
+    return mean + risk * np.sqrt(_sum_columns(dev * dev) / t.shape[1])
+
+
+def _sum_columns(a: F64) -> F64:
+    """Row sums of a (n, k), added left to right one column at a time: (n,)."""
+    total = a[:, 0].copy()
+    for j in range(1, a.shape[1]):
+        total += a[:, j]
+    return total
 
 
 KnnMean = Callable[..., NDArray[np.float64]]
