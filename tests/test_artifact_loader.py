@@ -109,6 +109,8 @@ def set_path(manifest: dict[str, Any], dotted: str, value: Any) -> None:
     ("scaling.parameters.x_scale", float("nan"), ("x_scale",)),
     ("selection.novelty_fallback_params", {"no_such_param": 1.0}, ("no_such_param",)),
     ("selection.novelty_distance", -2.0, ("novelty_distance",)),
+    ("selection.risk", -0.5, ("selection.risk", ">= 0")),
+    ("selection.risk", None, ("selection.risk", "finite number")),
 ])
 def test_bad_manifest_values_are_refused(good: Path, tmp_path: Path, field: str, value: Any,
                                          words: tuple[str, ...]) -> None:

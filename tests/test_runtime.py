@@ -21,6 +21,7 @@ from pipeline.odometry.registry import get_adapter
 from pipeline.runtime import TIE_TOL, Selector, load_model
 from pipeline.sequence import SequenceReader
 from pipeline.surrogates import knn_search
+from pipeline.surrogates.base import environment_d2
 from pipeline.surrogates.fit import SurrogateSection
 from pipeline.surrogates.knn_search import GroupedNeighbourhood, Neighbourhood, knn_mean_numpy
 from stages.cli import main
@@ -164,21 +165,29 @@ def test_too_few_points_keep_last(model_dir: Path, kitti_root: Path) -> None:
     assert set(first) == {"resolution", "keyframe_interval"}
 
 
-def full_knn(model, e_s: np.ndarray, U: np.ndarray) -> np.ndarray:
-    """scikit-learn's kNN over ALL rows of the artifact, at (e_s, U)."""
+def full_knn(model, e_s: np.ndarray, U: np.ndarray, risk: float = 0.0) -> np.ndarray:
+    """scikit-learn's kNN over ALL rows of the artifact, at (e_s, U): the mean of the k
+    neighbours' targets, plus risk times their (population) std."""
     knn_model = model.surrogate
     counts = np.diff(knn_model.env_offsets)
     feats = np.hstack([np.repeat(model.env, counts, axis=0), knn_model.rows_x])
     knn = KNeighborsRegressor(n_neighbors=knn_model.k).fit(feats, knn_model.rows_t)
     q = np.hstack([np.repeat(e_s[None], len(U), 0), U * model.x_scale])
-    return knn.predict(q)
+    if risk == 0.0:
+        return knn.predict(q)
+    t = knn_model.rows_t[knn.kneighbors(q, return_distance=False)]
+    return t.mean(axis=1) + risk * t.std(axis=1)
 
 
+RISKS = pytest.mark.parametrize("risk", [0.0, 0.5])
+
+
+@RISKS
 def test_grouped_search_is_the_exact_knn_over_every_row(
-    model_dir: Path, kitti_root: Path
+    model_dir: Path, kitti_root: Path, risk: float
 ) -> None:
     model = load_model(model_dir)
-    sel = Selector(model, hysteresis=0.0, refine_iters=0)
+    sel = Selector(model, hysteresis=0.0, refine_iters=0, risk=risk)
     groups = sel.search.groups
     assert groups is not None and len(groups.trees) == 4  # one group per sequence
     off = np.random.default_rng(3).random((50, 2))  # points off the candidate set too
@@ -186,15 +195,19 @@ def test_grouped_search_is_the_exact_knn_over_every_row(
         e_s = model.environment(kitti_scan(kitti_root, seq, frame))
         nb = sel.neighbourhood(e_s)
         assert isinstance(nb, GroupedNeighbourhood)
-        brute = full_knn(model, e_s, sel.candidates)
+        brute = full_knn(model, e_s, sel.candidates, risk)
         values = nb.candidate_values(sel.candidates)
         np.testing.assert_allclose(values, brute, rtol=1e-12)
-        np.testing.assert_allclose(nb.predict(off).t, full_knn(model, e_s, off), rtol=1e-12)
+        np.testing.assert_allclose(nb.predict(off).t, full_knn(model, e_s, off, risk),
+                                   rtol=1e-12)
         numpy_path = knn_mean_numpy(
             *groups.candidate_trials, nb.frame_d2, nb.frame_row0, model.surrogate.rows_t,
-            model.surrogate.k,
+            model.surrogate.k, risk,
         )
         np.testing.assert_allclose(numpy_path, values, rtol=1e-12)  # the no-numba fallback
+        tree = Neighbourhood(model.surrogate, environment_d2(model.env, e_s),
+                             len(model.surrogate.rows_t), model.x_scale, risk)
+        np.testing.assert_array_equal(tree.predict(sel.candidates).t, values)  # same bits
         chosen = sel.select_environment(e_s)  # one of the candidates of least value (ties)
         least = sel.candidates[brute <= brute.min() + TIE_TOL]
         assert chosen in [model.params_of(u) for u in least]
@@ -220,19 +233,20 @@ def test_frames_with_their_own_row_order_form_their_own_group(
     )
 
 
+@RISKS
 def test_ungrouped_artifacts_use_the_certified_tree(
-    model_dir: Path, kitti_root: Path, monkeypatch: pytest.MonkeyPatch
+    model_dir: Path, kitti_root: Path, monkeypatch: pytest.MonkeyPatch, risk: float
 ) -> None:
     model = load_model(model_dir)
     monkeypatch.setattr(knn_search, "MAX_GROUPS", 3)  # the 4 sequences no longer qualify
     assert Selector(model).search.groups is None
     for seq, frame in (("01", 5), ("10", 2), ("06", 9)):
         e_s = model.environment(kitti_scan(kitti_root, seq, frame))
-        sel = Selector(model, hysteresis=0.0, refine_iters=0, subset_rows=200)
+        sel = Selector(model, hysteresis=0.0, refine_iters=0, subset_rows=200, risk=risk)
         nb = sel.neighbourhood(e_s)
         assert isinstance(nb, Neighbourhood)
         pred = nb.predict(sel.candidates)
-        brute = full_knn(model, e_s, sel.candidates)
+        brute = full_knn(model, e_s, sel.candidates, risk)
         assert pred.exact.any()
         np.testing.assert_allclose(pred.t[pred.exact], brute[pred.exact], rtol=1e-12)
         # the bounded query of the search: the same certified values, inf elsewhere
@@ -242,7 +256,7 @@ def test_ungrouped_artifacts_use_the_certified_tree(
         # with every row in the subset every candidate is certified and exact
         d2 = ((model.env - e_s) ** 2).sum(1)
         everything = Neighbourhood(model.surrogate, d2, len(model.surrogate.rows_t),
-                                   model.x_scale)
+                                   model.x_scale, risk)
         allp = everything.predict(sel.candidates)
         assert allp.exact.all()
         np.testing.assert_allclose(allp.t, brute, rtol=1e-12)

@@ -9,8 +9,14 @@ import numpy as np
 import pytest
 from test_surrogate import build_model, kitti_scan
 
+from pipeline.artifact import ArtifactInfo, write_artifact
+from pipeline.descriptors import NdtHistogram
+from pipeline.odometry.registry import get_adapter
+from pipeline.pca import Pca
 from pipeline.runtime import Model, Selector, load_model
-from pipeline.surrogates.knn_search import canonical_mean, knn_mean_numpy
+from pipeline.surrogates.fit import SurrogateSection, fit_surrogate
+from pipeline.surrogates.knn_search import canonical_mean, canonical_value, knn_mean_numpy
+from pipeline.surrogates.rows import TrainingRows
 
 
 @pytest.fixture(scope="module")
@@ -64,28 +70,114 @@ def test_last_bit_changes_do_not_choose(model: Model, kitti_root: Path) -> None:
         assert schedule(Selector(model, refine_iters=2, window=2), nudged) == ref
 
 
-def test_the_same_neighbours_give_the_same_bits(model: Model, kitti_root: Path) -> None:
-    """The kNN mean does not depend on the order the neighbours were found in, and the numba
-    and numpy searches agree to the last bit."""
+@pytest.mark.parametrize("risk", [0.0, 0.5])
+def test_the_same_neighbours_give_the_same_bits(model: Model, kitti_root: Path,
+                                                risk: float) -> None:
+    """The kNN mean (+ risk * std) does not depend on the order the neighbours were found in,
+    and the numba and numpy searches agree to the last bit."""
     t = np.random.default_rng(0).lognormal(size=(200, 7))
     shuffled = np.random.default_rng(1).permuted(t, axis=1)
-    np.testing.assert_array_equal(canonical_mean(shuffled), canonical_mean(t))
+    np.testing.assert_array_equal(canonical_value(shuffled, risk), canonical_value(t, risk))
+    np.testing.assert_allclose(canonical_value(t, risk), t.mean(1) + risk * t.std(1),
+                               rtol=1e-13)
     assert (shuffled.mean(axis=1) != t.mean(axis=1)).any()  # what a plain mean does
-    sel = Selector(model)
+    sel = Selector(model, risk=risk)
     groups = sel.search.groups
     assert groups is not None
     for e_s in drive(model, kitti_root)[:4]:
         nb = sel.neighbourhood(e_s)
         np.testing.assert_array_equal(
             knn_mean_numpy(*groups.candidate_trials, nb.frame_d2, nb.frame_row0,
-                           model.surrogate.rows_t, model.surrogate.k),
+                           model.surrogate.rows_t, model.surrogate.k, risk),
             nb.candidate_values(sel.candidates))
 
 
-def test_the_window_minimises_the_mean_over_recent_environments(model: Model,
-                                                                  kitti_root: Path) -> None:
+def test_risk_zero_is_the_plain_mean_to_the_last_bit(model: Model, kitti_root: Path) -> None:
+    """risk = 0 (the default, and what an artifact without ``selection.risk`` reads as) gives
+    the kNN mean of before, bit for bit, and the same schedule."""
+    assert "risk" not in model.selection
+    envs = drive(model, kitti_root)
+    plain, zero = Selector(model, refine_iters=2), Selector(model, refine_iters=2, risk=0.0)
+    assert zero.risk == plain.risk == 0.0
+    assert schedule(zero, envs) == schedule(plain, envs)
+    U = zero.candidates[:40]
+    for e_s in envs[:3]:
+        rows = np.stack([knn_rows(model, e_s, u) for u in U])
+        np.testing.assert_array_equal(zero.neighbourhood(e_s).predict(U).t,
+                                      canonical_mean(model.surrogate.rows_t[rows]))
+
+
+def knn_rows(model: Model, e_s: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """The rows of the k nearest training rows of (e_s, u) by brute force: (k,)."""
+    knn = model.surrogate
+    counts = np.diff(knn.env_offsets)
+    d2 = (np.repeat(((model.env - e_s) ** 2).sum(1), counts)
+          + ((knn.rows_x - u * model.x_scale) ** 2).sum(1))
+    return np.argsort(d2, kind="stable")[: knn.k]
+
+
+def spread_model(out: Path, risk: float) -> Path:
+    """An artifact of two trials, A = (0.1, 0.5) and B = (0.9, 0.5) in the cube, run on four
+    frames (two sequences x two frames, E = -1 or +1): A scores 0.2 % or 2.4 % RTE by frame
+    (log1p: mean 0.703, std 0.521), B 1.2 % everywhere (0.788, std 0). With k = 4 the
+    neighbours of A are the four A rows (B's rows are 2.77 away in X_s, the frames at most 2
+    in E_s), of B the four B rows."""
+    frames = [("s0", 0, -1.0, 0.2), ("s0", 1, 1.0, 2.4), ("s1", 0, -1.0, 2.4),
+              ("s1", 1, 1.0, 0.2)]
+    E, U, y, seqs, idx, trials = [], [], [], [], [], []
+    for seq, frame, e, y_a in frames:
+        for trial, (u, y_u) in enumerate((((0.1, 0.5), y_a), ((0.9, 0.5), 1.2))):
+            E.append([e])
+            U.append(u)
+            y.append(y_u)
+            seqs.append(seq)
+            idx.append(frame)
+            trials.append(trial)
+    rows = TrainingRows(np.array(E), np.array(U), np.array(y), np.array(seqs), np.array(idx),
+                        np.array(trials))
+    section = SurrogateSection(k=4, n_sobol=0, cv_max_frames=2, novelty_quantile=None,
+                               risk=risk)
+    space = get_adapter("ndt").space.to_json()
+    fitted = fit_surrogate(rows, space, section)
+    pca = Pca(np.zeros(90), np.ones(90), np.eye(1, 90), np.ones(1))
+    write_artifact(out, fitted, pca, ArtifactInfo("ndt", space, NdtHistogram(),
+                                                  section.selection()))
+    return out
+
+
+@pytest.mark.parametrize("grouped", [True, False])
+def test_risk_prefers_the_parameters_whose_neighbours_agree(tmp_path: Path,
+                                                           grouped: bool) -> None:
+    """risk = 0 picks A (the lower mean), risk = 1 picks B (A's neighbours disagree), with
+    the value read from the manifest or given to the selector, by either search."""
+    plain = load_model(spread_model(tmp_path / "plain", 0.0))
+    wary = load_model(spread_model(tmp_path / "wary", 1.0))
+    assert (plain.selection["risk"], wary.selection["risk"]) == (0.0, 1.0)
+    a, b = (plain.params_of(np.array(u)) for u in ((0.1, 0.5), (0.9, 0.5)))
+    t_a, t_b = np.log1p([0.2, 2.4, 2.4, 0.2]), np.log1p([1.2] * 4)
+    for model in (plain, wary):
+        e_s = model.env[0]
+        for risk, want, t in ((0.0, a, t_a.mean()), (1.0, b, t_b.mean()),
+                              (0.1, a, t_a.mean() + 0.1 * t_a.std())):
+            sel = Selector(model, risk=risk, grouped=grouped)
+            assert sel.select_environment(e_s) == want
+            assert sel.last["predicted_t"] == pytest.approx(t, rel=1e-12)
+        assert Selector(model, grouped=grouped).select_environment(e_s) == (
+            a if model is plain else b)
+    # the hysteresis weighs risk-adjusted values: from A (1.224), B (0.788) is 0.436 better
+    for hysteresis, want, kept in ((0.4, b, ""), (0.5, a, "hysteresis")):
+        sel = Selector(wary, hysteresis=hysteresis, grouped=grouped)
+        sel.current_u = next(u for u in sel.candidates if wary.params_of(u) == a)
+        assert sel.select_environment(wary.env[0]) == want
+        assert sel.last["kept"] == kept
+
+
+@pytest.mark.parametrize("risk", [0.0, 0.5])
+def test_the_window_minimises_the_mean_over_recent_environments(model: Model, kitti_root: Path,
+                                                                  risk: float) -> None:
+    """The window averages S, risk-adjusted when risk > 0, over the last W scans."""
     a, b, c = drive(model, kitti_root)[:3]
-    sel = Selector(model, window=2, refine_iters=0)
+    sel = Selector(model, window=2, refine_iters=0, risk=risk)
     sel.select_environment(a)
     sel.select_environment(b)
     chosen = sel.select_environment(c)
@@ -94,7 +186,7 @@ def test_the_window_minimises_the_mean_over_recent_environments(model: Model,
     assert sel.last["predicted_t"] == pytest.approx(mean.min(), abs=1e-9)
     assert mean[[model.params_of(u) == chosen for u in sel.candidates]].min() == pytest.approx(
         mean.min(), abs=1e-9)
-    one = Selector(model, window=1, refine_iters=0)
+    one = Selector(model, window=1, refine_iters=0, risk=risk)
     for e in (a, b, c):
         one.select_environment(e)
     assert one.last["predicted_t"] == pytest.approx(

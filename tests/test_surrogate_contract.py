@@ -5,6 +5,7 @@ queries that agree with the fitted model, cross-validation, determinism, a refus
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -14,8 +15,9 @@ import pytest
 from test_surrogate import SELECTION, kitti_scan, synthetic_rows
 
 from pipeline.artifact import ArtifactInfo, canonical_manifest_hash, write_artifact
+from pipeline.config import validate_section
 from pipeline.descriptors import NdtHistogram
-from pipeline.errors import ArtifactError
+from pipeline.errors import ArtifactError, ConfigError
 from pipeline.odometry.registry import get_adapter
 from pipeline.runtime import Selector, load_model
 from pipeline.surrogates import SURROGATES
@@ -92,6 +94,28 @@ def test_runtime_queries_agree_with_the_fitted_model(fitted: FittedSurrogate,
         cand = q.candidate_values(sel.candidates)
         ok = np.isfinite(cand)
         np.testing.assert_allclose(cand[ok], want[: len(sel.candidates)][ok], rtol=1e-12)
+
+
+def test_risk_is_weighed_or_refused(fitted: FittedSurrogate, model_dir: Path) -> None:
+    """``surrogate.risk``: a risk-aware surrogate adds risk * the neighbours' spread to every
+    value; any other refuses risk > 0, in the params and in the selector, naming both."""
+    model = load_model(model_dir)
+    name = fitted.settings.model
+    if not SURROGATES[name].risk_aware:
+        rule = re.escape(f"risk > 0 needs model knn, got (model={name}, risk=0.5)")
+        with pytest.raises(ConfigError, match=f"^surrogate: {rule}$"):
+            validate_section(SurrogateSection, "surrogate", {"model": name, "risk": 0.5})
+        with pytest.raises(ConfigError, match=f"^surrogate.{rule}$"):
+            Selector(model, risk=0.5)
+        assert Selector(model, risk=0.0).risk == 0.0
+        return
+    plain, wary = Selector(model, risk=0.0), Selector(model, risk=0.5)
+    for g in (0, 7, len(model.env) - 1):
+        e_s = model.env[g] + 0.01
+        p = plain.neighbourhood(e_s).candidate_values(plain.candidates)
+        w = wary.neighbourhood(e_s).candidate_values(wary.candidates)
+        ok = np.isfinite(p) & np.isfinite(w)
+        assert ok.any() and (w[ok] >= p[ok]).all() and (w[ok] > p[ok]).any()
 
 
 def test_selection_stays_in_range(model_dir: Path, kitti_root: Path) -> None:
