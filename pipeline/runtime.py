@@ -32,7 +32,7 @@ Selection (x_t = argmin_x S(E_t, x), S = the artifact's surrogate), every ``peri
    halving, moves accepted only to certified points that are better by more than TIE_TOL)
    around the best few. Values within TIE_TOL are equal: the kNN surface is piecewise
    constant, so many candidates share their value exactly (their neighbours are the same,
-   ``knn_search.canonical_mean``); among them the one nearest the parameters in force wins,
+   ``knn_search.canonical_value``); among them the one nearest the parameters in force wins,
    then the smallest parameters, whatever the candidates' order or the last bits of E_t.
 6. Anchor (``anchor_margin``, null: off): the fallback parameters (step 3) are kept unless the
    best is predicted better than them by more than ``anchor_margin`` (target units).
