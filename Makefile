@@ -16,8 +16,11 @@ $(STAMP): pyproject.toml
 	@$(PY) -c "import open3d" >/dev/null
 	touch $(STAMP)
 
+# the suite in TEST_WORKERS processes (pytest-xdist), a test file per process so that a file's
+# module fixtures (the DVC projects of tests/test_pipeline_dvc.py) are built once
+TEST_WORKERS ?= 2
 test: setup
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 # the fuzz suite of tests/fuzz at length: FUZZ_EXAMPLES examples a target, random seeds
 # (make test runs it small and seeded); a failure prints the blob that replays it
