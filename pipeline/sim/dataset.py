@@ -17,16 +17,20 @@ from pipeline.sim.simulate import SimSpec, SimSummary, derive_seed, simulate_seq
 from pipeline.sim.worlds import WORLDS
 
 log = logging.getLogger(__name__)
+SensorName = Literal["hdl32", "hdl64", "vlp16"]
 PROGRESS = logging.getLogger("pipeline.progress")  # shown at any CLI verbosity (stages/cli.py)
 
 
 class SimulateSection(Section):
     """params.yaml section ``simulate``. Seeds derive from ``base.seed`` and the sequence name
     unless ``seed`` is given here; ``workers``: sequences simulated at a time (processes; the
-    output does not depend on it)."""
+    output does not depend on it). ``sensor``: of the validation sequences, and of the
+    training ones unless ``train_sensors`` is given: then training sequence i of a world
+    (``cave_i``) uses ``train_sensors[i % len(train_sensors)]``."""
 
     seed: int | None = Field(None, ge=0)
-    sensor: Literal["hdl32", "hdl64", "vlp16"] = "hdl32"
+    sensor: SensorName = "hdl32"
+    train_sensors: list[SensorName] = Field(default_factory=list)
     range_noise_m: float = Field(0.02, ge=0.0, le=0.5)
     dropout: float = Field(0.01, ge=0.0, lt=1.0)
     motion_distortion: bool = False
@@ -62,12 +66,13 @@ def dataset_specs(section: SimulateSection, base_seed: int) -> dict[str, tuple[s
     """name -> (split, SimSpec) of every sequence of the data set, in a stable order."""
     seed0 = base_seed if section.seed is None else section.seed
 
-    def spec(world: str, name: str, frames: int, segments: tuple[str, ...] = ()) -> SimSpec:
+    def spec(world: str, name: str, frames: int, segments: tuple[str, ...] = (),
+             sensor: str = section.sensor) -> SimSpec:
         return SimSpec(
             world,
             derive_seed(seed0, name),
             frames,
-            section.sensor,
+            sensor,
             segments or tuple(LABELS),
             None,
             section.range_noise_m,
@@ -78,7 +83,9 @@ def dataset_specs(section: SimulateSection, base_seed: int) -> dict[str, tuple[s
     out: dict[str, tuple[str, SimSpec]] = {}
     for world, count in section.train.items():
         for i in range(count):
-            out[f"{world}_{i}"] = ("train", spec(world, f"{world}_{i}", section.train_frames))
+            sensors = section.train_sensors or [section.sensor]
+            out[f"{world}_{i}"] = ("train", spec(world, f"{world}_{i}", section.train_frames,
+                                                 sensor=sensors[i % len(sensors)]))
     for i in range(section.validation_count):
         name = f"composite_{i}"
         out[name] = (

@@ -51,3 +51,23 @@ def test_a_failing_job_leaves_no_temporary_of_the_others(tmp_path: Path) -> None
     with pytest.raises(InputError, match="this job fails"):
         simulate_all(_simulate_or_fail, jobs, [long, bad], 2, log_lines=False)
     assert list(tmp_path.iterdir()) == []  # the long job was killed mid-write, cleaned up
+
+
+def test_train_sensors_cycle_over_each_worlds_training_sequences(tmp_path: Path) -> None:
+    """``train_sensors``: cave_i and street_i use train_sensors[i % n], recorded in their
+    MCAP; the validation sequence keeps ``sensor``."""
+    from pipeline.sequence import SequenceReader
+    from pipeline.sim.dataset import dataset_specs
+    from pipeline.sim.sensors import SENSOR_TITLES
+
+    section = SimulateSection(sensor="hdl32", train={"cave": 3, "street": 1}, train_frames=10,
+                              validation_frames=30, train_sensors=["vlp16", "hdl64"], workers=1)
+    specs = {name: spec.sensor for name, (_, spec) in dataset_specs(section, 5).items()}
+    assert specs == {"cave_0": "vlp16", "cave_1": "hdl64", "cave_2": "vlp16",
+                     "street_0": "vlp16", "composite_0": "hdl32"}
+    simulate_set(section.model_copy(update={"train": {"cave": 2}}), 5, tmp_path)
+    for name, sensor in (("cave_0", "vlp16"), ("cave_1", "hdl64"), ("composite_0", "hdl32")):
+        with SequenceReader(tmp_path / f"{name}.mcap") as reader:
+            assert reader.info.sensor == SENSOR_TITLES[sensor]
+    with pytest.raises(ValidationError, match="train_sensors"):
+        SimulateSection(train_sensors=["hdl128"])
