@@ -9,6 +9,7 @@ evaluate stage (the generalize stage's test is in test_pipeline_dvc.py).
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 from pathlib import Path
 from typing import Any
@@ -121,6 +122,38 @@ def test_table2_lays_out_every_algorithm(protocol: Path, tmp_path: Path) -> None
     assert result.output.strip() == (f"adaptune: error: metrics of 'other': L = 100.0 m, the "
                                      f"others {TINY_L_M} m")
     assert not (tmp_path / "u").exists()
+
+
+def _without_wall_times(node: Any) -> Any:
+    """``node`` (parsed JSON) without its ``wall_time_s`` entries, the only figures a rerun
+    may change."""
+    if isinstance(node, dict):
+        return {k: _without_wall_times(v) for k, v in node.items() if k != "wall_time_s"}
+    return node
+
+
+def test_a_second_run_gives_the_same_numbers(protocol: Path, tmp_path: Path) -> None:
+    """Determinism (issue 15): the protocol run again from scratch in a copy of the project
+    (`dvc repro -f`: every stage again, the KITTI ingest included) gives the same metrics, the
+    same trials tables and the same trajectories of every trial and setting, wall times aside."""
+    import pyarrow.parquet as pq
+
+    again = tmp_path / "again"
+    shutil.copytree(protocol, again, symlinks=True)
+    log = dvc(again, "repro", "-f", "evaluate")
+    for stage in ("ingest", "trials", "fixed", "surrogate", "adaptive", "evaluate"):
+        assert f"Running stage '{stage}'" in log
+    first, second = (json.loads((root / "metrics/evaluation.json").read_text())
+                     for root in (protocol, again))
+    assert _without_wall_times(second) == _without_wall_times(first)
+    tables = sorted(p.relative_to(protocol) for p in protocol.glob("results/**/*.parquet"))
+    assert sorted(p.relative_to(again) for p in again.glob("results/**/*.parquet")) == tables
+    assert any(p.name == "trials.parquet" for p in tables)
+    assert any(p.parts[:2] == ("results", "adaptive") for p in tables)
+    for path in tables:
+        a, b = (pq.read_table(root / path) for root in (protocol, again))
+        keep = [c for c in a.column_names if c != "wall_time_s"]
+        assert b.select(keep).equals(a.select(keep)), path
 
 
 def overrides(out: str, tmp_path: Path) -> dict[str, Any]:
