@@ -6,18 +6,18 @@ import logging
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from pydantic import Field, field_validator
 
 from pipeline.config import Section
 from pipeline.sequence_index import write_index
 from pipeline.sim.route import LABELS
+from pipeline.sim.sensors import SensorName
 from pipeline.sim.simulate import SimSpec, SimSummary, derive_seed, simulate_sequence
 from pipeline.sim.worlds import WORLDS
 
 log = logging.getLogger(__name__)
-SensorName = Literal["hdl32", "hdl64", "vlp16"]
 PROGRESS = logging.getLogger("pipeline.progress")  # shown at any CLI verbosity (stages/cli.py)
 
 
@@ -81,9 +81,9 @@ def dataset_specs(section: SimulateSection, base_seed: int) -> dict[str, tuple[s
         )
 
     out: dict[str, tuple[str, SimSpec]] = {}
+    sensors = section.train_sensors or [section.sensor]
     for world, count in section.train.items():
         for i in range(count):
-            sensors = section.train_sensors or [section.sensor]
             out[f"{world}_{i}"] = ("train", spec(world, f"{world}_{i}", section.train_frames,
                                                  sensor=sensors[i % len(sensors)]))
     for i in range(section.validation_count):

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
@@ -20,6 +19,7 @@ from pipeline.errors import InputError
 from pipeline.sequence_index import check_split, write_index
 from pipeline.sim.dataset import simulate_all
 from pipeline.sim.kitti_world import SCHEDULES
+from pipeline.sim.sensors import SensorName
 from pipeline.sim.simulate import SimSummary, derive_seed
 
 log = logging.getLogger(__name__)
@@ -44,7 +44,7 @@ class SimulateKittiSection(Section):
     start: int | None = Field(None, ge=0)
     end: int | None = Field(None, ge=0)
     windows: list[tuple[str, int, int]] = Field(default_factory=list)
-    sensor: Literal["hdl64", "hdl32", "vlp16"] = "hdl64"
+    sensor: SensorName = "hdl64"
     range_noise_m: float = Field(0.02, ge=0.0, le=0.5)
     dropout: float = Field(0.01, ge=0.0, lt=1.0)
     seed: int | None = Field(None, ge=0)

@@ -8,6 +8,7 @@ Ray directions are unit vectors in the lidar frame (x forward, y left, z up).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -110,6 +111,10 @@ SENSORS: dict[str, SensorModel] = {
     ),
 }
 """HDL-32E (default), HDL-64E (KITTI's), VLP-16 at 10 Hz."""
+
+SensorName = Literal["hdl32", "hdl64", "vlp16"]
+"""A key of SENSORS, as the params sections type it (tests/sim/test_simulate_set.py: the same
+names)."""
 
 SENSOR_TITLES = {
     "hdl32": "Velodyne HDL-32E",

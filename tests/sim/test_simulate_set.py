@@ -71,3 +71,12 @@ def test_train_sensors_cycle_over_each_worlds_training_sequences(tmp_path: Path)
             assert reader.info.sensor == SENSOR_TITLES[sensor]
     with pytest.raises(ValidationError, match="train_sensors"):
         SimulateSection(train_sensors=["hdl128"])
+
+
+def test_the_typed_sensor_names_are_the_simulated_sensors() -> None:
+    """``SensorName`` (the params sections' type) names exactly the sensors of SENSORS."""
+    from typing import get_args
+
+    from pipeline.sim.sensors import SENSORS, SensorName
+
+    assert sorted(get_args(SensorName)) == sorted(SENSORS)
