@@ -15,6 +15,13 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """The DVC projects the tests create (`dvc init` in a temporary folder) send no usage
+    analytics: DVC's analytics daemon leaves a report file in the system's temporary folder
+    for every command when it cannot send it (this machine has no network)."""
+    os.environ["DVC_NO_ANALYTICS"] = "1"
+
+
 def _data_root() -> Path:
     env = os.environ.get("ADAPTUNE_TEST_DATA")
     return Path(env) if env else (REPO / ".." / "shared" / "data").resolve()
