@@ -284,6 +284,10 @@ def _validate_selection(sel: Any, space: list[dict[str, Any]]) -> None:
     if "risk" in sel:  # absent: 0.0 (artifacts from before the setting)
         _number(sel["risk"], "selection.risk", 0.0)
     chosen = sel.get("novelty_fallback_params")
+    record = sel.get("novelty_fallback")
+    if isinstance(record, dict) and record.get("chosen") == "per_scan" and chosen is None:
+        raise ValueError("selection.novelty_fallback 'per_scan' needs novelty_fallback_params "
+                         "(the fixed parameters it weighs against the defaults)")
     if chosen is None:
         return
     specs = {s["name"]: s for s in space}

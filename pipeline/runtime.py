@@ -17,7 +17,11 @@ Selection (x_t = argmin_x S(E_t, x), S = the artifact's surrogate), every ``peri
    ``novelty_fallback_params`` (the joint study's fixed parameters, when the surrogate stage
    found them better than the defaults on every training sequence:
    ``pipeline.surrogates.novelty.choose_fallback``), else the adapter's defaults, until the
-   scans look familiar again. ``null`` as novelty_distance disables it.
+   scans look familiar again. ``null`` as novelty_distance disables it. With the fallback
+   ``per_scan`` (``Model.per_scan_fallback``) the surrogate does not search, but weighs those
+   two only: each unfamiliar scan gets the defaults or the fixed parameters, whichever has the
+   lower S (mean over the last W unfamiliar scans, the hysteresis as in step 7, ties to the
+   parameters in force, then the defaults).
 4. The surrogate's query at E_t (``pipeline.surrogates.base.Search``): for the kNN the exact
    k nearest rows over every row, grouped by trial set, or a certified kd-tree search
    (``pipeline.surrogates.knn_search``); for the forest a walk of its trees. With ``window``
@@ -115,6 +119,13 @@ class Model:
 
     def defaults(self) -> Params:
         return {str(s["name"]): float(s["default"]) for s in self.space}
+
+    @property
+    def per_scan_fallback(self) -> bool:
+        """True when every unfamiliar scan chooses between the defaults and the fixed
+        parameters (surrogate.novelty_fallback ``per_scan``), not one fallback for all."""
+        record = self.manifest["selection"].get("novelty_fallback")
+        return isinstance(record, dict) and record.get("chosen") == "per_scan"
 
     def fallback(self) -> Params:
         """The parameters for unfamiliar scans (step 3): the manifest's
@@ -234,11 +245,15 @@ class Selector:
         self.search = model.surrogate.search(
             self.candidates, model.x_scale,
             {"subset_rows": self.subset_rows, "grouped": grouped, "risk": self.risk})
-        fallback = model.fallback()
-        self.anchor_u = model.to_unit(np.array([[fallback[n] for n in model.names]]))[0]
+        self.anchor_u = self._unit(model.fallback())
+        # per_scan fallback: the two sets an unfamiliar scan chooses between (step 3)
+        self.fallback_u = (np.stack([self._unit(model.defaults()), self.anchor_u])
+                           if model.per_scan_fallback else self.anchor_u[None])
         self.current_u: NDArray[np.float64] | None = None
         self.recent: collections.deque[tuple[Query, NDArray[np.float64]]] = collections.deque(
             maxlen=max(1, self.window))
+        self.recent_novel: collections.deque[NDArray[np.float64]] = collections.deque(
+            maxlen=max(1, self.window))  # S at fallback_u of the last unfamiliar scans
         self.last_stamp_ns: int | None = None
         self.last: dict[str, Any] = {}
         self.selections = 0
@@ -276,12 +291,13 @@ class Selector:
         env_d2 = environment_d2(self.model.env, e_s)
         nearest = float(np.sqrt(env_d2.min()))  # E-distance to the closest training frame
         if nearest > self.novelty_distance:  # an unfamiliar scan: the fallback (step 3)
-            self.current_u = self.anchor_u.copy()
             self.recent.clear()  # the window restarts with the next familiar scan
+            self.current_u = self._fallback_for(e_s, env_d2)
             self.last = {"kept": "novel", "nearest_environment": nearest}
-            return self.current  # the fallback as held: params_of(anchor_u), not the manifest's
-            # own floats (7.774158360578929 comes back as ...928), or every novel selection
-            # would be followed by a last-bit parameter change on the next frame
+            return self.current  # the fallback as held: params_of(fallback_u), not the
+            # manifest's own floats (7.774158360578929 comes back as ...928), or every novel
+            # selection would be followed by a last-bit parameter change on the next frame
+        self.recent_novel.clear()
         nb = self.search.at(e_s, env_d2)
         self.recent.append((nb, nb.candidate_values(self.candidates)))
         u_best, t_best, exact_frac = self._search()
@@ -303,6 +319,26 @@ class Selector:
             "nearest_environment": nearest,
         }
         return self.model.params_of(u_best)
+
+    def _unit(self, params: Params) -> NDArray[np.float64]:
+        """{name: value} -> its unit point (P,)."""
+        return self.model.to_unit(np.array([[params[n] for n in self.model.names]]))[0]
+
+    def _fallback_for(self, e_s: NDArray[np.float64],
+                      env_d2: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The fallback's unit point for an unfamiliar scan (step 3): the one fallback, or
+        with ``per_scan`` the defaults or the fixed parameters by S at E_s, averaged over the
+        window's unfamiliar scans, with the hysteresis of step 7."""
+        if len(self.fallback_u) == 1:
+            return self.fallback_u[0].copy()
+        self.recent_novel.append(self.search.at(e_s, env_d2).predict(self.fallback_u).t)
+        t = np.mean(self.recent_novel, axis=0)
+        held = [i for i, u in enumerate(self.fallback_u)
+                if self.current_u is not None and np.array_equal(u, self.current_u)]
+        best = 1 if t[1] < t[0] - TIE_TOL else 0
+        if held and best != held[0] and not t[best] < t[held[0]] - self.hysteresis:
+            best = held[0]
+        return self.fallback_u[best].copy()
 
     def neighbourhood(self, e_s: NDArray[np.float64]) -> Query:
         """The surrogate's query at E_s (D,) (step 4)."""

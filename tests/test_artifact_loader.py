@@ -109,6 +109,8 @@ def set_path(manifest: dict[str, Any], dotted: str, value: Any) -> None:
     ("scaling.parameters.x_scale", float("nan"), ("x_scale",)),
     ("selection.novelty_fallback_params", {"no_such_param": 1.0}, ("no_such_param",)),
     ("selection.novelty_distance", -2.0, ("novelty_distance",)),
+    ("selection.novelty_fallback", {"mode": "per_scan", "chosen": "per_scan"},
+     ("per_scan", "novelty_fallback_params")),
     ("selection.risk", -0.5, ("selection.risk", ">= 0")),
     ("selection.risk", None, ("selection.risk", "finite number")),
 ])

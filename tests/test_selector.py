@@ -201,3 +201,72 @@ def test_the_anchor_is_left_only_for_a_predicted_gain(model: Model, kitti_root: 
     anchored = Selector(model, anchor_margin=1e9)
     assert anchored.select_environment(e_s) == model.fallback()
     assert anchored.last["kept"] == "anchor"
+
+
+def two_sets_model(out: Path, per_scan: bool) -> tuple[Path, dict[str, float], dict[str, float]]:
+    """An artifact of two trials, the NDT defaults D and a 'fixed' set F, run on four frames
+    (two sequences x two frames, E = -1 or +1): D scores 0.3 % at E = -1 and 3 % at E = +1, F
+    the reverse. Novelty distance 2 (in E units): scans at E = -5 and +5 are unfamiliar, and
+    their k = 2 nearest rows are those of the frames at E = -1 and +1 respectively. The
+    fallback is ``per_scan`` (D or F by S at the scan) or the defaults for every such scan.
+    Returns (artifact, D, F)."""
+    space_obj = get_adapter("ndt").space
+    space = space_obj.to_json()
+    cube_d = space_obj.to_unit(space_obj.defaults())
+    cube_f = np.array([0.9, 0.9])
+    E, U, y, seqs, idx, trials = [], [], [], [], [], []
+    for seq in ("s0", "s1"):
+        for frame, e in enumerate((-1.0, 1.0)):
+            for trial, (u, rte) in enumerate(((cube_d, 0.3 if e < 0 else 3.0),
+                                              (cube_f, 3.0 if e < 0 else 0.3))):
+                E.append([e])
+                U.append(u)
+                y.append(rte)
+                seqs.append(seq)
+                idx.append(frame)
+                trials.append(trial)
+    rows = TrainingRows(np.array(E), np.array(U), np.array(y), np.array(seqs), np.array(idx),
+                        np.array(trials))
+    section = SurrogateSection(k=2, n_sobol=0, cv_max_frames=2, novelty_quantile=None,
+                               window=1)
+    fitted = fit_surrogate(rows, space, section)
+    fitted.novelty_distance = 2.0 * float(np.abs(fitted.env).max())  # E = +-1 is env +-max
+    d, f = space_obj.from_unit(cube_d[None]), space_obj.from_unit(cube_f[None])
+    record = ({"mode": "per_scan", "chosen": "per_scan"} if per_scan
+              else {"mode": "defaults", "chosen": "defaults"})
+    selection = {**section.selection(), "novelty_fallback": record,
+                 **({"novelty_fallback_params": f} if per_scan else {})}
+    pca = Pca(np.zeros(90), np.ones(90), np.eye(1, 90), np.ones(1))
+    write_artifact(out, fitted, pca, ArtifactInfo("ndt", space, NdtHistogram(), selection))
+    return out, d, f
+
+
+def test_a_per_scan_fallback_weighs_the_defaults_against_the_fixed_parameters(
+        tmp_path: Path) -> None:
+    """Unfamiliar scans get the defaults or the fixed parameters, whichever the surrogate
+    predicts better at the scan, with the hysteresis; the single fallback gives one set to
+    every unfamiliar scan."""
+    path, d, f = two_sets_model(tmp_path / "per_scan", per_scan=True)
+    model = load_model(path)
+    assert model.per_scan_fallback and model.fallback() == pytest.approx(f)
+    scale = float(np.abs(model.env).max())
+    near_d, near_f, familiar = (np.array([v * scale]) for v in (-5.0, 5.0, -1.0))
+    sel = Selector(model)
+    assert sel.select_environment(near_d) == pytest.approx(d)
+    assert sel.last["kept"] == "novel"
+    assert sel.select_environment(near_f) == pytest.approx(f)  # better by 1.12 > 0.02
+    assert sel.select_environment(familiar) == pytest.approx(d)  # the surrogate's own choice
+    assert sel.last["kept"] == ""
+    # a hysteresis larger than the predicted gain keeps the fallback in force
+    held = Selector(model, hysteresis=5.0)
+    assert held.select_environment(near_f) == pytest.approx(f)
+    assert held.select_environment(near_d) == pytest.approx(f)
+    # the window averages the unfamiliar scans' S: one scan each way ties, and ties hold
+    windowed = Selector(model, window=2, hysteresis=0.0)
+    assert windowed.select_environment(near_d) == pytest.approx(d)
+    assert windowed.select_environment(near_f) == pytest.approx(d)
+    assert windowed.select_environment(near_f) == pytest.approx(f)
+    single = load_model(two_sets_model(tmp_path / "single", per_scan=False)[0])
+    assert not single.per_scan_fallback
+    one = Selector(single)
+    assert [one.select_environment(e) for e in (near_d, near_f)] == [d, d]

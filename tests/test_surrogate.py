@@ -374,10 +374,14 @@ def test_novelty_fallback_is_fixed_only_where_it_beats_the_defaults_everywhere(
         {"fixed_rte_pct": 0.8, "defaults_rte_pct": 0.7})
     assert novelty_fallback(tmp_path / "b.duckdb", "ndt", space, "fixed")[0] == evidence.fixed
     assert novelty_fallback(tmp_path / "b.duckdb", "ndt", space, "defaults")[0] is None
+    # per_scan: the runtime weighs both, so the artifact carries the fixed parameters
+    params, record = novelty_fallback(tmp_path / "b.duckdb", "ndt", space, "per_scan")
+    assert params == evidence.fixed and record["chosen"] == "per_scan"
     with pytest.raises(ConfigError, match="novelty_fallback must be one of"):
         choose_fallback("fixed-ish", evidence)
-    with pytest.raises(InputError, match="needs the joint study"):
-        choose_fallback("fixed", None)
+    for mode in ("fixed", "per_scan"):
+        with pytest.raises(InputError, match="needs the joint study"):
+            choose_fallback(mode, None)
 
 
 def test_the_forest_runtime_predicts_like_scikit_learn(kitti_root: Path) -> None:

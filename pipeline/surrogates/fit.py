@@ -33,6 +33,7 @@ from pydantic import Field, field_validator, model_validator
 from pipeline.config import Section
 from pipeline.errors import ConfigError
 from pipeline.surrogates.base import Surrogate, TrainingSet
+from pipeline.surrogates.novelty import NoveltyFallback
 from pipeline.surrogates.rows import TrainingRows
 
 if TYPE_CHECKING:
@@ -68,7 +69,7 @@ class SurrogateSection(Section):
     anchor_margin: float | None = Field(None, ge=0)
     risk: float = Field(0.0, ge=0)
     novelty_quantile: float | None = Field(1.0, gt=0, le=1)
-    novelty_fallback: Literal["defaults", "fixed", "auto"] = "auto"
+    novelty_fallback: NoveltyFallback = "auto"
     forest: ForestSection = ForestSection.model_validate({})
 
     @field_validator("model")

@@ -3,7 +3,8 @@ fitted model and the fallback parameters the runtime gives such scans.
 
 The novelty distance is a quantile of every training frame's distance to the nearest frame of
 another training sequence; the fallback is the adapter's defaults, or the joint study's best
-parameters when they beat the defaults on every training sequence (``choose_fallback``).
+parameters when they beat the defaults on every training sequence, or, per scan, whichever of
+the two the surrogate predicts better there (``choose_fallback``).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,7 +40,8 @@ def novelty_distance(env: NDArray[np.float64], sequences: NDArray[np.str_],
     return float(np.quantile(nearest, quantile))
 
 
-NOVELTY_FALLBACKS = ("defaults", "fixed", "auto")
+NoveltyFallback = Literal["defaults", "fixed", "auto", "per_scan"]
+NOVELTY_FALLBACKS: tuple[str, ...] = get_args(NoveltyFallback)
 
 
 @dataclass
@@ -66,14 +68,17 @@ def choose_fallback(
     The defaults are the out-of-distribution prior (hand-tuned for no environment in particular);
     they are dropped only when every environment seen shows them worse. Chosen on training data
     and dev composites, not on the validation sequence (README, "novelty fallback").
+    ``per_scan``: both; the runtime gives each unfamiliar scan the one of the two the surrogate
+    predicts better there (pipeline.runtime, step 3). Returns the fixed parameters, as the
+    runtime needs them; the record's ``chosen`` is ``per_scan``.
     """
     if mode not in NOVELTY_FALLBACKS:
         raise ConfigError(f"novelty_fallback must be one of {NOVELTY_FALLBACKS}, got {mode!r}")
     if mode == "defaults":
         return None, {"mode": mode, "chosen": "defaults"}
     if evidence is None:
-        if mode == "fixed":
-            raise InputError("novelty_fallback 'fixed' needs the joint study (the fixed stage)")
+        if mode in ("fixed", "per_scan"):
+            raise InputError(f"novelty_fallback {mode!r} needs the joint study (the fixed stage)")
         return None, {"mode": mode, "chosen": "defaults", "reason": "no joint study"}
     record: dict[str, Any] = {
         "mode": mode,
@@ -86,6 +91,9 @@ def choose_fallback(
     use_fixed = mode == "fixed" or (
         bool(evidence.per_sequence) and all(f < d for f, d in evidence.per_sequence.values())
     )
+    if mode == "per_scan":
+        record["chosen"] = "per_scan"
+        return dict(evidence.fixed), record
     record["chosen"] = "fixed" if use_fixed else "defaults"
     return (dict(evidence.fixed) if use_fixed else None), record
 
