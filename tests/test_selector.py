@@ -3,7 +3,9 @@ environment window, the anchor. Small synthetic artifact of tests/test_surrogate
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -116,32 +118,44 @@ def knn_rows(model: Model, e_s: np.ndarray, u: np.ndarray) -> np.ndarray:
     return np.argsort(d2, kind="stable")[: knn.k]
 
 
+def four_frame_rows(u_a: tuple[float, ...] | np.ndarray, u_b: tuple[float, ...] | np.ndarray,
+                    rte: Callable[[int, float], tuple[float, float]]) -> TrainingRows:
+    """Training rows of two trials, A and B at unit points ``u_a``, ``u_b``, on four frames:
+    sequences s0, s1 x frames at E = -1, +1; ``rte(i, e)`` -> (A's, B's RTE [%]) on frame E = e
+    of sequence s<i>."""
+    E, U, y, seqs, idx, trials = [], [], [], [], [], []
+    for i, seq in enumerate(("s0", "s1")):
+        for frame, e in enumerate((-1.0, 1.0)):
+            for trial, (u, y_u) in enumerate(zip((u_a, u_b), rte(i, e), strict=True)):
+                E.append([e])
+                U.append(u)
+                y.append(y_u)
+                seqs.append(seq)
+                idx.append(frame)
+                trials.append(trial)
+    return TrainingRows(np.array(E), np.array(U), np.array(y), np.array(seqs), np.array(idx),
+                        np.array(trials))
+
+
+def write_small(out: Path, fitted: Any, space: list[dict[str, Any]],
+                selection: dict[str, Any]) -> None:
+    """The artifact of a one-dimensional environment (a PCA that keeps the first bin)."""
+    pca = Pca(np.zeros(90), np.ones(90), np.eye(1, 90), np.ones(1))
+    write_artifact(out, fitted, pca, ArtifactInfo("ndt", space, NdtHistogram(), selection))
+
+
 def spread_model(out: Path, risk: float) -> Path:
     """An artifact of two trials, A = (0.1, 0.5) and B = (0.9, 0.5) in the cube, run on four
     frames (two sequences x two frames, E = -1 or +1): A scores 0.2 % or 2.4 % RTE by frame
     (log1p: mean 0.703, std 0.521), B 1.2 % everywhere (0.788, std 0). With k = 4 the
     neighbours of A are the four A rows (B's rows are 2.77 away in X_s, the frames at most 2
     in E_s), of B the four B rows."""
-    frames = [("s0", 0, -1.0, 0.2), ("s0", 1, 1.0, 2.4), ("s1", 0, -1.0, 2.4),
-              ("s1", 1, 1.0, 0.2)]
-    E, U, y, seqs, idx, trials = [], [], [], [], [], []
-    for seq, frame, e, y_a in frames:
-        for trial, (u, y_u) in enumerate((((0.1, 0.5), y_a), ((0.9, 0.5), 1.2))):
-            E.append([e])
-            U.append(u)
-            y.append(y_u)
-            seqs.append(seq)
-            idx.append(frame)
-            trials.append(trial)
-    rows = TrainingRows(np.array(E), np.array(U), np.array(y), np.array(seqs), np.array(idx),
-                        np.array(trials))
+    rows = four_frame_rows((0.1, 0.5), (0.9, 0.5),
+                           lambda i, e: (0.2 if (i == 0) == (e < 0) else 2.4, 1.2))
     section = SurrogateSection(k=4, n_sobol=0, cv_max_frames=2, novelty_quantile=None,
                                risk=risk)
     space = get_adapter("ndt").space.to_json()
-    fitted = fit_surrogate(rows, space, section)
-    pca = Pca(np.zeros(90), np.ones(90), np.eye(1, 90), np.ones(1))
-    write_artifact(out, fitted, pca, ArtifactInfo("ndt", space, NdtHistogram(),
-                                                  section.selection()))
+    write_small(out, fit_surrogate(rows, space, section), space, section.selection())
     return out
 
 
@@ -214,19 +228,7 @@ def two_sets_model(out: Path, per_scan: bool) -> tuple[Path, dict[str, float], d
     space = space_obj.to_json()
     cube_d = space_obj.to_unit(space_obj.defaults())
     cube_f = np.array([0.9, 0.9])
-    E, U, y, seqs, idx, trials = [], [], [], [], [], []
-    for seq in ("s0", "s1"):
-        for frame, e in enumerate((-1.0, 1.0)):
-            for trial, (u, rte) in enumerate(((cube_d, 0.3 if e < 0 else 3.0),
-                                              (cube_f, 3.0 if e < 0 else 0.3))):
-                E.append([e])
-                U.append(u)
-                y.append(rte)
-                seqs.append(seq)
-                idx.append(frame)
-                trials.append(trial)
-    rows = TrainingRows(np.array(E), np.array(U), np.array(y), np.array(seqs), np.array(idx),
-                        np.array(trials))
+    rows = four_frame_rows(cube_d, cube_f, lambda i, e: (0.3, 3.0) if e < 0 else (3.0, 0.3))
     section = SurrogateSection(k=2, n_sobol=0, cv_max_frames=2, novelty_quantile=None,
                                window=1)
     fitted = fit_surrogate(rows, space, section)
@@ -236,8 +238,7 @@ def two_sets_model(out: Path, per_scan: bool) -> tuple[Path, dict[str, float], d
               else {"mode": "defaults", "chosen": "defaults"})
     selection = {**section.selection(), "novelty_fallback": record,
                  **({"novelty_fallback_params": f} if per_scan else {})}
-    pca = Pca(np.zeros(90), np.ones(90), np.eye(1, 90), np.ones(1))
-    write_artifact(out, fitted, pca, ArtifactInfo("ndt", space, NdtHistogram(), selection))
+    write_small(out, fitted, space, selection)
     return out, d, f
 
 
