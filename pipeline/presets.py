@@ -43,8 +43,9 @@ class KittiProtocol(Section):
     change_windows: a window of this many frames around the first change of environment of
     every sequence (simulated KITTI only; ``pipeline.sim.kitti_world.change_window``);
     iterations / joint_iterations: SMBO budget per training sequence / of the joint study
-    (null keeps params.yaml's); length_m: L [m]; kitti_lengths_m: devkit lengths (null keeps
-    params.yaml's, 100..800 m).
+    (null keeps params.yaml's); time_limit_s: a trial's time limit per sequence run [s] (a
+    slower parameter set fails with the penalty; null keeps params.yaml's); length_m: L [m];
+    kitti_lengths_m: devkit lengths (null keeps params.yaml's, 100..800 m).
     """
 
     source: Literal["real", "simulated"] = "real"
@@ -59,6 +60,7 @@ class KittiProtocol(Section):
     algorithm: str | None = None
     iterations: int | None = Field(None, ge=1)
     joint_iterations: int | None = Field(None, ge=1)
+    time_limit_s: float | None = Field(None, gt=0)
     length_m: float = Field(KITTI_LENGTH_M, gt=0)
     kitti_lengths_m: list[float] | None = Field(None, min_length=1)
 
@@ -102,6 +104,8 @@ def kitti_protocol(protocol: KittiProtocol, params: Mapping[str, Any]) -> dict[s
         data["trials.startup_trials"] = min(startup, max(2, protocol.iterations // 4))
     if protocol.joint_iterations is not None:
         data["fixed.iterations"] = protocol.joint_iterations
+    if protocol.time_limit_s is not None:
+        data["trials.time_limit_s"] = protocol.time_limit_s
     if protocol.kitti_lengths_m is not None:
         data["rte.kitti_lengths_m"] = protocol.kitti_lengths_m
         data["evaluate.kitti_lengths_m"] = protocol.kitti_lengths_m

@@ -51,6 +51,9 @@ def _window(text: str) -> tuple[str, tuple[int, int]]:
               help="SMBO iterations per training sequence [params.yaml's].")
 @click.option("--joint-iterations", type=int, default=None,
               help="SMBO iterations of the joint study [as --iterations].")
+@click.option("--time-limit-s", type=float, default=None,
+              help="A trial's time limit per sequence run [s]: a slower parameter set fails "
+              "with the penalty [params.yaml's trials.time_limit_s].")
 @click.option("--length-m", type=float, default=100.0, show_default=True,
               help="L, the RTE length of the SMBO objective [m].")
 @click.option("--kitti-lengths-m", default=None,
@@ -59,14 +62,15 @@ def _window(text: str) -> tuple[str, tuple[int, int]]:
 def kitti_preset(root: Path | None, simulated: Path | None, train: str | None,
                  test: str | None, stride: int, start: int | None, end: int | None,
                  windows: tuple[str, ...], change_windows: int | None, algorithm: str | None,
-                 iterations: int | None, joint_iterations: int | None, length_m: float,
-                 kitti_lengths_m: str | None, params_path: Path) -> None:
+                 iterations: int | None, joint_iterations: int | None,
+                 time_limit_s: float | None, length_m: float, kitti_lengths_m: str | None,
+                 params_path: Path) -> None:
     """Print the `dvc exp run` arguments of the KITTI protocol, one a line.
 
     \b
     make kitti KITTI_ROOT=... (or KITTI_SIMULATED=...) runs them; by hand:
       adaptune kitti-preset --root /data/kitti/dataset > kitti.args
-      xargs -a kitti.args -d '\\n' dvc exp run
+      xargs -a kitti.args -d '\\n' dvc exp run evaluate
     """
     from pipeline.config import read_params, validate_section
     from pipeline.errors import ConfigError
@@ -79,7 +83,8 @@ def kitti_preset(root: Path | None, simulated: Path | None, train: str | None,
            "end": end, "windows": dict(_window(w) for w in windows),
            "change_windows": change_windows, "algorithm": algorithm,
            "iterations": iterations,
-           "joint_iterations": joint_iterations, "length_m": length_m,
+           "joint_iterations": joint_iterations, "time_limit_s": time_limit_s,
+           "length_m": length_m,
            "kitti_lengths_m": _names(kitti_lengths_m)}
     protocol = validate_section(KittiProtocol, "kitti-preset",
                                 {k: v for k, v in raw.items() if v is not None})
