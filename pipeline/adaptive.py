@@ -13,6 +13,7 @@ For every sequence, ``run_adaptive``
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import time
@@ -49,18 +50,38 @@ class AdaptiveRun:
 
 def run_adaptive(model_dir: str | Path, sequence_paths: Sequence[str | Path], out_dir: str | Path,
                  adapter_options: Mapping[str, Any] | None = None,
-                 time_limit_s: float | None = None) -> list[AdaptiveRun]:
+                 time_limit_s: float | None = None, workers: int = 1) -> list[AdaptiveRun]:
     """Schedule and run every sequence with the model of ``model_dir``; see the module docstring.
 
-    adapter_options: untuned settings of the model's adapter (as in the trials).
+    adapter_options: untuned settings of the model's adapter (as in the trials); workers:
+    sequences run at a time, in spawned processes (each sequence's run depends on the model and
+    the sequence alone, so the outputs are the same for any number).
     Raises ArtifactError for a bad model, InputError for bad sequences, OdometryError when the
     odometry fails (an adaptive run has no penalty to fall back on).
     """
+    from pipeline.executor import map_in_processes
     from pipeline.runtime import load_model
 
-    model = load_model(model_dir)
-    return [run_one(model, Path(p), Path(out_dir) / Path(p).stem, adapter_options, time_limit_s)
-            for p in sequence_paths]
+    load_model(model_dir)  # a bad artifact fails here, once, before any worker starts
+    jobs = [(Path(model_dir), Path(p), Path(out_dir) / Path(p).stem, adapter_options,
+             time_limit_s) for p in sequence_paths]
+    return map_in_processes(_run_loaded, jobs, workers)
+
+
+def _run_loaded(model_dir: Path, sequence_path: Path, out_dir: Path,
+                adapter_options: Mapping[str, Any] | None,
+                time_limit_s: float | None) -> AdaptiveRun:
+    """``run_one`` with the artifact at ``model_dir``, loaded once per process."""
+    return run_one(loaded_model(model_dir), sequence_path, out_dir, adapter_options, time_limit_s)
+
+
+@functools.lru_cache(maxsize=2)
+def loaded_model(model_dir: Path) -> Any:
+    """The verified artifact of ``model_dir``, loaded once per process (worker processes run
+    many sequences or worlds with one model)."""
+    from pipeline.runtime import load_model
+
+    return load_model(model_dir)
 
 
 def run_one(model: Any, sequence_path: Path, out_dir: Path,

@@ -34,6 +34,7 @@ def adaptive(params_path: Path | None, model_dir: Path, sequence_dir: Path, spli
     trials = load_section(params_path, "trials", TrialsSection)
     section = load_section(params_path, "evaluate", EvaluateSection)
     paths = list(read_index(sequence_dir).split_paths(list(splits) or section.splits))
-    for run in run_adaptive(model_dir, paths, out_dir, trials.adapter_options):
+    for run in run_adaptive(model_dir, paths, out_dir, trials.adapter_options,
+                            workers=section.workers):
         click.echo(f"{run.sequence}: {run.frames} frames, {run.selections} selections, "
                    f"{run.changes} parameter changes, {run.wall_time_s:.1f} s", err=True)

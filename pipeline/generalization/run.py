@@ -15,7 +15,6 @@ writes ``<out>`` atomically.
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 import time
@@ -103,7 +102,7 @@ def _logged(score: WorldScore, i: int, n: int) -> WorldScore:
 
 def score_world(world: SuiteWorld, inputs: SuiteInputs, out_dir: Path) -> WorldScore:
     """Simulate ``world``, run adaptive, baseline and fixed, score them (module docstring)."""
-    from pipeline.adaptive import run_one
+    from pipeline.adaptive import loaded_model, run_one
     from pipeline.report.evaluate import EvaluateSection, evaluate
     from pipeline.sim.simulate import simulate_sequence
 
@@ -113,7 +112,7 @@ def score_world(world: SuiteWorld, inputs: SuiteInputs, out_dir: Path) -> WorldS
     path = scratch / f"{world.name}.mcap"
     try:
         simulate_sequence(world.spec, path, name=world.name)
-        run = run_one(_model(inputs.model_dir), path, out_dir / "adaptive" / world.name,
+        run = run_one(loaded_model(inputs.model_dir), path, out_dir / "adaptive" / world.name,
                       inputs.adapter_options)
         ev = evaluate([path], inputs.algorithm, inputs.fixed_params, out_dir / "adaptive",
                       out_dir / "runs", EvaluateSection(length_m=inputs.length_m),
@@ -125,12 +124,3 @@ def score_world(world: SuiteWorld, inputs: SuiteInputs, out_dir: Path) -> WorldS
         {s: ev.score(s, world.name).rte_pct for s in SETTINGS},
         {s: ev.score(s, world.name).per_label() for s in SETTINGS},
         run.changes, time.perf_counter() - t0)
-
-
-@functools.lru_cache(maxsize=2)
-def _model(model_dir: Path) -> Any:
-    """The artifact, loaded once per process."""
-    from pipeline.runtime import load_model
-
-    return load_model(model_dir)
-

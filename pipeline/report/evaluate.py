@@ -45,12 +45,14 @@ class EvaluateSection(Section):
     splits: the splits of index.json to evaluate on, the headline one first (e.g.
     [validation, train] for the KITTI protocol's test and training sequences); length_m: RTE
     segment length [m] (the trials' L); kitti_lengths_m: devkit lengths to try (those longer
-    than a sequence are left out, as the devkit does).
+    than a sequence are left out, as the devkit does); workers: sequences run at a time by the
+    ``adaptive`` and ``evaluate`` stages (processes; the same results for any number).
     """
 
     splits: list[str] = Field(default_factory=lambda: ["validation"], min_length=1)
     length_m: float = Field(25.0, gt=0)
     kitti_lengths_m: tuple[float, ...] = LENGTHS_M
+    workers: int = Field(2, ge=1)
 
     @field_validator("splits")
     @classmethod
@@ -182,36 +184,71 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
     baseline) is used; None: the adapter's built-in space.
     split_of: sequence name -> split (default: every sequence in ``settings.splits[0]``).
     The baseline and fixed trajectories go to ``out_dir/<sequence>/<setting>.parquet``.
+    ``settings.workers`` sequences are scored at a time (spawned processes; every figure is the
+    same for any number).
     """
+    from pipeline.executor import map_in_processes
+
+    adapter = _adapter(algorithm, adapter_options, fixed_dir)
+    result = Evaluation(algorithm, settings.length_m, adapter.space.validate(fixed_params),
+                        adapter.space.defaults(), settings.kitti_lengths_m)
+    jobs = [(path, algorithm, adapter_options, fixed_dir, result.baseline_params,
+             result.fixed_params, adaptive_dir, out_dir, settings) for path in sequences]
+    scored = map_in_processes(_score_sequence, jobs, settings.workers)
+    for path, seq in zip(sequences, scored, strict=True):
+        name = path.stem
+        result.infos[name], result.ground_truth[name] = seq.info, seq.ground_truth
+        result.split_of[name] = (split_of or {}).get(name, settings.splits[0])
+        result.scores.extend(seq.scores)
+        result.schedules[name] = seq.schedule
+        result.kitti_segments[name] = seq.kitti_segments
+        result.kitti[name] = {s: _kitti_summary(seg) for s, seg in seq.kitti_segments.items()}
+    return result
+
+
+def _adapter(algorithm: str, adapter_options: Mapping[str, object] | None,
+             fixed_dir: Path | None) -> Any:
+    """The adapter with the space the studies searched (its defaults are the baseline), read
+    from the joint study's output; the built-in space without one."""
     from pipeline.odometry import get_adapter
     from pipeline.odometry.base import with_space
     from pipeline.tuning.table import read_space
 
-    # the space the studies searched (its defaults are the baseline), from the trials output
     adapter = get_adapter(algorithm, **dict(adapter_options or {}))
-    if fixed_dir is not None:
-        adapter = with_space(adapter, read_space(fixed_dir, algorithm))
-    result = Evaluation(algorithm, settings.length_m, adapter.space.validate(fixed_params),
-                        adapter.space.defaults(), settings.kitti_lengths_m)
-    for path in sequences:
-        name = path.stem
-        gt, info = _ground_truth(path)
-        result.infos[name], result.ground_truth[name] = info, gt
-        result.split_of[name] = (split_of or {}).get(name, settings.splits[0])
-        labels = [info.label_of(i) for i in range(len(gt))]
-        runs = {"baseline": _run_fixed(adapter, path, result.baseline_params, out_dir, "baseline"),
-                "fixed": _run_fixed(adapter, path, result.fixed_params, out_dir, "fixed"),
-                "adaptive": _read_adaptive(adaptive_dir / name, algorithm)}
-        for setting, (traj, wall) in runs.items():
-            t_err, _ = per_frame_rte(gt, traj.T_world_lidar, settings.length_m)
-            result.scores.append(SettingScore(setting, name, t_err, labels, wall, traj))
-            log.info("%s %s: %.3f %% RTE (%.1f s)", name, setting, result.scores[-1].rte_pct, wall)
-        result.schedules[name] = Schedule.read(adaptive_dir / name / "schedule.parquet")
-        result.kitti_segments[name] = _kitti_segments(
-            gt, {s: t for s, (t, _) in runs.items()}, settings.kitti_lengths_m)
-        result.kitti[name] = {s: _kitti_summary(seg)
-                              for s, seg in result.kitti_segments[name].items()}
-    return result
+    return adapter if fixed_dir is None else with_space(adapter, read_space(fixed_dir, algorithm))
+
+
+@dataclass
+class _SequenceResult:
+    """What scoring one sequence gives ``evaluate``."""
+
+    info: SequenceInfo
+    ground_truth: NDArray[np.float64]
+    scores: list[SettingScore]
+    schedule: Schedule
+    kitti_segments: dict[str, KittiSegments]
+
+
+def _score_sequence(path: Path, algorithm: str, adapter_options: Mapping[str, object] | None,
+                    fixed_dir: Path | None, baseline_params: dict[str, float],
+                    fixed_params: dict[str, float], adaptive_dir: Path, out_dir: Path,
+                    settings: EvaluateSection) -> _SequenceResult:
+    """Baseline and fixed run on ``path``, the adaptive run read back, all three scored."""
+    adapter = _adapter(algorithm, adapter_options, fixed_dir)
+    name = path.stem
+    gt, info = _ground_truth(path)
+    labels = [info.label_of(i) for i in range(len(gt))]
+    runs = {"baseline": _run_fixed(adapter, path, baseline_params, out_dir, "baseline"),
+            "fixed": _run_fixed(adapter, path, fixed_params, out_dir, "fixed"),
+            "adaptive": _read_adaptive(adaptive_dir / name, algorithm)}
+    scores = []
+    for setting, (traj, wall) in runs.items():
+        t_err, _ = per_frame_rte(gt, traj.T_world_lidar, settings.length_m)
+        scores.append(SettingScore(setting, name, t_err, labels, wall, traj))
+        log.info("%s %s: %.3f %% RTE (%.1f s)", name, setting, scores[-1].rte_pct, wall)
+    return _SequenceResult(
+        info, gt, scores, Schedule.read(adaptive_dir / name / "schedule.parquet"),
+        _kitti_segments(gt, {s: t for s, (t, _) in runs.items()}, settings.kitti_lengths_m))
 
 
 def _ground_truth(path: Path) -> tuple[NDArray[np.float64], SequenceInfo]:
