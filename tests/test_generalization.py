@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -110,3 +111,89 @@ def test_world_of_draws_from_the_named_suite() -> None:
     section = GeneralizeSection()
     assert world_of(section, "test", 3) == suite_worlds(section)[3]
     assert world_of(section, "dev", 3).spec != world_of(section, "test", 3).spec
+
+
+def test_replica_factors_and_perturbed_parameters() -> None:
+    from pipeline.generalization.replicas import factors, perturbed_params, perturbed_schedule
+    from pipeline.odometry import get_adapter
+    from pipeline.odometry.base import Schedule
+
+    f = factors(7, 1, 6, 0.005)
+    assert np.all(np.abs(f - 1.0) <= 0.005) and len(set(f.tolist())) == 6
+    assert np.array_equal(factors(7, 1, 6, 0.005), f)  # (seed, replica) alone
+    assert not np.array_equal(factors(7, 2, 6, 0.005), f)
+    space = get_adapter("kiss_icp").space  # max_points_per_voxel is an integer
+    top = {s.name: s.high for s in space.specs}
+    moved = perturbed_params(top, space, np.full(6, 1.005))
+    assert moved == top  # clipped to the range
+    low = perturbed_params(space.defaults(), space, np.full(6, 0.995))
+    assert low["max_points_per_voxel"] == 20.0 and low["voxel_size"] == pytest.approx(0.995)
+    schedule = Schedule.constant(space.defaults(), 5)
+    s2 = perturbed_schedule(schedule, space, np.full(6, 0.995))
+    assert all(np.array_equal(s2.values[n], np.full(5, low[n])) for n in space.names)
+
+
+def test_replicas_run_each_setting_with_its_perturbed_parameters(tmp_path: Path) -> None:
+    """A replica of a setting is a run with that setting's parameters times the replica's
+    factors; the adaptive replica runs the perturbed schedule (a constant schedule of the
+    baseline parameters gives the baseline replica's figure)."""
+    from types import SimpleNamespace
+
+    from pipeline.evaluation.rte import mean_rte_pct
+    from pipeline.generalization.run import SuiteInputs, run_replicas
+    from pipeline.generalization.suite import SuiteWorld
+    from pipeline.odometry import get_adapter, run_sequence
+    from pipeline.odometry.base import Schedule
+    from pipeline.sequence import SequenceReader
+    from pipeline.sim.simulate import simulate_sequence
+    from pipeline.tuning.job import TrialResult
+    from pipeline.tuning.table import JOINT, trials_path, write_trials
+
+    space = get_adapter("ndt").space
+    write_trials(trials_path(tmp_path / "fixed", "ndt", JOINT), space,
+                 [TrialResult(0, "ok", "", 1.5, 1.0, 7, space.defaults())],
+                 {"space": space.to_json()})
+    world = SuiteWorld("w", SimSpec("composite", 5, 60, segments=("street", "cave")))
+    path = tmp_path / "w.mcap"
+    simulate_sequence(world.spec, path, name="w")
+    with SequenceReader(path) as reader:
+        gt = reader.ground_truth()
+    base = space.defaults()
+    fixed = {"resolution": 2.0, "keyframe_interval": 7.0}
+    ev = SimpleNamespace(ground_truth={"w": gt}, baseline_params=base, fixed_params=fixed,
+                         schedules={"w": Schedule.constant(base, 60)})
+    inputs = SuiteInputs(tmp_path / "model", tmp_path / "fixed", "ndt", fixed, {}, 4.0,
+                         replicas=2, replica_scale=0.01)
+    out = run_replicas(world, inputs, path, ev)
+    assert {k: len(v) for k, v in out.items()} == {"baseline": 2, "fixed": 2, "adaptive": 2}
+    for r in (1, 2):
+        f = 1.0 + np.random.default_rng([5, r]).uniform(-0.01, 0.01, 2)
+        for setting, params in (("baseline", base), ("fixed", fixed)):
+            moved = {"resolution": params["resolution"] * f[0],
+                     "keyframe_interval": params["keyframe_interval"] * f[1]}
+            traj = run_sequence(get_adapter("ndt"), path, moved)
+            assert out[setting][r - 1] == mean_rte_pct(gt, traj.T_world_lidar, 4.0)
+    assert out["adaptive"] == out["baseline"]
+
+
+def test_replica_figures() -> None:
+    """The replica ratios divide the settings' medians over their runs; the noise block gives
+    the runs' spread and the ratios two runs of one setting show."""
+    from pipeline.generalization.summary import noise_summary, suite_metrics
+
+    one = WorldScore("a", ("cave",), "hdl32", 10, 1, {"baseline": 2.0, "fixed": 1.0,
+                     "adaptive": 1.5}, {}, 0, 0.0,
+                     {"baseline": [4.0, 3.0], "fixed": [1.0, 1.0], "adaptive": [0.5, math.nan]})
+    assert one.replica_medians() == {"baseline": 3.0, "fixed": 1.0, "adaptive": 1.0}
+    assert one.replica_ratios()["adaptive_vs_best"] == 1.0
+    noise = noise_summary([one])
+    # pairs: baseline 2/4 2/3 4/2 4/3 3/2 3/4, fixed all 1 -> 3 of 12 above 1.05 (2, 4/3, 1.5)
+    assert noise["chance_above_worst_target"] == pytest.approx(3 / 12)
+    assert noise["failed_replicas"] == 1
+    assert noise["cv_median"]["fixed"] == 0.0
+    assert noise["cv_median"]["baseline"] == pytest.approx(np.std([2, 4, 3]) / 3)
+    m = suite_metrics([one], "dev", 1, 200, "ndt", 25.0)
+    assert m["replicas"] == 2 and m["replica_summary"]["adaptive_vs_best"]["median"] == 1.0
+    plain = WorldScore("b", ("cave",), "hdl32", 10, 1, {"baseline": 2.0, "fixed": 1.0,
+                       "adaptive": 1.5}, {}, 0, 0.0)
+    assert "replica_summary" not in suite_metrics([plain], "dev", 1, 200, "ndt", 25.0)

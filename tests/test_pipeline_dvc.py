@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 import yaml
 
@@ -192,14 +193,24 @@ def test_generalize_scores_every_world_of_the_suite(repro: tuple[Path, str]) -> 
             assert len(read_trajectory(path)) == 50
         assert len(Schedule.read(root / f"results/generalization/adaptive/{name}/"
                                  "schedule.parquet")) == 50
+        # two replicas of every setting (params.yaml), the ratio of the medians of the runs
+        runs = {s: [r[s], *w["replicas_rte_pct"][s]] for s in r}
+        assert all(len(v) == 3 and all(x > 0 for x in v) for v in runs.values())
+        med = {s: float(np.median(v)) for s, v in runs.items()}
+        assert w["replica_ratio"]["adaptive_vs_best"] == pytest.approx(
+            med["adaptive"] / min(med["baseline"], med["fixed"]))
     assert not list((root / "results/generalization").rglob("*.mcap"))  # scratch removed
     for ratio in RATIOS:
         s = m["summary"][ratio]
         lo, hi = s["median_interval"]
         assert lo <= s["median"] <= hi and s["worst_world"] in worlds
         assert s["worst"] == max(w["ratio"][ratio] for w in worlds.values())
+        assert m["replica_summary"][ratio]["worst"] == max(
+            w["replica_ratio"][ratio] for w in worlds.values())
+    assert m["replicas"] == 2 and m["noise"]["chance_ratio_p95"] >= 1.0
     rows = (root / "plots/generalization.csv").read_text().splitlines()
     assert len(rows) == 4 and rows[0].startswith("world,segments,sensor,frames,")
+    assert rows[0].endswith(",replica_adaptive_vs_best")
     assert (root / "report/generalization.png").read_bytes()[:4] == b"\x89PNG"
     assert "on the test suite (3 worlds)" in log
 

@@ -18,13 +18,13 @@ import numpy as np
 
 from pipeline.generalization.run import SuiteInputs, WorldScore, run_suite
 from pipeline.generalization.suite import GeneralizeSection
-from pipeline.generalization.summary import plot_rows, suite_metrics
+from pipeline.generalization.summary import (
+    TARGET_MEDIAN,
+    TARGET_WORST,
+    plot_rows,
+    suite_metrics,
+)
 from pipeline.io_utils import atomic_write_text
-
-TARGET_MEDIAN = 0.75
-TARGET_WORST = 1.05
-"""The issue's targets on the test worlds: median ratio adaptive / min(baseline, fixed) and
-worst world (drawn in the figure)."""
 
 
 @dataclass(frozen=True)
@@ -48,7 +48,7 @@ def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
 
     algorithm, fixed = best_fixed_params(paths.fixed)
     inputs = SuiteInputs(paths.model, paths.fixed, algorithm, fixed, dict(adapter_options or {}),
-                         section.length_m)
+                         section.length_m, section.replicas, section.replica_scale)
     scores = run_suite(section, inputs, paths.runs)
     result = suite_metrics(scores, section.suite, section.root, section.bootstrap, algorithm,
                            section.length_m)
@@ -59,8 +59,9 @@ def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
 
 
 def suite_figure(scores: Sequence[WorldScore], metrics: Mapping[str, Any], out_png: Path) -> Path:
-    """RTE of every setting per world (top, log scale) and adaptive / min(baseline, fixed)
-    per world (bottom, log scale) with the median and the targets."""
+    """RTE of every setting per world (top, log scale; with replicas a line over the range of
+    its runs) and adaptive / min(baseline, fixed) per world (bottom, log scale; with replicas
+    the ratio of the settings' medians as a diamond) with the median and the targets."""
     from pipeline.report.evaluate import SETTINGS
     from pipeline.report.figures import SETTING_COLOURS, _figure
 
@@ -71,11 +72,17 @@ def suite_figure(scores: Sequence[WorldScore], metrics: Mapping[str, Any], out_p
         for j, setting in enumerate(SETTINGS):
             ax[0, 0].bar(x + (j - 1) * 0.27, [s.rte_pct[setting] for s in scores], 0.27,
                          color=SETTING_COLOURS[setting], label=setting)
+            if any(s.replicas_rte_pct for s in scores):  # the range of the setting's runs
+                lo, hi = np.array([_range(s.runs(setting)) for s in scores]).T
+                ax[0, 0].vlines(x + (j - 1) * 0.27, lo, hi, color="black", lw=1.0)
         ax[0, 0].set_yscale("log")
         ax[0, 0].set_ylabel(f"RTE over {metrics['length_m']:g} m [%]")
         ax[0, 0].legend(fontsize=8)
         ratio = [s.ratios()["adaptive_vs_best"] for s in scores]
         ax[1, 0].bar(x, ratio, 0.6, color=["tab:green" if r < 1 else "tab:red" for r in ratio])
+        if any(s.replicas_rte_pct for s in scores):
+            ax[1, 0].plot(x, [s.replica_ratios()["adaptive_vs_best"] for s in scores], "kD",
+                          ms=5, label="ratio of the medians over the replicas")
         ax[1, 0].axhline(1.0, color="black", lw=0.8)
         if best["median"] is not None:
             ax[1, 0].axhline(best["median"], color="tab:blue", ls="-",
@@ -89,3 +96,9 @@ def suite_figure(scores: Sequence[WorldScore], metrics: Mapping[str, Any], out_p
         fig.suptitle(f"{metrics['algorithm']} on the {metrics['suite']} suite "
                      f"({metrics['worlds']} unseen worlds; c/o/s: cave/open/street)")
     return out_png
+
+
+def _range(values: Sequence[float]) -> tuple[float, float]:
+    """(min, max) of the finite values (NaN, NaN without any)."""
+    ok = [v for v in values if np.isfinite(v)]
+    return (min(ok), max(ok)) if ok else (float("nan"), float("nan"))

@@ -6,7 +6,9 @@ For every world (``pipeline.generalization.suite``), ``score_world``
    stage's code);
 3. runs baseline and fixed and scores all three (``pipeline.report.evaluate.evaluate``, the
    ``evaluate`` stage's code: per-start-frame RTE at L = ``length_m``);
-4. deletes the MCAP (hundreds of MB a world) and keeps the trajectories and the schedule:
+4. with ``replicas`` R > 0, runs every setting R times more with its parameters moved by at
+   most ``replica_scale`` (``pipeline.generalization.replicas``) and scores those runs;
+5. deletes the MCAP (hundreds of MB a world) and keeps the trajectories and the schedule:
    ``<out>/adaptive/<world>/`` and ``<out>/runs/<world>/``.
 
 ``run_suite`` does that for every world, ``workers`` worlds at a time (spawned processes), and
@@ -17,8 +19,9 @@ from __future__ import annotations
 
 import logging
 import math
+import statistics
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +34,9 @@ log = logging.getLogger(__name__)
 @dataclass(frozen=True)
 class WorldScore:
     """One world's result: mean per-start-frame RTE [%] of every setting, overall and per
-    environment label, the adaptive run's parameter changes and the wall time [s]."""
+    environment label, the adaptive run's parameter changes and the wall time [s]; with
+    replicas (``pipeline.generalization.replicas``) the RTE [%] of every replica run of every
+    setting (NaN: the odometry failed)."""
 
     name: str
     segments: tuple[str, ...]
@@ -42,6 +47,7 @@ class WorldScore:
     rte_pct_per_label: dict[str, dict[str, float]]
     parameter_changes: int
     wall_time_s: float
+    replicas_rte_pct: dict[str, list[float]] = field(default_factory=dict)
 
     @property
     def best_fixed_setting(self) -> str:
@@ -50,12 +56,37 @@ class WorldScore:
 
     def ratios(self) -> dict[str, float]:
         """adaptive / baseline, adaptive / fixed and adaptive / min(baseline, fixed)."""
-        a, b, f = (self.rte_pct[s] for s in ("adaptive", "baseline", "fixed"))
-        return {"adaptive_vs_baseline": _ratio(a, b), "adaptive_vs_fixed": _ratio(a, f),
-                "adaptive_vs_best": _ratio(a, min(b, f))}
+        return _ratios(self.rte_pct)
+
+    def runs(self, setting: str) -> list[float]:
+        """RTE [%] of the nominal run and of every replica of ``setting``."""
+        return [self.rte_pct[setting], *self.replicas_rte_pct.get(setting, [])]
+
+    def replica_medians(self) -> dict[str, float]:
+        """Per setting, the median RTE [%] over its nominal and replica runs (failed left out)."""
+        return {s: _nanmedian(self.runs(s)) for s in self.rte_pct}
+
+    def replica_ratios(self) -> dict[str, float]:
+        """The three ratios of the settings' medians over their runs: what one run says with
+        the parameters' chaos averaged out."""
+        return _ratios(self.replica_medians())
 
     def to_json(self) -> dict[str, Any]:
-        return {**asdict(self), "segments": list(self.segments), "ratio": self.ratios()}
+        out = {**asdict(self), "segments": list(self.segments), "ratio": self.ratios()}
+        if self.replicas_rte_pct:
+            out["replica_ratio"] = self.replica_ratios()
+        return out
+
+
+def _ratios(rte_pct: dict[str, float]) -> dict[str, float]:
+    a, b, f = (rte_pct[s] for s in ("adaptive", "baseline", "fixed"))
+    return {"adaptive_vs_baseline": _ratio(a, b), "adaptive_vs_fixed": _ratio(a, f),
+            "adaptive_vs_best": _ratio(a, min(b, f))}
+
+
+def _nanmedian(values: list[float]) -> float:
+    ok = [v for v in values if math.isfinite(v)]
+    return float(statistics.median(ok)) if ok else math.nan
 
 
 def _ratio(a: float, b: float) -> float:
@@ -66,7 +97,7 @@ def _ratio(a: float, b: float) -> float:
 class SuiteInputs:
     """What every world is run with: the artifact, the joint study's output (its stored
     parameter space gives the baseline) and best parameters (and their algorithm), the
-    adapter's untuned options, L [m]."""
+    adapter's untuned options, L [m], replicas per setting and their relative scale."""
 
     model_dir: Path
     fixed_dir: Path
@@ -74,6 +105,8 @@ class SuiteInputs:
     fixed_params: dict[str, float]
     adapter_options: dict[str, Any]
     length_m: float
+    replicas: int = 0
+    replica_scale: float = 0.005
 
 
 def run_suite(section: GeneralizeSection, inputs: SuiteInputs, out_dir: Path) -> list[WorldScore]:
@@ -117,10 +150,38 @@ def score_world(world: SuiteWorld, inputs: SuiteInputs, out_dir: Path) -> WorldS
         ev = evaluate([path], inputs.algorithm, inputs.fixed_params, out_dir / "adaptive",
                       out_dir / "runs", EvaluateSection(length_m=inputs.length_m),
                       inputs.adapter_options, inputs.fixed_dir)
+        replicas = run_replicas(world, inputs, path, ev) if inputs.replicas else {}
     finally:
         path.unlink(missing_ok=True)
     return WorldScore(
         world.name, world.spec.segments, world.spec.sensor, world.spec.frames, world.spec.seed,
         {s: ev.score(s, world.name).rte_pct for s in SETTINGS},
         {s: ev.score(s, world.name).per_label() for s in SETTINGS},
-        run.changes, time.perf_counter() - t0)
+        run.changes, time.perf_counter() - t0, replicas)
+
+
+def run_replicas(world: SuiteWorld, inputs: SuiteInputs, path: Path,
+                 ev: Any) -> dict[str, list[float]]:
+    """RTE [%] of ``inputs.replicas`` replicas of every setting on ``world`` (scored ``ev``,
+    its sequence at ``path``): ``pipeline.generalization.replicas``."""
+    from pipeline.generalization.replicas import (
+        factors,
+        perturbed_params,
+        perturbed_schedule,
+        replica_rte,
+    )
+    from pipeline.report.evaluate import study_adapter
+
+    adapter = study_adapter(inputs.algorithm, inputs.adapter_options, inputs.fixed_dir)
+    space, gt = adapter.space, ev.ground_truth[world.name]
+    nominal = {"baseline": ev.baseline_params, "fixed": ev.fixed_params,
+               "adaptive": ev.schedules[world.name]}
+    out: dict[str, list[float]] = {s: [] for s in SETTINGS}
+    for r in range(1, inputs.replicas + 1):
+        f = factors(world.spec.seed, r, len(space.names), inputs.replica_scale)
+        for setting in SETTINGS:
+            x = nominal[setting]
+            what = (perturbed_params(x, space, f) if isinstance(x, dict)
+                    else perturbed_schedule(x, space, f))
+            out[setting].append(replica_rte(adapter, path, what, gt, inputs.length_m))
+    return out

@@ -33,7 +33,10 @@ class GeneralizeSection(Section):
     seed_roots: the root of every suite's seeds (fixed before any result was seen);
     worlds: worlds per suite; segments: (min, max) segments per world; segment_frames: (min,
     max) frames per segment (10 Hz); bootstrap: resamples of the bootstrap interval of the
-    median ratio; workers: worlds run in parallel; length_m: the RTE length L (from base).
+    median ratio; replicas: extra runs of every setting on every world with the parameters
+    moved by at most ``replica_scale`` (relative), to measure how far one run is from the next
+    (``pipeline.generalization.replicas``; 0: none); workers: worlds run in parallel;
+    length_m: the RTE length L (from base).
     """
 
     suite: Literal["dev", "test"] = "test"
@@ -44,6 +47,8 @@ class GeneralizeSection(Section):
     labels: tuple[str, ...] = LABELS
     sensors: tuple[str, ...] = ("hdl32", "vlp16", "hdl32", "hdl64")
     bootstrap: int = Field(2000, ge=100)
+    replicas: int = Field(2, ge=0)
+    replica_scale: float = Field(0.005, gt=0, le=0.1)
     workers: int = Field(2, ge=1)
     length_m: float = Field(25.0, gt=0)
 

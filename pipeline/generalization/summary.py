@@ -4,6 +4,14 @@ bootstrap interval of the median (``metrics/generalization.json``, ``plots/gener
 A ratio below 1 means adaptive beat the other setting on that world (lower RTE); the win rate
 is the fraction of worlds whose ratio is below 1. The interval is the percentile bootstrap
 (worlds resampled with replacement, ``resamples`` times, seeded) of the median ratio.
+
+With replicas (``pipeline.generalization.replicas``) two more blocks: ``replica_summary``, the
+same figures of the ratios of every setting's median over its runs, and ``noise``, how far
+runs of one setting are from each other on a world: per setting the median over worlds of the
+coefficient of variation of its runs, and over the ordered pairs of two runs of baseline or of
+fixed on one world, the fraction whose ratio exceeds the worst-world target
+(``chance_above_worst_target``) and the 95th percentile of that ratio (``chance_ratio_p95``):
+the ratios a selector no better and no worse than a fixed setting would show by chance.
 """
 
 from __future__ import annotations
@@ -18,6 +26,10 @@ from pipeline.generalization.run import WorldScore
 
 RATIOS = ("adaptive_vs_best", "adaptive_vs_baseline", "adaptive_vs_fixed")
 INTERVAL = 0.90
+TARGET_MEDIAN = 0.75
+TARGET_WORST = 1.05
+"""Issue 12's targets on the test worlds: median ratio adaptive / min(baseline, fixed) and
+worst world (drawn in the figure)."""
 
 
 def ratio_summary(names: Sequence[str], ratios: Sequence[float], resamples: int,
@@ -46,7 +58,7 @@ def suite_metrics(scores: Sequence[WorldScore], suite: str, root: int, resamples
     names = [s.name for s in scores]
     summary = {k: ratio_summary(names, [s.ratios()[k] for s in scores], resamples, root)
                for k in RATIOS}
-    return {
+    out: dict[str, Any] = {
         "algorithm": algorithm,
         "suite": suite,
         "seed_root": root,
@@ -54,15 +66,52 @@ def suite_metrics(scores: Sequence[WorldScore], suite: str, root: int, resamples
         "worlds": len(scores),
         "frames": sum(s.frames for s in scores),
         "summary": summary,
-        "per_world": {s.name: s.to_json() for s in scores},
     }
+    if any(s.replicas_rte_pct for s in scores):
+        out["replicas"] = max(len(v) for s in scores for v in s.replicas_rte_pct.values())
+        out["replica_summary"] = {
+            k: ratio_summary(names, [s.replica_ratios()[k] for s in scores], resamples, root)
+            for k in RATIOS}
+        out["noise"] = noise_summary(scores)
+    out["per_world"] = {s.name: s.to_json() for s in scores}
+    return out
+
+
+def noise_summary(scores: Sequence[WorldScore]) -> dict[str, Any]:
+    """How far runs of one setting are from each other (module docstring)."""
+    cv = {}
+    for setting in ("baseline", "fixed", "adaptive"):
+        per_world = [_cv(s.runs(setting)) for s in scores]
+        ok = [v for v in per_world if math.isfinite(v)]
+        cv[setting] = float(np.median(ok)) if ok else None
+    pairs = np.array([a / b for s in scores for setting in ("baseline", "fixed")
+                      for i, a in enumerate(s.runs(setting)) for j, b in enumerate(s.runs(setting))
+                      if i != j and b > 0 and math.isfinite(a) and math.isfinite(b)])
+    failed = sum(not math.isfinite(v) for s in scores for runs in s.replicas_rte_pct.values()
+                 for v in runs)
+    return {"cv_median": cv,
+            "chance_above_worst_target": float((pairs > TARGET_WORST).mean()) if len(pairs)
+            else None,
+            "chance_ratio_p95": float(np.quantile(pairs, 0.95)) if len(pairs) else None,
+            "failed_replicas": failed}
+
+
+def _cv(values: Sequence[float]) -> float:
+    """Coefficient of variation (population std / mean) of the finite values; NaN below 2."""
+    v = np.asarray([x for x in values if math.isfinite(x)], np.float64)
+    return float(v.std() / v.mean()) if len(v) >= 2 and v.mean() > 0 else math.nan
 
 
 def plot_rows(scores: Sequence[WorldScore]) -> list[dict[str, Any]]:
-    """One row per world for ``dvc plots``: RTE of every setting and the three ratios."""
+    """One row per world for ``dvc plots``: RTE of every setting and the three ratios (with
+    replicas also every setting's median over its runs and the ratios of those)."""
     def num(v: float) -> float | str:
         return round(float(v), 6) if math.isfinite(v) else ""
 
     return [{"world": s.name, "segments": "-".join(s.segments), "sensor": s.sensor,
              "frames": s.frames, **{f"{k}_pct": num(v) for k, v in s.rte_pct.items()},
-             **{k: num(v) for k, v in s.ratios().items()}} for s in scores]
+             **{k: num(v) for k, v in s.ratios().items()},
+             **({f"{k}_median_pct": num(v) for k, v in s.replica_medians().items()}
+                if s.replicas_rte_pct else {}),
+             **({f"replica_{k}": num(v) for k, v in s.replica_ratios().items()}
+                if s.replicas_rte_pct else {})} for s in scores]

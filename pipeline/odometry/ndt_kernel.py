@@ -333,8 +333,8 @@ def ndt_assemble(Ms: F64, cs: F64, moments: F64, used: int) -> tuple[F64, F64]: 
 
 
 @numba.njit(cache=True, nogil=True)
-def _voxel_in_sensor_frame(R: F64, t: F64, means: F64, inv_covs: F64, v: np.int64, Ms: F64,
-                           cs: F64, k: np.int64) -> None:  # pragma: no cover - compiled
+def _voxel_in_sensor_frame(R: F64, t: F64, means: F64, inv_covs: F64, v: int | np.int64, Ms: F64,
+                           cs: F64, k: int) -> None:  # pragma: no cover - compiled
     """Ms[k] = R^T C R (3, 3) and cs[k] = R^T (mu - t) (3,) of map voxel v (C = inv_covs[v],
     mu = means[v])."""
     for a in range(3):
@@ -349,7 +349,7 @@ def _voxel_in_sensor_frame(R: F64, t: F64, means: F64, inv_covs: F64, v: np.int6
 
 
 @numba.njit(cache=True, nogil=True)
-def _add_voxel_terms(Ms: F64, cs: F64, moments: F64, k: np.int64, H: F64, g: F64,
+def _add_voxel_terms(Ms: F64, cs: F64, moments: F64, k: int, H: F64, g: F64,
                      P: F64) -> None:  # pragma: no cover - compiled
     """Add voxel k's gradient (6,) and upper-triangle Hessian (6, 6) terms, from M = Ms[k],
     c = cs[k] and its moments (S0, S1, S2 upper triangle) = moments[k] (``ndt_terms``);

@@ -52,7 +52,7 @@ class EvaluateSection(Section):
     splits: list[str] = Field(default_factory=lambda: ["validation"], min_length=1)
     length_m: float = Field(25.0, gt=0)
     kitti_lengths_m: tuple[float, ...] = LENGTHS_M
-    workers: int = Field(2, ge=1)
+    workers: int = Field(default=2, ge=1)
 
     @field_validator("splits")
     @classmethod
@@ -189,7 +189,7 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
     """
     from pipeline.executor import map_in_processes
 
-    adapter = _adapter(algorithm, adapter_options, fixed_dir)
+    adapter = study_adapter(algorithm, adapter_options, fixed_dir)
     result = Evaluation(algorithm, settings.length_m, adapter.space.validate(fixed_params),
                         adapter.space.defaults(), settings.kitti_lengths_m)
     jobs = [(path, algorithm, adapter_options, fixed_dir, result.baseline_params,
@@ -206,7 +206,7 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
     return result
 
 
-def _adapter(algorithm: str, adapter_options: Mapping[str, object] | None,
+def study_adapter(algorithm: str, adapter_options: Mapping[str, object] | None,
              fixed_dir: Path | None) -> Any:
     """The adapter with the space the studies searched (its defaults are the baseline), read
     from the joint study's output; the built-in space without one."""
@@ -234,7 +234,7 @@ def _score_sequence(path: Path, algorithm: str, adapter_options: Mapping[str, ob
                     fixed_params: dict[str, float], adaptive_dir: Path, out_dir: Path,
                     settings: EvaluateSection) -> _SequenceResult:
     """Baseline and fixed run on ``path``, the adaptive run read back, all three scored."""
-    adapter = _adapter(algorithm, adapter_options, fixed_dir)
+    adapter = study_adapter(algorithm, adapter_options, fixed_dir)
     name = path.stem
     gt, info = _ground_truth(path)
     labels = [info.label_of(i) for i in range(len(gt))]
