@@ -45,7 +45,9 @@ class KittiProtocol(Section):
     iterations / joint_iterations: SMBO budget per training sequence / of the joint study
     (null keeps params.yaml's); time_limit_s: a trial's time limit per sequence run [s] (a
     slower parameter set fails with the penalty; null keeps params.yaml's); length_m: L [m];
-    kitti_lengths_m: devkit lengths (null keeps params.yaml's, 100..800 m).
+    kitti_lengths_m: devkit lengths (null keeps params.yaml's, 100..800 m); replicas: extra
+    runs of every setting with its parameters moved by at most 0.5 % (``evaluate.replicas``:
+    how far one run is from the next; null keeps params.yaml's).
     """
 
     source: Literal["real", "simulated"] = "real"
@@ -63,6 +65,7 @@ class KittiProtocol(Section):
     time_limit_s: float | None = Field(None, gt=0)
     length_m: float = Field(KITTI_LENGTH_M, gt=0)
     kitti_lengths_m: list[float] | None = Field(None, min_length=1)
+    replicas: int | None = Field(None, ge=0)
 
     @model_validator(mode="after")
     def _consistent(self) -> KittiProtocol:
@@ -109,6 +112,8 @@ def kitti_protocol(protocol: KittiProtocol, params: Mapping[str, Any]) -> dict[s
     if protocol.kitti_lengths_m is not None:
         data["rte.kitti_lengths_m"] = protocol.kitti_lengths_m
         data["evaluate.kitti_lengths_m"] = protocol.kitti_lengths_m
+    if protocol.replicas is not None:
+        data["evaluate.replicas"] = protocol.replicas
     check(apply(params, data))
     return data
 

@@ -58,13 +58,16 @@ def _window(text: str) -> tuple[str, tuple[int, int]]:
               help="L, the RTE length of the SMBO objective [m].")
 @click.option("--kitti-lengths-m", default=None,
               help="Devkit segment lengths [m], comma-separated [100,...,800].")
+@click.option("--replicas", type=int, default=None,
+              help="Extra runs of every setting with its parameters moved by at most 0.5 % "
+              "(the table gives their spread) [params.yaml's evaluate.replicas].")
 @params_option
 def kitti_preset(root: Path | None, simulated: Path | None, train: str | None,
                  test: str | None, stride: int, start: int | None, end: int | None,
                  windows: tuple[str, ...], change_windows: int | None, algorithm: str | None,
                  iterations: int | None, joint_iterations: int | None,
                  time_limit_s: float | None, length_m: float, kitti_lengths_m: str | None,
-                 params_path: Path) -> None:
+                 replicas: int | None, params_path: Path) -> None:
     """Print the `dvc exp run` arguments of the KITTI protocol, one a line.
 
     \b
@@ -85,7 +88,7 @@ def kitti_preset(root: Path | None, simulated: Path | None, train: str | None,
            "iterations": iterations,
            "joint_iterations": joint_iterations, "time_limit_s": time_limit_s,
            "length_m": length_m,
-           "kitti_lengths_m": _names(kitti_lengths_m)}
+           "kitti_lengths_m": _names(kitti_lengths_m), "replicas": replicas}
     protocol = validate_section(KittiProtocol, "kitti-preset",
                                 {k: v for k, v in raw.items() if v is not None})
     for arg in set_params(kitti_protocol(protocol, read_params(params_path))):

@@ -198,3 +198,54 @@ def test_adaptive_and_evaluate_give_the_same_results_for_any_workers(
             one, two = (pq.read_table(tmp_path / f"ev{w}" / name / f"{setting}.parquet")
                         for w in (1, 2))
             assert one.equals(two)
+
+
+def test_replicas_run_each_setting_with_its_perturbed_parameters(
+        tmp_path: Path, validation_set: Path) -> None:
+    """evaluate.replicas: replica r of a setting is a run with that setting's parameters times
+    the factors of (the sequence, r), scored like the nominal run; the adaptive replica runs
+    the schedule times the same factors (a constant schedule of the defaults gives the
+    baseline replica's figures); the metrics pool the r-th runs of a split."""
+    import numpy as np
+
+    from pipeline.evaluation.rte import mean_rte_pct
+    from pipeline.odometry import get_adapter, run_sequence
+    from pipeline.odometry.base import Schedule
+    from pipeline.report.evaluate import EvaluateSection, evaluate, metrics
+    from pipeline.report.replicas import sequence_seed
+    from pipeline.sequence import SequenceReader
+    from pipeline.trajectory import write_trajectory
+
+    path = validation_set / "composite_0.mcap"
+    space = get_adapter("ndt").space
+    base = space.defaults()
+    adaptive = tmp_path / "adaptive" / "composite_0"
+    traj = run_sequence(get_adapter("ndt"), path, base)
+    Schedule.constant(base, len(traj)).write(adaptive / "schedule.parquet")
+    write_trajectory(adaptive / "trajectory.parquet", traj, {"setting": "adaptive"})
+    (adaptive / "run.json").write_text(json.dumps({"algorithm": "ndt", "wall_time_s": 1.0}))
+    fixed = {"resolution": 2.0, "keyframe_interval": 7.0}
+    settings = EvaluateSection(length_m=4.0, kitti_lengths_m=(4.0,), replicas=2,
+                               replica_scale=0.01)
+    ev = evaluate([path], "ndt", fixed, tmp_path / "adaptive", tmp_path / "ev", settings,
+                  fixed_dir=_joint_table(tmp_path / "fixed"))
+    with SequenceReader(path) as reader:
+        gt = reader.ground_truth()
+    for setting, params in (("baseline", base), ("fixed", fixed)):
+        got = ev.score(setting, "composite_0").replica_rte_pct
+        for r in (1, 2):
+            f = 1.0 + np.random.default_rng([sequence_seed("composite_0"), r]).uniform(
+                -0.01, 0.01, 2)
+            moved = {n: params[n] * f[j] for j, n in enumerate(space.names)}
+            run = run_sequence(get_adapter("ndt"), path, moved)
+            assert got[r - 1] == mean_rte_pct(gt, run.T_world_lidar, 4.0)
+    assert (ev.score("adaptive", "composite_0").replica_rte_pct
+            == ev.score("baseline", "composite_0").replica_rte_pct)
+    m = metrics(ev, {})
+    assert m["replicas"] == 2
+    runs = m["splits"]["validation"]["replicas"]["baseline"]
+    assert runs["rte_pct"] == [ev.score("baseline", "composite_0").rte_pct,
+                               *ev.score("baseline", "composite_0").replica_rte_pct]
+    assert len(runs["kitti_t_err_pct"]) == 3
+    assert m["sequences"]["composite_0"]["replicas_rte_pct"]["fixed"] == (
+        ev.score("fixed", "composite_0").replica_rte_pct)

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import itertools
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -114,9 +113,9 @@ def test_world_of_draws_from_the_named_suite() -> None:
 
 
 def test_replica_factors_and_perturbed_parameters() -> None:
-    from pipeline.generalization.replicas import factors, perturbed_params, perturbed_schedule
     from pipeline.odometry import get_adapter
     from pipeline.odometry.base import Schedule
+    from pipeline.report.replicas import factors, perturbed_params, perturbed_schedule
 
     f = factors(7, 1, 6, 0.005)
     assert np.all(np.abs(f - 1.0) <= 0.005) and len(set(f.tolist())) == 6
@@ -131,49 +130,6 @@ def test_replica_factors_and_perturbed_parameters() -> None:
     schedule = Schedule.constant(space.defaults(), 5)
     s2 = perturbed_schedule(schedule, space, np.full(6, 0.995))
     assert all(np.array_equal(s2.values[n], np.full(5, low[n])) for n in space.names)
-
-
-def test_replicas_run_each_setting_with_its_perturbed_parameters(tmp_path: Path) -> None:
-    """A replica of a setting is a run with that setting's parameters times the replica's
-    factors; the adaptive replica runs the perturbed schedule (a constant schedule of the
-    baseline parameters gives the baseline replica's figure)."""
-    from types import SimpleNamespace
-
-    from pipeline.evaluation.rte import mean_rte_pct
-    from pipeline.generalization.run import SuiteInputs, run_replicas
-    from pipeline.generalization.suite import SuiteWorld
-    from pipeline.odometry import get_adapter, run_sequence
-    from pipeline.odometry.base import Schedule
-    from pipeline.sequence import SequenceReader
-    from pipeline.sim.simulate import simulate_sequence
-    from pipeline.tuning.job import TrialResult
-    from pipeline.tuning.table import JOINT, trials_path, write_trials
-
-    space = get_adapter("ndt").space
-    write_trials(trials_path(tmp_path / "fixed", "ndt", JOINT), space,
-                 [TrialResult(0, "ok", "", 1.5, 1.0, 7, space.defaults())],
-                 {"space": space.to_json()})
-    world = SuiteWorld("w", SimSpec("composite", 5, 60, segments=("street", "cave")))
-    path = tmp_path / "w.mcap"
-    simulate_sequence(world.spec, path, name="w")
-    with SequenceReader(path) as reader:
-        gt = reader.ground_truth()
-    base = space.defaults()
-    fixed = {"resolution": 2.0, "keyframe_interval": 7.0}
-    ev = SimpleNamespace(ground_truth={"w": gt}, baseline_params=base, fixed_params=fixed,
-                         schedules={"w": Schedule.constant(base, 60)})
-    inputs = SuiteInputs(tmp_path / "model", tmp_path / "fixed", "ndt", fixed, {}, 4.0,
-                         replicas=2, replica_scale=0.01)
-    out = run_replicas(world, inputs, path, ev)
-    assert {k: len(v) for k, v in out.items()} == {"baseline": 2, "fixed": 2, "adaptive": 2}
-    for r in (1, 2):
-        f = 1.0 + np.random.default_rng([5, r]).uniform(-0.01, 0.01, 2)
-        for setting, params in (("baseline", base), ("fixed", fixed)):
-            moved = {"resolution": params["resolution"] * f[0],
-                     "keyframe_interval": params["keyframe_interval"] * f[1]}
-            traj = run_sequence(get_adapter("ndt"), path, moved)
-            assert out[setting][r - 1] == mean_rte_pct(gt, traj.T_world_lidar, 4.0)
-    assert out["adaptive"] == out["baseline"]
 
 
 def test_replica_figures() -> None:

@@ -44,7 +44,7 @@ def protocol(kitti_root: Path, tmp_path_factory: pytest.TempPathFactory) -> Path
     args = subprocess.run(
         [str(BIN / "adaptune"), "kitti-preset", "--root", str(kitti_root), "--train", "01,04",
          "--test", "06,10", "--iterations", "3", "--joint-iterations", "2",
-         "--length-m", str(TINY_L_M), "--kitti-lengths-m", "2,4"],
+         "--length-m", str(TINY_L_M), "--kitti-lengths-m", "2,4", "--replicas", "1"],
         cwd=root, check=True, capture_output=True, text=True).stdout.splitlines()
     log = dvc(root, "exp", "run", *args, "evaluate")
     assert "Running stage 'ingest'" in log and "Running stage 'simulate'" not in log
@@ -58,6 +58,7 @@ def test_the_preset_sets_the_protocol(protocol: Path, kitti_root: Path) -> None:
     assert params["ingest"] == {"kitti_root": str(kitti_root), "train": ["01", "04"],
                                 "validation": ["06", "10"], "start": None, "end": None}
     assert params["evaluate"]["splits"] == ["validation", "train"]
+    assert params["evaluate"]["replicas"] == 1
     assert (params["trials"]["iterations"], params["trials"]["startup_trials"],
             params["fixed"]["iterations"]) == (3, 2, 2)
     assert params["rte"]["kitti_lengths_m"] == params["evaluate"]["kitti_lengths_m"] == [2, 4]
@@ -106,7 +107,7 @@ def test_table2_lays_out_every_algorithm(protocol: Path, tmp_path: Path) -> None
     md = (tmp_path / "t/table.md").read_text().splitlines()
     head = next(line for line in md if line.startswith("| algorithm"))
     assert head == ("| algorithm | setting | 01 | 04 | training avg | 06 | 10 | test avg |")
-    assert [line.split("|")[1:3] for line in md if "| baseline |" in line] == [
+    assert [line.split("|")[1:3] for line in md if line.split("|")[2:3] == [" baseline "]] == [
         [" ndt ", " baseline "], [" other ", " baseline "]]
     table = json.loads((tmp_path / "t/table.json").read_text())
     ndt = table["algorithms"]["ndt"]
@@ -114,6 +115,13 @@ def test_table2_lays_out_every_algorithm(protocol: Path, tmp_path: Path) -> None
         m["splits"]["train"]["kitti"]["fixed"]["t_err_pct"])
     assert ndt["sequences"]["06"]["t_err_pct"]["adaptive"] == pytest.approx(
         m["sequences"]["06"]["kitti"]["adaptive"]["t_err_pct"])
+    # --replicas 1: two runs of every setting, the nominal one first, their spread in the table
+    reps = m["splits"]["validation"]["replicas"]["adaptive"]["kitti_t_err_pct"]
+    assert reps[0] == m["splits"]["validation"]["kitti"]["adaptive"]["t_err_pct"]
+    assert ndt["replicas"]["validation"]["adaptive"] == reps and len(reps) == 2
+    spread = next(line for line in md if line.startswith("| ndt | 2 | baseline |"))
+    lo, hi = sorted(m["splits"]["train"]["replicas"]["baseline"]["kitti_t_err_pct"])
+    assert f"{(lo + hi) / 2:.3f} [{lo:.3f}, {hi:.3f}]" in spread.split("|")[4]
     # blocks of different protocols do not share a table
     other.write_text(json.dumps({**m, "algorithm": "other", "length_m": 100.0}))
     result = CliRunner().invoke(main, ["kitti-table", str(protocol / "metrics/evaluation.json"),

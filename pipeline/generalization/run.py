@@ -6,9 +6,9 @@ For every world (``pipeline.generalization.suite``), ``score_world``
    stage's code);
 3. runs baseline and fixed and scores all three (``pipeline.report.evaluate.evaluate``, the
    ``evaluate`` stage's code: per-start-frame RTE at L = ``length_m``);
-4. with ``replicas`` R > 0, runs every setting R times more with its parameters moved by at
-   most ``replica_scale`` (``pipeline.generalization.replicas``) and scores those runs;
-5. deletes the MCAP (hundreds of MB a world) and keeps the trajectories and the schedule:
+   with ``replicas`` R > 0 every setting runs R times more, its parameters moved by at most
+   ``replica_scale`` (``pipeline.report.replicas``);
+4. deletes the MCAP (hundreds of MB a world) and keeps the trajectories and the schedule:
    ``<out>/adaptive/<world>/`` and ``<out>/runs/<world>/``.
 
 ``run_suite`` does that for every world, ``workers`` worlds at a time (spawned processes), and
@@ -35,7 +35,7 @@ log = logging.getLogger(__name__)
 class WorldScore:
     """One world's result: mean per-start-frame RTE [%] of every setting, overall and per
     environment label, the adaptive run's parameter changes and the wall time [s]; with
-    replicas (``pipeline.generalization.replicas``) the RTE [%] of every replica run of every
+    replicas (``pipeline.report.replicas``) the RTE [%] of every replica run of every
     setting (NaN: the odometry failed)."""
 
     name: str
@@ -147,41 +147,15 @@ def score_world(world: SuiteWorld, inputs: SuiteInputs, out_dir: Path) -> WorldS
         simulate_sequence(world.spec, path, name=world.name)
         run = run_one(loaded_model(inputs.model_dir), path, out_dir / "adaptive" / world.name,
                       inputs.adapter_options)
+        settings = EvaluateSection(length_m=inputs.length_m, replicas=inputs.replicas,
+                                   replica_scale=inputs.replica_scale)
         ev = evaluate([path], inputs.algorithm, inputs.fixed_params, out_dir / "adaptive",
-                      out_dir / "runs", EvaluateSection(length_m=inputs.length_m),
-                      inputs.adapter_options, inputs.fixed_dir)
-        replicas = run_replicas(world, inputs, path, ev) if inputs.replicas else {}
+                      out_dir / "runs", settings, inputs.adapter_options, inputs.fixed_dir)
     finally:
         path.unlink(missing_ok=True)
+    scores = {s: ev.score(s, world.name) for s in SETTINGS}
     return WorldScore(
         world.name, world.spec.segments, world.spec.sensor, world.spec.frames, world.spec.seed,
-        {s: ev.score(s, world.name).rte_pct for s in SETTINGS},
-        {s: ev.score(s, world.name).per_label() for s in SETTINGS},
-        run.changes, time.perf_counter() - t0, replicas)
-
-
-def run_replicas(world: SuiteWorld, inputs: SuiteInputs, path: Path,
-                 ev: Any) -> dict[str, list[float]]:
-    """RTE [%] of ``inputs.replicas`` replicas of every setting on ``world`` (scored ``ev``,
-    its sequence at ``path``): ``pipeline.generalization.replicas``."""
-    from pipeline.generalization.replicas import (
-        factors,
-        perturbed_params,
-        perturbed_schedule,
-        replica_rte,
-    )
-    from pipeline.report.evaluate import study_adapter
-
-    adapter = study_adapter(inputs.algorithm, inputs.adapter_options, inputs.fixed_dir)
-    space, gt = adapter.space, ev.ground_truth[world.name]
-    nominal = {"baseline": ev.baseline_params, "fixed": ev.fixed_params,
-               "adaptive": ev.schedules[world.name]}
-    out: dict[str, list[float]] = {s: [] for s in SETTINGS}
-    for r in range(1, inputs.replicas + 1):
-        f = factors(world.spec.seed, r, len(space.names), inputs.replica_scale)
-        for setting in SETTINGS:
-            x = nominal[setting]
-            what = (perturbed_params(x, space, f) if isinstance(x, dict)
-                    else perturbed_schedule(x, space, f))
-            out[setting].append(replica_rte(adapter, path, what, gt, inputs.length_m))
-    return out
+        {s: x.rte_pct for s, x in scores.items()}, {s: x.per_label() for s, x in scores.items()},
+        run.changes, time.perf_counter() - t0,
+        {s: x.replica_rte_pct for s, x in scores.items()} if inputs.replicas else {})

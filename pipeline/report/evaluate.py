@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from pydantic import Field, field_validator
 
 from pipeline.config import Section
-from pipeline.errors import InputError
+from pipeline.errors import InputError, OdometryError
 from pipeline.evaluation.kitti import LENGTHS_M, KittiSegments
 from pipeline.evaluation.rte import per_frame_rte
 from pipeline.odometry.base import Schedule
@@ -46,13 +46,17 @@ class EvaluateSection(Section):
     [validation, train] for the KITTI protocol's test and training sequences); length_m: RTE
     segment length [m] (the trials' L); kitti_lengths_m: devkit lengths to try (those longer
     than a sequence are left out, as the devkit does); workers: sequences run at a time by the
-    ``adaptive`` and ``evaluate`` stages (processes; the same results for any number).
+    ``adaptive`` and ``evaluate`` stages (processes; the same results for any number);
+    replicas: extra runs of every setting with the parameters moved by at most
+    ``replica_scale`` (relative; ``pipeline.report.replicas``; 0: none).
     """
 
     splits: list[str] = Field(default_factory=lambda: ["validation"], min_length=1)
     length_m: float = Field(25.0, gt=0)
     kitti_lengths_m: tuple[float, ...] = LENGTHS_M
     workers: int = Field(default=2, ge=1)
+    replicas: int = Field(default=0, ge=0)
+    replica_scale: float = Field(default=0.005, gt=0, le=0.1)
 
     @field_validator("splits")
     @classmethod
@@ -61,6 +65,15 @@ class EvaluateSection(Section):
         if twice:
             raise ValueError(f"splits must be distinct, {twice[0]!r} is listed twice")
         return v
+
+
+@dataclass
+class Replica:
+    """One replica run of a setting (``pipeline.report.replicas``): per-start-frame RTE (N,)
+    [%] and devkit segments, both None when the odometry failed."""
+
+    t_err_pct: NDArray[np.float64] | None
+    kitti: KittiSegments | None
 
 
 @dataclass
@@ -73,11 +86,17 @@ class SettingScore:
     labels: list[str | None]
     wall_time_s: float
     trajectory: Trajectory
+    replicas: list[Replica] = field(default_factory=list)
 
     @property
     def rte_pct(self) -> float:
         """Mean RTE [%] over the start frames that have a segment."""
         return _mean(self.t_err_pct)
+
+    @property
+    def replica_rte_pct(self) -> list[float]:
+        """Mean RTE [%] of every replica run (NaN where the odometry failed)."""
+        return [math.nan if r.t_err_pct is None else _mean(r.t_err_pct) for r in self.replicas]
 
     def per_label(self) -> dict[str, float]:
         """Mean RTE [%] of the segments starting in each environment label."""
@@ -148,6 +167,27 @@ class Evaluation:
         seg = KittiSegments.concat([self.kitti_segments[n][setting]
                                     for n in self.in_split(split)])
         return _kitti_summary(seg)
+
+    @property
+    def replicas(self) -> int:
+        """Replica runs per setting and sequence (0: none)."""
+        return max((len(s.replicas) for s in self.scores), default=0)
+
+    def replica_runs(self, setting: str, split: str) -> dict[str, list[float]]:
+        """The ``split``'s pooled figures of ``setting`` for the nominal run and each replica
+        r (the r-th replica of every sequence pooled; NaN when one of them failed): mean
+        per-start-frame RTE [%] (``rte_pct``) and devkit t_err [%] (``kitti_t_err_pct``)."""
+        scores = self._of(setting, split)
+        rte, kitti = [self.overall(setting, split)], [self.kitti_split(setting, split)["t_err_pct"]]
+        for r in range(self.replicas):
+            errs = [s.replicas[r].t_err_pct for s in scores]
+            segs = [s.replicas[r].kitti for s in scores]
+            ok_errs = [e for e in errs if e is not None]
+            ok_segs = [k for k in segs if k is not None]
+            failed = len(ok_errs) < len(errs) or len(ok_segs) < len(segs)
+            rte.append(math.nan if failed else _mean(np.concatenate(ok_errs)))
+            kitti.append(math.nan if failed else KittiSegments.concat(ok_segs).t_err_pct)
+        return {"rte_pct": rte, "kitti_t_err_pct": kitti}
 
 
 def _mean(values: NDArray[np.float64]) -> float:
@@ -246,9 +286,36 @@ def _score_sequence(path: Path, algorithm: str, adapter_options: Mapping[str, ob
         t_err, _ = per_frame_rte(gt, traj.T_world_lidar, settings.length_m)
         scores.append(SettingScore(setting, name, t_err, labels, wall, traj))
         log.info("%s %s: %.3f %% RTE (%.1f s)", name, setting, scores[-1].rte_pct, wall)
+    schedule = Schedule.read(adaptive_dir / name / "schedule.parquet")
+    nominal: dict[str, Mapping[str, float] | Schedule] = {
+        "baseline": baseline_params, "fixed": fixed_params, "adaptive": schedule}
+    for score in scores if settings.replicas else []:
+        score.replicas = run_replicas(adapter, path, gt, nominal[score.setting], settings)
     return _SequenceResult(
-        info, gt, scores, Schedule.read(adaptive_dir / name / "schedule.parquet"),
+        info, gt, scores, schedule,
         _kitti_segments(gt, {s: t for s, (t, _) in runs.items()}, settings.kitti_lengths_m))
+
+
+def run_replicas(adapter: Any, path: Path, gt: NDArray[np.float64],
+                 params_or_schedule: Mapping[str, float] | Schedule,
+                 settings: EvaluateSection) -> list[Replica]:
+    """``settings.replicas`` runs of one setting on ``path`` with its parameters moved by the
+    replicas' factors (``pipeline.report.replicas``), scored like the nominal run."""
+    from pipeline.evaluation.kitti import kitti_errors
+    from pipeline.odometry import run_sequence
+    from pipeline.report.replicas import factors, perturbed, sequence_seed
+
+    out = []
+    for r in range(1, settings.replicas + 1):
+        f = factors(sequence_seed(path.stem), r, len(adapter.space.names), settings.replica_scale)
+        try:
+            traj = run_sequence(adapter, path, perturbed(params_or_schedule, adapter.space, f))
+        except OdometryError:
+            out.append(Replica(None, None))
+            continue
+        t_err, _ = per_frame_rte(gt, traj.T_world_lidar, settings.length_m)
+        out.append(Replica(t_err, kitti_errors(gt, traj.T_world_lidar, settings.kitti_lengths_m)))
+    return out
 
 
 def _ground_truth(path: Path) -> tuple[NDArray[np.float64], SequenceInfo]:
@@ -329,10 +396,13 @@ def split_metrics(ev: Evaluation, split: str) -> dict[str, Any]:
     ratios, and the devkit metric pooled over the split's segments with its ratios."""
     rte = {s: ev.overall(s, split) for s in SETTINGS}
     kitti = {s: ev.kitti_split(s, split) for s in SETTINGS}
-    return {"sequences": ev.in_split(split), "rte_pct": rte, "ratio": _ratio(rte),
-            "rte_pct_per_label": {s: ev.overall_per_label(s, split) for s in SETTINGS},
-            "kitti": kitti,
-            "kitti_ratio": _ratio({s: k["t_err_pct"] for s, k in kitti.items()})}
+    out = {"sequences": ev.in_split(split), "rte_pct": rte, "ratio": _ratio(rte),
+           "rte_pct_per_label": {s: ev.overall_per_label(s, split) for s in SETTINGS},
+           "kitti": kitti,
+           "kitti_ratio": _ratio({s: k["t_err_pct"] for s, k in kitti.items()})}
+    if ev.replicas:
+        out["replicas"] = {s: ev.replica_runs(s, split) for s in SETTINGS}
+    return out
 
 
 def metrics(ev: Evaluation, trials: Mapping[str, Mapping[str, float]]) -> dict[str, Any]:
@@ -343,6 +413,7 @@ def metrics(ev: Evaluation, trials: Mapping[str, Mapping[str, float]]) -> dict[s
     return {
         "algorithm": ev.algorithm,
         "length_m": ev.length_m,
+        "replicas": ev.replicas,
         "headline_split": ev.splits[0],
         "kitti_lengths_m": list(ev.kitti_lengths_m),
         "rte_pct": head["rte_pct"],
@@ -356,6 +427,8 @@ def metrics(ev: Evaluation, trials: Mapping[str, Mapping[str, float]]) -> dict[s
             "kitti": ev.kitti[name],
             "wall_time_s": {s: ev.score(s, name).wall_time_s for s in SETTINGS},
             "parameter_changes": ev.schedules[name].n_changes,
+            **({"replicas_rte_pct": {s: ev.score(s, name).replica_rte_pct for s in SETTINGS}}
+               if ev.replicas else {}),
         } for name in ev.sequences},
         "params": {"baseline": ev.baseline_params, "fixed": ev.fixed_params},
         "trials": dict(trials),

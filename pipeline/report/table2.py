@@ -55,6 +55,9 @@ def table2_json(blocks: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
                                  "segments": m["splits"][split]["kitti"]["baseline"]["segments"]}
                          for split in mine},
             "params": m.get("params", {}),
+            "replicas": {split: {s: m["splits"][split]["replicas"][s]["kitti_t_err_pct"]
+                                 for s in SETTINGS}
+                         for split in mine if "replicas" in m["splits"][split]},
         }
     out["splits"] = layout or {}
     return out
@@ -94,7 +97,36 @@ def table2_markdown(table: Mapping[str, Any],
                 cells[s].append(f"**{text}**" if best is not None and vals[s] == best else text)
         for i, s in enumerate(SETTINGS):
             lines.append(f"| {algorithm if i == 0 else ''} | {s} | " + " | ".join(cells[s]) + " |")
+    return "\n".join(lines) + "\n" + replicas_markdown(table, titles)
+
+
+def replicas_markdown(table: Mapping[str, Any], titles: Mapping[str, str]) -> str:
+    """The spread of every split's average over the nominal and replica runs of each setting
+    (``evaluate.replicas``): median [min, max]; empty without replicas."""
+    blocks = {a: b["replicas"] for a, b in table["algorithms"].items() if b.get("replicas")}
+    if not blocks:
+        return ""
+    splits = list(table["splits"])
+    head = ["algorithm", "runs", "setting", *[f"{titles.get(s, s)} avg" for s in splits]]
+    lines = ["", "Spread over the runs (the nominal one and replicas with every parameter "
+             "moved by at most `evaluate.replica_scale`): median [min, max] of each split's "
+             "average; failed runs left out.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for algorithm, reps in blocks.items():
+        for i, s in enumerate(SETTINGS):
+            runs = len(next(iter(reps.values()))[s])
+            cells = [_spread(reps[split][s]) if split in reps else "-" for split in splits]
+            lines.append(f"| {algorithm if i == 0 else ''} | {runs if i == 0 else ''} | {s} | "
+                         + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _spread(values: Sequence[float | None]) -> str:
+    ok = sorted(v for v in values if v is not None and math.isfinite(v))
+    if not ok:
+        return "-"
+    mid = ok[len(ok) // 2] if len(ok) % 2 else (ok[len(ok) // 2 - 1] + ok[len(ok) // 2]) / 2
+    return f"{mid:.3f} [{ok[0]:.3f}, {ok[-1]:.3f}]"
 
 
 KITTI_SPLIT_TITLES = {"train": "training", "validation": "test"}
