@@ -1,4 +1,5 @@
-"""Shared pieces of the benchmark scripts: the Row type, timing, the table printer."""
+"""Shared pieces of the benchmark scripts: the Row type, timing, the table printer, the toy
+reproduction's fixed NDT parameters."""
 
 from __future__ import annotations
 
@@ -7,6 +8,9 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+
+TOY_FIXED_NDT = {"resolution": 2.0202443098570972, "keyframe_interval": 7.758915470730103}
+"""NDT's joint-study parameters of the toy reproduction (README, "Result of make repro")."""
 
 
 @dataclass

@@ -30,10 +30,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from common import TOY_FIXED_NDT
+
 RESOLUTION_M = (1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0)
 KEYFRAME_M = (0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0)
 BASELINE = (4.0, 4.0)
-FIXED = (2.0202443098570972, 7.758915470730103)  # the toy reproduction's joint study
+FIXED = (TOY_FIXED_NDT["resolution"], TOY_FIXED_NDT["keyframe_interval"])
 SETS = [*itertools.product(RESOLUTION_M, KEYFRAME_M), FIXED]
 WORLDS = 8
 LENGTH_M = 25.0

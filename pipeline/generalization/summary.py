@@ -17,10 +17,11 @@ the ratios a selector no better and no worse than a fixed setting would show by 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pipeline.generalization.run import WorldScore
 
@@ -79,27 +80,33 @@ def suite_metrics(scores: Sequence[WorldScore], suite: str, root: int, resamples
 
 def noise_summary(scores: Sequence[WorldScore]) -> dict[str, Any]:
     """How far runs of one setting are from each other (module docstring)."""
-    cv = {}
+    cv_median = {}
     for setting in ("baseline", "fixed", "adaptive"):
-        per_world = [_cv(s.runs(setting)) for s in scores]
+        per_world = [cv(s.runs(setting)) for s in scores]
         ok = [v for v in per_world if math.isfinite(v)]
-        cv[setting] = float(np.median(ok)) if ok else None
-    pairs = np.array([a / b for s in scores for setting in ("baseline", "fixed")
-                      for i, a in enumerate(s.runs(setting)) for j, b in enumerate(s.runs(setting))
-                      if i != j and b > 0 and math.isfinite(a) and math.isfinite(b)])
+        cv_median[setting] = float(np.median(ok)) if ok else None
+    pairs = pair_ratios(s.runs(setting) for s in scores for setting in ("baseline", "fixed"))
     failed = sum(not math.isfinite(v) for s in scores for runs in s.replicas_rte_pct.values()
                  for v in runs)
-    return {"cv_median": cv,
+    return {"cv_median": cv_median,
             "chance_above_worst_target": float((pairs > TARGET_WORST).mean()) if len(pairs)
             else None,
             "chance_ratio_p95": float(np.quantile(pairs, 0.95)) if len(pairs) else None,
             "failed_replicas": failed}
 
 
-def _cv(values: Sequence[float]) -> float:
+def cv(values: Sequence[float]) -> float:
     """Coefficient of variation (population std / mean) of the finite values; NaN below 2."""
     v = np.asarray([x for x in values if math.isfinite(x)], np.float64)
     return float(v.std() / v.mean()) if len(v) >= 2 and v.mean() > 0 else math.nan
+
+
+def pair_ratios(groups: Iterable[Sequence[float]]) -> NDArray[np.float64]:
+    """a / b over every ordered pair of two distinct finite runs (a, b > 0 RTE [%]) of each
+    group (the runs of one setting on one world), all groups pooled: (P,)."""
+    return np.array([a / b for runs in groups for i, a in enumerate(runs)
+                     for j, b in enumerate(runs)
+                     if i != j and b > 0 and math.isfinite(a) and math.isfinite(b)], np.float64)
 
 
 def plot_rows(scores: Sequence[WorldScore]) -> list[dict[str, Any]]:

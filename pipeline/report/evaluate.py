@@ -180,13 +180,11 @@ class Evaluation:
         scores = self._of(setting, split)
         rte, kitti = [self.overall(setting, split)], [self.kitti_split(setting, split)["t_err_pct"]]
         for r in range(self.replicas):
-            errs = [s.replicas[r].t_err_pct for s in scores]
-            segs = [s.replicas[r].kitti for s in scores]
-            ok_errs = [e for e in errs if e is not None]
-            ok_segs = [k for k in segs if k is not None]
-            failed = len(ok_errs) < len(errs) or len(ok_segs) < len(segs)
-            rte.append(math.nan if failed else _mean(np.concatenate(ok_errs)))
-            kitti.append(math.nan if failed else KittiSegments.concat(ok_segs).t_err_pct)
+            ok = [(run.t_err_pct, run.kitti) for run in (s.replicas[r] for s in scores)
+                  if run.t_err_pct is not None and run.kitti is not None]
+            failed = len(ok) < len(scores)
+            rte.append(math.nan if failed else _mean(np.concatenate([e for e, _ in ok])))
+            kitti.append(math.nan if failed else KittiSegments.concat([k for _, k in ok]).t_err_pct)
         return {"rte_pct": rte, "kitti_t_err_pct": kitti}
 
 
@@ -247,7 +245,7 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
 
 
 def study_adapter(algorithm: str, adapter_options: Mapping[str, object] | None,
-             fixed_dir: Path | None) -> Any:
+                  fixed_dir: Path | None) -> Any:
     """The adapter with the space the studies searched (its defaults are the baseline), read
     from the joint study's output; the built-in space without one."""
     from pipeline.odometry import get_adapter

@@ -10,6 +10,7 @@ metrics``) of each algorithm; ``table2_json`` and ``table2_markdown`` lay them o
 from __future__ import annotations
 
 import math
+import statistics
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -122,11 +123,11 @@ def replicas_markdown(table: Mapping[str, Any], titles: Mapping[str, str]) -> st
 
 
 def _spread(values: Sequence[float | None]) -> str:
+    """"median [min, max]" of the finite values; "-" without any."""
     ok = sorted(v for v in values if v is not None and math.isfinite(v))
     if not ok:
         return "-"
-    mid = ok[len(ok) // 2] if len(ok) % 2 else (ok[len(ok) // 2 - 1] + ok[len(ok) // 2]) / 2
-    return f"{mid:.3f} [{ok[0]:.3f}, {ok[-1]:.3f}]"
+    return f"{statistics.median(ok):.3f} [{ok[0]:.3f}, {ok[-1]:.3f}]"
 
 
 KITTI_SPLIT_TITLES = {"train": "training", "validation": "test"}
