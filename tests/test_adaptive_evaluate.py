@@ -69,6 +69,23 @@ def test_fixed_section_is_validated(tmp_path: Path) -> None:
         load_section(_params(tmp_path, fixed={"iterations": 0}), "fixed", FixedSection)
 
 
+@pytest.mark.parametrize(("section", "model", "value", "rule"), [
+    ("evaluate", "EvaluateSection", {"replicas": -1},
+     r"evaluate\.replicas: Input should be greater than or equal to 0, got -1"),
+    ("evaluate", "EvaluateSection", {"replica_scale": 0.5},
+     r"evaluate\.replica_scale: Input should be less than or equal to 0\.1, got 0\.5"),
+    ("generalize", "GeneralizeSection", {"replica_scale": 0},
+     r"generalize\.replica_scale: Input should be greater than 0, got 0"),
+])
+def test_replica_settings_are_validated(tmp_path: Path, section: str, model: str,
+                                        value: dict, rule: str) -> None:
+    from pipeline.presets import section_models
+
+    with pytest.raises(ConfigError, match=rule):
+        load_section(_params(tmp_path, **{section: value}), section, section_models()[section])
+    assert model == section_models()[section].__name__
+
+
 @pytest.fixture(scope="module")
 def validation_set(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """data/sequences with one short composite validation sequence."""

@@ -210,6 +210,10 @@ def test_preset_stride_and_bad_input(kitti_root: Path) -> None:
                         "--time-limit-s", "0")
     assert (code, out) == (1, "adaptune: error: kitti-preset.time_limit_s: Input should be "
                                  "greater than 0, got 0.0\n")
+    code, out = _preset("--root", str(kitti_root), "--train", "01", "--test", "06",
+                        "--replicas", "-1")
+    assert (code, out) == (1, "adaptune: error: kitti-preset.replicas: Input should be "
+                                 "greater than or equal to 0, got -1\n")
     code, out = _preset("--root", str(kitti_root), "--params", str(REPO / "params.yaml"))
     assert code == 1 and out.count("\n") == 1
     assert out.startswith(f"adaptune: error: root: {kitti_root / 'sequences' / '00'} does not "
