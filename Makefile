@@ -4,7 +4,7 @@ PY := $(VENV)/bin/python
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test fuzz lint bench repro kitti clean
+.PHONY: setup test fuzz lint deps bench repro kitti clean
 
 setup: $(STAMP)
 
@@ -32,6 +32,12 @@ fuzz: setup
 lint: setup
 	$(BIN)/ruff check pipeline stages schemas tests bench
 	$(BIN)/mypy pipeline stages
+	$(PY) tests/helpers/dvc_deps.py --check
+
+# dvc.yaml's code deps, generated from the import graph of each stage's command (checked by
+# `make lint` and tests/test_dvc_deps.py)
+deps: setup
+	$(PY) tests/helpers/dvc_deps.py
 
 bench: setup
 	$(PY) bench/run.py

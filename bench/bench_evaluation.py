@@ -13,9 +13,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "evaluati
 
 from evaluation_data import drifting, gt_path, write_sequence, write_study
 
-from pipeline.evaluation.kitti import kitti_sequence_error
-from pipeline.evaluation.posefile import read_kitti_poses
-from pipeline.evaluation.store import RteSection, build_database
+from pipeline.database.store import RteSection, build_database
+from pipeline.metrics.kitti import kitti_sequence_error
+from pipeline.posefile import read_kitti_poses
 
 
 def run() -> list[Row]:

@@ -47,7 +47,7 @@ def runs_of(algorithm: str, params: dict[str, float], path: Path, gt: np.ndarray
     """Mean RTE [%] (L = 25 m) of the nominal run and of ``replicas`` perturbed runs (NaN:
     failed), with the evaluate code's replicas (``pipeline.report.evaluate.run_replicas``)."""
     from pipeline.errors import OdometryError
-    from pipeline.evaluation.rte import mean_rte_pct
+    from pipeline.metrics.rte import mean_rte_pct
     from pipeline.odometry import get_adapter, run_sequence
     from pipeline.report.evaluate import EvaluateSection, run_replicas
 

@@ -82,7 +82,7 @@ def _step_cost(adapter: object, scans: list) -> float:
 
 
 def sweep_rows() -> list[Row]:
-    from pipeline.evaluation.rte import mean_rte_pct
+    from pipeline.metrics.rte import mean_rte_pct
     from pipeline.odometry.base import Schedule
     from pipeline.odometry.registry import get_adapter
     from pipeline.sim.simulate import SimSpec, iter_scans, make_world

@@ -92,7 +92,7 @@ def synthetic_inputs() -> tuple[object, np.ndarray]:
 def rte_pct(model, seq: Path, values: np.ndarray) -> float:
     """Mean per-start-frame RTE [%] of the model's odometry with the selections ``values``
     (held for a period each) on ``seq``."""
-    from pipeline.evaluation.rte import per_frame_rte
+    from pipeline.metrics.rte import per_frame_rte
     from pipeline.odometry import get_adapter, run_sequence
     from pipeline.odometry.base import Schedule
     from pipeline.sequence import SequenceReader

@@ -50,7 +50,7 @@ def per_frame_errors(path: Path, values: np.ndarray, out: Path) -> np.ndarray:
     """Per-start-frame RTE [%] (N,) of NDT run with per-frame (N, 2) parameter ``values``
     (100 where the run failed), cached at ``out``."""
     from pipeline.errors import OdometryError
-    from pipeline.evaluation.rte import per_frame_rte
+    from pipeline.metrics.rte import per_frame_rte
     from pipeline.odometry import get_adapter, run_sequence
     from pipeline.odometry.base import Schedule
     from pipeline.sequence import SequenceReader

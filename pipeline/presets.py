@@ -167,8 +167,8 @@ def check(params: Mapping[str, Any]) -> None:
 def section_models() -> dict[str, type[Section]]:
     """params.yaml section -> its model (the stages' sections)."""
     from pipeline.config import BaseSection
+    from pipeline.database.store import RteSection
     from pipeline.descriptors.dataset import DescriptorsSection
-    from pipeline.evaluation.store import RteSection
     from pipeline.generalization.suite import GeneralizeSection
     from pipeline.report.evaluate import EvaluateSection
     from pipeline.sim.dataset import SimulateSection

@@ -1,4 +1,4 @@
--- Error of every segment, for pipeline.evaluation.store (schema version 1.0).
+-- Error of every segment, for pipeline.database.store (schema version 1.0).
 -- Inputs (temporary tables): seg_starts(sequence, frame, length_m): the segment starts;
 -- est(study, algorithm, sequence, trial, frame, T_00 .. T_23): the estimated trajectories;
 -- and the table ground_truth. Output: study, algorithm, sequence, trial, frame, end_frame,

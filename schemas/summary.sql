@@ -1,4 +1,4 @@
--- Per-trial summary of rte_frames, for pipeline.evaluation.store (schema version 1.0):
+-- Per-trial summary of rte_frames, for pipeline.database.store (schema version 1.0):
 -- mean_rte_pct = mean t_err_pct over the trial's start frames, rte_frames = their count.
 -- A joint-SMBO trial (sequence = '__joint__') pools the frames of every sequence it ran on.
 UPDATE trials

@@ -1,5 +1,5 @@
 -- adaptune results database (results/adaptune.duckdb): tables. Built by the `rte` stage
--- (pipeline.evaluation.store); docs/design.md ("Formats") gives the layout. `study` names the SMBO output a
+-- (pipeline.database.store); docs/design.md ("Formats") gives the layout. `study` names the SMBO output a
 -- row comes from ('trials' = per-sequence SMBO, 'fixed' = joint SMBO), so that the two studies'
 -- trial numbers never collide.
 
@@ -35,7 +35,7 @@ CREATE TABLE ground_truth (         -- T_world_lidar per frame, row-major 3x4; d
     PRIMARY KEY (sequence, frame)
 );
 
--- One row per trial. pipeline.evaluation.store appends one `p_<name> DOUBLE` column per
+-- One row per trial. pipeline.database.store appends one `p_<name> DOUBLE` column per
 -- parameter (union over all algorithms; NULL where an algorithm lacks it), then the summary
 -- columns mean_rte_pct DOUBLE (mean of rte_frames.t_err_pct) and rte_frames INTEGER (their count).
 -- For the joint SMBO (sequence = '__joint__') the summary pools the frames of all sequences.
@@ -77,7 +77,7 @@ CREATE TABLE rte_kitti (            -- KITTI devkit segments (start every 10 fra
     r_err DOUBLE NOT NULL           -- devkit units: angle(E.R) / length [rad/m]
 );
 
--- The descriptor and environment tables name a frame; pipeline.evaluation.store adds their value
+-- The descriptor and environment tables name a frame; pipeline.database.store adds their value
 -- columns from the Parquet files (d0..d<F-1> FLOAT for a descriptor of width F,
 -- schemas.arrow.descriptors_schema; e0..e<D-1> FLOAT for the PCA's dimension D).
 CREATE TABLE descriptors (          -- from data/descriptors.parquet

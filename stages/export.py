@@ -3,7 +3,7 @@
 By default the estimate is anchored at the ground truth of its first frame (from the sequence
 the trajectory names, or --sequence); ``--frame kitti-camera`` writes KITTI's camera-0 frame;
 ``--ground-truth`` exports the ground truth of a sequence MCAP instead
-(``pipeline.evaluation.export`` documents the frames).
+(``pipeline.export`` documents the frames).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def export(source: Path, fmt: str, out: Path, ground_truth: bool, sequence: Path
            anchor: str, frame: str, calib: Path | None) -> None:
     """Write SOURCE (a trajectory Parquet, or with --ground-truth a sequence MCAP) as a KITTI
     or TUM pose file."""
-    from pipeline.evaluation.export import export_ground_truth, export_trajectory
+    from pipeline.export import export_ground_truth, export_trajectory
 
     if ground_truth:
         n = export_ground_truth(source, fmt, out, frame=frame, calib=calib)

@@ -18,7 +18,7 @@ poses_option = click.option(
     "(element (3,3): 1 or the stamp [s]). Stamped poses are matched by time.",
 )
 POSE_FORMATS = ("auto", "kitti", "tum", "euroc", "matrix4")
-"""pipeline.evaluation.posefile.POSE_FORMATS (kept here so that --help imports no numpy)."""
+"""pipeline.posefile.POSE_FORMATS (kept here so that --help imports no numpy)."""
 format_option = click.option(
     "--poses-format", type=click.Choice(POSE_FORMATS),
     default="auto", show_default=True,

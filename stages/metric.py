@@ -27,7 +27,7 @@ def kitti(gt_poses: Path, est_poses: Path, as_json: bool) -> None:
     Segments of 100..800 m starting every 10 frames; the mean over all segments, as
     evaluate_odometry.cpp computes it.
     """
-    from pipeline.evaluation.kitti import evaluate_kitti_files
+    from pipeline.metrics.kitti import evaluate_kitti_files
 
     result = evaluate_kitti_files(gt_poses, est_poses)
     if as_json:
@@ -59,7 +59,7 @@ def rte(ground_truth: Path, estimate: Path, length_m: float, scale: bool, gt_for
     file (KITTI, TUM, EuRoC CSV, 4x4 blocks). Stamped poses pair by time (10 ms), others by
     index.
     """
-    from pipeline.evaluation.trajectory_error import evaluate_files
+    from pipeline.metrics.trajectory_error import evaluate_files
 
     r = evaluate_files(ground_truth, estimate, length_m, scale, gt_format,  # type: ignore[arg-type]
                        est_format)  # type: ignore[arg-type]

@@ -56,7 +56,7 @@ def _tables(pairs: tuple[str, ...]) -> dict[str, Path]:
 def query(sql: str, db: Path, fmt: str, out: Path | None, table_pairs: tuple[str, ...]) -> None:
     """Run SQL (or - to read it from stdin) on the results database, opened read-only and
     sandboxed, and print or write the result."""
-    from pipeline.evaluation.query import query_database
+    from pipeline.database.query import query_database
 
     to_stdout = out is None or str(out) == "-"
     if to_stdout and fmt == "parquet" and sys.stdout.isatty():

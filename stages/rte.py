@@ -22,7 +22,7 @@ def rte(params_path: Path | None, sequence_dir: Path, trials_dir: Path | None,
         db: Path) -> None:
     """Build the results database: sequences, trials, rte_frames, rte_kitti, descriptors."""
     from pipeline.config import load_section
-    from pipeline.evaluation.store import RteSection, build_database
+    from pipeline.database.store import RteSection, build_database
 
     settings = load_section(params_path, "rte", RteSection)
     studies = {name: path for name, path in (("trials", trials_dir), ("fixed", fixed_dir))

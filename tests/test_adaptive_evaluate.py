@@ -225,7 +225,7 @@ def test_replicas_run_each_setting_with_its_perturbed_parameters(
     baseline replica's figures); the metrics pool the r-th runs of a split."""
     import numpy as np
 
-    from pipeline.evaluation.rte import mean_rte_pct
+    from pipeline.metrics.rte import mean_rte_pct
     from pipeline.odometry import get_adapter, run_sequence
     from pipeline.odometry.base import Schedule
     from pipeline.report.evaluate import EvaluateSection, evaluate, metrics

@@ -13,10 +13,10 @@ from click.testing import CliRunner
 from test_surrogate import kitti_scan, write_tiny_sequence
 
 from pipeline.config import validate_section
+from pipeline.database.store import apply_sql, load_frame_table
 from pipeline.descriptors import DESCRIPTORS, Descriptor, descriptor_from_json, make_descriptor
 from pipeline.descriptors.dataset import DescriptorsSection
 from pipeline.errors import ConfigError
-from pipeline.evaluation.store import apply_sql, load_frame_table
 from schemas import read_text
 from schemas.arrow import descriptors_schema
 from stages.cli import main

@@ -109,13 +109,13 @@ def test_every_stage_ran(repro: tuple[Path, str]) -> None:
 def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
     import duckdb
 
-    from pipeline.evaluation.trials import read_trials_tables
     from pipeline.odometry.base import Schedule
     from pipeline.pca import Pca
     from pipeline.report.evaluate import SETTINGS
     from pipeline.runtime import load_model
     from pipeline.sequence import SequenceReader
     from pipeline.trajectory import read_trajectory
+    from pipeline.tuning.layout import read_trials_tables
     from schemas.arrow import check_schema_version, descriptors_schema
 
     root, _ = repro

@@ -28,8 +28,8 @@ from pydantic import Field, field_validator
 
 from pipeline.config import Section
 from pipeline.errors import InputError, OdometryError
-from pipeline.evaluation.kitti import LENGTHS_M, KittiSegments
-from pipeline.evaluation.rte import per_frame_rte
+from pipeline.metrics.kitti import LENGTHS_M, KittiSegments
+from pipeline.metrics.rte import per_frame_rte
 from pipeline.odometry.base import Schedule
 from pipeline.sequence import SequenceInfo, SequenceReader
 from pipeline.trajectory import Trajectory, read_trajectory, write_trajectory
@@ -196,7 +196,7 @@ def _mean(values: NDArray[np.float64]) -> float:
 def best_fixed_params(trials_dir: Path,
                       algorithm: str | None = None) -> tuple[str, dict[str, float]]:
     """(algorithm, parameters) of the best 'ok' trial of the joint SMBO under ``trials_dir``."""
-    from pipeline.evaluation.trials import JOINT_SEQUENCE, best_trial, read_trials_tables
+    from pipeline.tuning.layout import JOINT_SEQUENCE, best_trial, read_trials_tables
 
     table = read_trials_tables(trials_dir)
     rows = [r for r in table.to_pylist() if r["sequence"] == JOINT_SEQUENCE
@@ -299,7 +299,7 @@ def run_replicas(adapter: Any, path: Path, gt: NDArray[np.float64],
                  settings: EvaluateSection) -> list[Replica]:
     """``settings.replicas`` runs of one setting on ``path`` with its parameters moved by the
     replicas' factors (``pipeline.report.replicas``), scored like the nominal run."""
-    from pipeline.evaluation.kitti import kitti_errors
+    from pipeline.metrics.kitti import kitti_errors
     from pipeline.odometry import run_sequence
     from pipeline.report.replicas import factors, perturbed, sequence_seed
 
@@ -353,7 +353,7 @@ def _read_adaptive(folder: Path, algorithm: str) -> tuple[Trajectory, float]:
 def _kitti_segments(gt: NDArray[np.float64], trajectories: Mapping[str, Trajectory],
                     lengths_m: tuple[float, ...]) -> dict[str, KittiSegments]:
     """Devkit segments of every setting (the lengths that fit)."""
-    from pipeline.evaluation.kitti import kitti_errors
+    from pipeline.metrics.kitti import kitti_errors
 
     return {setting: kitti_errors(gt, traj.T_world_lidar, lengths_m)
             for setting, traj in trajectories.items()}
@@ -371,7 +371,7 @@ def _kitti_summary(seg: KittiSegments) -> dict[str, float]:
 def trials_summary(studies: Mapping[str, Path]) -> dict[str, dict[str, float]]:
     """Trial counts by status (failed: the odometry failed; pruned: stopped early as hopeless;
     lost: to the machinery) and total wall time [s] of every SMBO output folder."""
-    from pipeline.evaluation.trials import read_trials_tables
+    from pipeline.tuning.layout import read_trials_tables
 
     out = {}
     for study, folder in studies.items():

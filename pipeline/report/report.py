@@ -50,8 +50,8 @@ def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection,
                    adapter_options: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Evaluate baseline, fixed and adaptive on the sequences of ``settings.splits``; write
     everything; return the metrics."""
-    from pipeline.evaluation.trials import read_trials_tables
     from pipeline.sequence_index import read_index
+    from pipeline.tuning.layout import read_trials_tables
 
     algorithm, fixed = best_fixed_params(paths.fixed)
     split_of = read_index(paths.sequences).split_paths(settings.splits)

@@ -7,7 +7,7 @@ stamps), one pose per scan in order; else frame k is at k / rate_hz seconds. Sca
 frame number (``000123.pcd``) take row 123 of a times file or of a pose file without stamps
 that is longer than the folder (a slice of a KITTI sequence needs no hand-cut files);
 otherwise row k is scan k.
-Ground truth: a pose file of any format pipeline.evaluation.posefile reads; with stamps it is
+Ground truth: a pose file of any format pipeline.posefile reads; with stamps it is
 matched by time when the scans' stamps come from elsewhere, without stamps pose k is scan k.
 ``extrinsic`` (E = T_x_lidar, e.g. KITTI's Tr) turns poses of another frame into LiDAR poses;
 without it a ground truth that moves along the sensor's z axis gets a warning.
@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError, InputError
-from pipeline.evaluation.posefile import PoseFile, PoseFormat, read_pose_file
+from pipeline.posefile import PoseFile, PoseFormat, read_pose_file
 from pipeline.sequence import SequenceInfo
 from pipeline.sources.base import (
     Frame,

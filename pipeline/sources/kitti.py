@@ -16,11 +16,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError, InputError
-from pipeline.evaluation.posefile import read_pose_file
+from pipeline.kitti_calib import read_kitti_calib
+from pipeline.posefile import read_pose_file
 from pipeline.sequence import SequenceInfo
 from pipeline.sources.base import Frame, IngestReport, write_sequence
 from pipeline.sources.ordering import natural_order
-from pipeline.sources.poses import check_count, read_kitti_calib, to_lidar_frame
+from pipeline.sources.poses import check_count, to_lidar_frame
 from pipeline.sources.scanfiles import read_bin, scan_files
 from pipeline.stamps import read_times
 

@@ -1,6 +1,6 @@
 """Ground truth for the scans: pose files in the LiDAR frame, time matching, a frame check.
 
-- Pose files (every format of pipeline.evaluation.posefile): without stamps pose k is scan k
+- Pose files (every format of pipeline.posefile): without stamps pose k is scan k
   (the counts must match); stamped poses are interpolated to the scan stamps (linear in
   translation, slerp in rotation); a scan outside the poses' time span is an error.
 - The extrinsic E = T_x_lidar (LiDAR -> the frame x the poses describe; KITTI's ``Tr``:
@@ -20,14 +20,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
-from pipeline.evaluation.posefile import PoseFile
 from pipeline.geometry import (
     MAX_POSITION_M,
     interpolate_rotations,
     inv_se3,
     refuse_non_rotations,
 )
-from pipeline.io_utils import input_file
+from pipeline.kitti_calib import has_kitti_calib, read_kitti_calib
+from pipeline.posefile import PoseFile
 
 log = logging.getLogger(__name__)
 
@@ -37,24 +37,6 @@ MAX_GAP_NS = 1_000_000_000
 """Two poses further apart than 1 s are not interpolated between."""
 Z_MOTION_SHARE = 0.7
 """Warn when more than this share of the path runs along the sensor's z axis."""
-
-
-def read_kitti_calib(path: str | Path) -> NDArray[np.float64]:
-    """(4, 4) Tr (velodyne -> camera 0) from a KITTI odometry calib.txt."""
-    path = input_file(path, "calibration file")
-    for line in path.read_text(encoding="utf-8-sig", errors="replace").splitlines():
-        key, _, rest = line.partition(":")
-        if key.strip() in ("Tr", "Tr_velo_to_cam"):
-            try:
-                vals = [float(v) for v in rest.split()]
-            except ValueError:
-                vals = []
-            if len(vals) != 12 or not np.isfinite(vals).all():
-                raise InputError(f"{path}: Tr must be 12 finite numbers, got {rest.strip()[:60]!r}")
-            Tr = np.eye(4)
-            Tr[:3, :] = np.reshape(vals, (3, 4))
-            return Tr
-    raise InputError(f"{path}: no 'Tr' (velodyne -> camera) line in the calibration file")
 
 
 def read_extrinsic(value: str | Path) -> NDArray[np.float64]:
@@ -72,7 +54,7 @@ def read_extrinsic(value: str | Path) -> NDArray[np.float64]:
             raise InputError(f"--extrinsic {text[:80]!r} is neither 12 or 16 numbers nor a "
                              "file")
         content = path.read_text(encoding="utf-8-sig", errors="replace")
-        if re.search(r"^\s*(Tr|Tr_velo_to_cam)\s*:", content, re.MULTILINE):
+        if has_kitti_calib(content):
             return read_kitti_calib(path)
         text, source = content, str(path)
     try:

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from pipeline.errors import ConfigError, InputError
-from pipeline.evaluation.posefile import PoseFormat, read_pose_file
+from pipeline.posefile import PoseFormat, read_pose_file
 from pipeline.sequence import SequenceInfo
 from pipeline.sources.base import (
     Frame,

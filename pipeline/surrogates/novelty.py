@@ -106,7 +106,7 @@ def read_fallback_evidence(
     with the defaults is left out."""
     import duckdb
 
-    from pipeline.evaluation.trials import best_trial
+    from pipeline.tuning.layout import best_trial
 
     con = duckdb.connect(str(db_path), read_only=True)
     try:

@@ -25,9 +25,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import AdaptuneError, InputError, OdometryError
-from pipeline.evaluation.trials import trajectory_path
 from pipeline.odometry.base import Adapter
 from pipeline.trajectory import Trajectory
+from pipeline.tuning.layout import trajectory_path
 
 if TYPE_CHECKING:
     from pipeline.sequence import Scan
@@ -120,7 +120,7 @@ def evaluate_trial(job: TrialJob, adapter: Adapter,
     """
     import time
 
-    from pipeline.evaluation.rte import mean_rte_pct
+    from pipeline.metrics.rte import mean_rte_pct
     from pipeline.trajectory import write_trajectory
     from pipeline.tuning.pruning import Checkpoint, Pruned, curve_of
 

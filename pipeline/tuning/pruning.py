@@ -95,7 +95,7 @@ def thresholds(points: Sequence[Checkpoint], frame_counts: Sequence[int],
 def running_rte(gt: F64, est: F64, frame: int, length_m: float) -> float:
     """Mean translational RTE [%] of the segments of ``length_m`` that end at or before
     ``frame`` (NaN when none does); ``gt``, ``est``: (N, 4, 4) T_world_lidar, N > frame."""
-    from pipeline.evaluation.rte import per_frame_rte
+    from pipeline.metrics.rte import per_frame_rte
 
     t_err, _ = per_frame_rte(gt[:frame + 1], est[:frame + 1], length_m)
     valid = t_err[np.isfinite(t_err)]
@@ -115,7 +115,7 @@ def curve_of(points: Sequence[Checkpoint], gts: Sequence[F64], ests: Sequence[F6
              length_m: float) -> tuple[float, ...]:
     """Values at ``points`` of a trial whose trajectory of sequence s is ``ests[s]`` (possibly
     partial: frames 0..len-1; None when not run); stops at the first point not reached."""
-    from pipeline.evaluation.rte import mean_rte_pct
+    from pipeline.metrics.rte import mean_rte_pct
 
     full: dict[int, float] = {}
     out = []

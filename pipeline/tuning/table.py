@@ -6,7 +6,7 @@ The study's fingerprint (``pipeline.tuning.fingerprint``: adapter, options, para
 seed, ...) travels in the file's schema metadata under ``adaptune.study`` (``read_study``): the
 one home of the parameter space a study searched, for every later stage. Where the table lives
 (``trials_path``) and the joint study's name (``JOINT``) are the trials output layout of
-``pipeline.evaluation.trials``.
+``pipeline.tuning.layout``.
 """
 
 from __future__ import annotations
@@ -20,11 +20,11 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.errors import InputError, SchemaError
-from pipeline.evaluation.trials import JOINT_SEQUENCE as JOINT
-from pipeline.evaluation.trials import trials_table_path as trials_path
 from pipeline.io_utils import atomic_path
 from pipeline.odometry.base import ParameterSpace
 from pipeline.tuning.job import TrialResult
+from pipeline.tuning.layout import JOINT_SEQUENCE as JOINT
+from pipeline.tuning.layout import trials_table_path as trials_path
 from schemas.arrow import check_schema_version, trials_schema
 
 __all__ = ["JOINT", "STUDY_KEY", "read_space", "read_study", "read_trials", "trials_path",

@@ -1,5 +1,5 @@
 """Synthetic inputs for the evaluation tests and bench: ground-truth paths, drifting estimates,
-and whole SMBO outputs in the trials layout (pipeline.evaluation.trials), written with the real
+and whole SMBO outputs in the trials layout (pipeline.tuning.layout), written with the real
 writers."""
 
 from __future__ import annotations
@@ -11,11 +11,11 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipeline.evaluation.trials import trajectory_path, trials_table_path
 from pipeline.geometry import rot_z
 from pipeline.io_utils import atomic_path
 from pipeline.sequence import EnvLabel, SequenceInfo, SequenceWriter
 from pipeline.trajectory import Trajectory, write_trajectory
+from pipeline.tuning.layout import trajectory_path, trials_table_path
 from schemas.arrow import trials_schema
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from pipeline.evaluation.posefile import read_kitti_poses, write_kitti_poses
+from pipeline.posefile import read_kitti_poses, write_kitti_poses
 from stages.cli import main
 
 BIN = Path(sys.executable).parent

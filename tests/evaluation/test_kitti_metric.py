@@ -10,8 +10,8 @@ import pytest
 from click.testing import CliRunner
 from evaluation_data import cli_fails, drifting
 
-from pipeline.evaluation.kitti import LENGTHS_M, kitti_errors, kitti_sequence_error
-from pipeline.evaluation.posefile import read_kitti_poses, write_kitti_poses
+from pipeline.metrics.kitti import LENGTHS_M, kitti_errors, kitti_sequence_error
+from pipeline.posefile import read_kitti_poses, write_kitti_poses
 from stages.cli import main
 
 FLOAT32_RTOL = 2.0**-23  # kiss-icp returns std::tuple<float, float>: one float32 rounding

@@ -7,7 +7,7 @@ import pytest
 from evaluation_data import drifting, gt_path
 
 from pipeline.errors import InputError
-from pipeline.evaluation.rte import mean_rte_pct, per_frame_rte
+from pipeline.metrics.rte import mean_rte_pct, per_frame_rte
 
 
 def loop_rte(gt: np.ndarray, est: np.ndarray, length_m: float) -> tuple[np.ndarray, np.ndarray]:

@@ -15,12 +15,12 @@ import pytest
 from click.testing import CliRunner
 from evaluation_data import cli_fails, gt_path, write_sequence, write_study
 
-from pipeline.evaluation.kitti import kitti_errors
-from pipeline.evaluation.posefile import read_kitti_poses, read_tum
-from pipeline.evaluation.rte import per_frame_rte
-from pipeline.evaluation.trials import read_trials_tables, trajectory_path
+from pipeline.metrics.kitti import kitti_errors
+from pipeline.metrics.rte import per_frame_rte
+from pipeline.posefile import read_kitti_poses, read_tum
 from pipeline.sequence import EnvLabel, SequenceReader
 from pipeline.trajectory import Trajectory, read_trajectory, write_trajectory
+from pipeline.tuning.layout import read_trials_tables, trajectory_path
 from schemas import SCHEMA_VERSION
 from stages.cli import main
 

@@ -10,8 +10,8 @@ import pytest
 from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from pipeline.evaluation.posefile import read_kitti_poses, write_kitti_poses, write_tum
-from pipeline.evaluation.rte import per_frame_rte
+from pipeline.metrics.rte import per_frame_rte
+from pipeline.posefile import read_kitti_poses, write_kitti_poses, write_tum
 from stages.cli import main
 
 

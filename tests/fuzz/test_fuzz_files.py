@@ -11,8 +11,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 from numpy.typing import NDArray
 
-from pipeline.evaluation.posefile import POSE_FORMATS, PoseFile, read_pose_file
-from pipeline.sources.poses import read_extrinsic, read_kitti_calib
+from pipeline.kitti_calib import read_kitti_calib
+from pipeline.posefile import POSE_FORMATS, PoseFile, read_pose_file
+from pipeline.sources.poses import read_extrinsic
 from pipeline.sources.scanfiles import read_bin, read_pcd
 from pipeline.stamps import MAX_STAMP_S, read_times
 

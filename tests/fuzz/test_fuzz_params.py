@@ -15,8 +15,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from pipeline.config import BaseSection, Section, load_section
+from pipeline.database.store import RteSection
 from pipeline.descriptors.dataset import DescriptorsSection
-from pipeline.evaluation.store import RteSection
 from pipeline.odometry import get_adapter
 from pipeline.odometry.base import Schedule
 from pipeline.report.evaluate import EvaluateSection

@@ -142,7 +142,7 @@ def test_dropout_and_noise_settings() -> None:
 
 def test_kitti_trajectory_drives_a_street(kitti_trajectories: Path, kitti_root: Path) -> None:
     from pipeline.geometry import inv_se3
-    from pipeline.sim.kitti import velodyne_to_camera
+    from pipeline.kitti_calib import calib_for_pose_file
 
     path = kitti_trajectories / "04.txt"
     spec = SimSpec("street", 1, 30, kitti_trajectory=path)
@@ -150,7 +150,7 @@ def test_kitti_trajectory_drives_a_street(kitti_trajectories: Path, kitti_root: 
     rows = np.loadtxt(path, max_rows=30)
     P = np.tile(np.eye(4), (30, 1, 1))
     P[:, :3, :4] = rows.reshape(-1, 3, 4)
-    Tr = velodyne_to_camera(path)
+    Tr = calib_for_pose_file(path)
     np.testing.assert_allclose(w.poses.T_world_lidar, inv_se3(Tr) @ P @ Tr)
     assert w.poses.frame_labels == ["street"] * 30
     # Tr of sequence 04 matches the dataset's own calib.txt

@@ -9,8 +9,8 @@ import pytest
 from source_inputs import write_pcd, write_tum
 
 from pipeline.errors import InputError
-from pipeline.evaluation.posefile import read_pose_file
 from pipeline.geometry import pose_from_xyz_quat, rot_z
+from pipeline.posefile import read_pose_file
 from pipeline.sequence import SequenceReader
 from pipeline.sources import ingest_folder
 from pipeline.sources.poses import interpolate_poses

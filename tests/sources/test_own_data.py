@@ -14,7 +14,7 @@ from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 from source_inputs import KittiFrames, load_kitti, point_times_s, write_kitti_poses, write_tum
 
-from pipeline.evaluation.posefile import read_pose_file
+from pipeline.posefile import read_pose_file
 from pipeline.sequence import SequenceReader
 from stages.cli import main
 

@@ -89,7 +89,7 @@ def test_the_rows_a_pruned_trial_earned_reach_the_results_database(
         sequences: list[Path], pool: Executor, tmp_path: Path) -> None:
     import duckdb
 
-    from pipeline.evaluation.store import RteSection, build_database
+    from pipeline.database.store import RteSection, build_database
 
     out = tmp_path / "trials"
     run_trials(sequences[:1], out, settings(iterations=12, pruning=PRUNING), seed=5,

@@ -10,7 +10,7 @@ import pyarrow.parquet as pq
 import pytest
 from conftest import Interrupt, interrupt_after, settings
 
-from pipeline.evaluation.rte import mean_rte_pct
+from pipeline.metrics.rte import mean_rte_pct
 from pipeline.sequence import SequenceReader
 from pipeline.trajectory import read_trajectory
 from pipeline.tuning.job import trajectory_path

@@ -1,14 +1,14 @@
 """Errors of an estimated trajectory against a ground truth, for runs of any length.
 
 - RTE: the pipeline's own per-start-frame relative error over ``length_m`` metres
-  (pipeline.evaluation.rte), averaged over the start frames: the number trials optimise.
+  (pipeline.metrics.rte), averaged over the start frames: the number trials optimise.
 - APE (as evo_ape): translation error [m] of every pose after aligning the estimate to the
   ground truth with Umeyama's method (rotation and translation; scale too with ``scale``).
 - RPE (as evo_rpe): translation error [m] of the relative motion between consecutive frames.
 APE and RPE give rmse, mean, median, std, min and max, as evo does.
 
 Inputs: a sequence MCAP (its ground truth), a trajectory Parquet (``adaptune run``) or a pose
-file of any format pipeline.evaluation.posefile reads. Stamped poses on both sides are paired by
+file of any format pipeline.posefile reads. Stamped poses on both sides are paired by
 the nearest stamp within 10 ms (evo's default); otherwise pose k pairs with pose k.
 """
 
@@ -22,9 +22,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
-from pipeline.evaluation.posefile import PoseFormat, read_pose_file
-from pipeline.evaluation.rte import per_frame_rte
 from pipeline.geometry import inv_se3, path_distances
+from pipeline.metrics.rte import per_frame_rte
+from pipeline.posefile import PoseFormat, read_pose_file
 
 F64 = NDArray[np.float64]
 MAX_STAMP_DIFF_NS = 10_000_000

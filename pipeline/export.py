@@ -21,9 +21,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError, InputError
-from pipeline.evaluation.posefile import write_kitti_poses, write_tum
 from pipeline.geometry import inv_se3
 from pipeline.io_utils import refuse_input_as_output
+from pipeline.posefile import write_kitti_poses, write_tum
 
 F64 = NDArray[np.float64]
 ExportFormat = Literal["kitti", "tum"]
@@ -93,7 +93,7 @@ def export_ground_truth(sequence: str | Path, fmt: str, out: str | Path, *,
 def calibration(sequence: Path | None, calib: str | Path | None) -> F64:
     """(4, 4) T_cam_lidar from ``calib`` (a KITTI calib.txt) or the sequence's metadata."""
     if calib is not None:
-        from pipeline.sources.poses import read_kitti_calib
+        from pipeline.kitti_calib import read_kitti_calib
 
         return read_kitti_calib(calib)
     from pipeline.sequence import SequenceReader

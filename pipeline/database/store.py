@@ -24,11 +24,11 @@ from pydantic import Field, field_validator
 
 from pipeline.config import Section
 from pipeline.errors import InputError
-from pipeline.evaluation.kitti import LENGTHS_M, STEP_FRAMES
-from pipeline.evaluation.trials import read_trials_tables
 from pipeline.geometry import path_distances
 from pipeline.io_utils import atomic_path
+from pipeline.metrics.kitti import LENGTHS_M, STEP_FRAMES
 from pipeline.sequence_index import read_index
+from pipeline.tuning.layout import read_trials_tables
 from schemas import read_text
 from schemas.arrow import POSE_COLUMNS
 
@@ -74,7 +74,7 @@ def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapp
     """Build the results database at ``db_path`` atomically.
 
     sequences_dir: data/sequences (``*.mcap`` and optionally index.json with the splits);
-    studies: study name ('trials' | 'fixed') -> SMBO output folder (pipeline.evaluation.trials);
+    studies: study name ('trials' | 'fixed') -> SMBO output folder (pipeline.tuning.layout);
     descriptors / environment: the descriptor Parquet files, or None for empty tables.
     """
     import duckdb

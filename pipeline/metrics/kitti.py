@@ -193,7 +193,7 @@ def evaluate_kitti_files(gt_path: str | Path, est_path: str | Path,
     {"t_err_pct", "r_err_deg_per_m", "segments"}}}. InputError names the file when the files
     disagree in length, hold a non-finite pose, or the path is too short for any segment.
     """
-    from pipeline.evaluation.posefile import read_kitti_poses
+    from pipeline.posefile import read_kitti_poses
 
     gt, est = read_kitti_poses(gt_path), read_kitti_poses(est_path)
     if len(est) != len(gt):
