@@ -2,7 +2,7 @@
 
 On worlds of the generalization suite's **dev** root, every adapter runs its defaults (and
 NDT also the toy's fixed parameters) once as they are and ``NOISE_REPLICAS`` times with every
-parameter moved by at most 0.5 % (``pipeline.report.replicas``: the same factors the
+parameter moved by at most 0.5 % (``pipeline.evaluate.replicas``: the same factors the
 ``evaluate`` and ``generalize`` stages' replicas use). Per world the coefficient of variation
 of the runs' mean RTE (L = 25 m); over the worlds its median, and over ordered pairs of runs
 of one setting on one world the fraction whose ratio exceeds 1.05, the issue's worst-world
@@ -45,11 +45,12 @@ def _algorithms() -> list[str]:
 def runs_of(algorithm: str, params: dict[str, float], path: Path, gt: np.ndarray,
             replicas: int) -> list[float]:
     """Mean RTE [%] (L = 25 m) of the nominal run and of ``replicas`` perturbed runs (NaN:
-    failed), with the evaluate code's replicas (``pipeline.report.evaluate.run_replicas``)."""
+    failed), with the evaluate code's replicas (``pipeline.evaluate.runs.run_replicas``)."""
     from pipeline.errors import OdometryError
+    from pipeline.evaluate.runs import run_replicas
+    from pipeline.evaluate.section import EvaluateSection
     from pipeline.metrics.rte import mean_rte_pct
     from pipeline.odometry import get_adapter, run_sequence
-    from pipeline.report.evaluate import EvaluateSection, run_replicas
 
     adapter = get_adapter(algorithm)
     section = EvaluateSection(length_m=LENGTH_M, replicas=replicas)  # its 0.5 % replica_scale

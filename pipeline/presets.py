@@ -169,8 +169,8 @@ def section_models() -> dict[str, type[Section]]:
     from pipeline.config import BaseSection
     from pipeline.database.store import RteSection
     from pipeline.descriptors.dataset import DescriptorsSection
+    from pipeline.evaluate.section import EvaluateSection
     from pipeline.generalization.suite import GeneralizeSection
-    from pipeline.report.evaluate import EvaluateSection
     from pipeline.sim.dataset import SimulateSection
     from pipeline.sim.kitti_dataset import SimulateKittiSection
     from pipeline.sources.dataset import IngestSection

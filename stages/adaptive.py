@@ -27,7 +27,7 @@ def adaptive(params_path: Path | None, model_dir: Path, sequence_dir: Path, spli
     """Schedule every sequence of the evaluated splits with the model and run its odometry."""
     from pipeline.adaptive import run_adaptive
     from pipeline.config import load_section
-    from pipeline.report.evaluate import EvaluateSection
+    from pipeline.evaluate.section import EvaluateSection
     from pipeline.sequence_index import read_index
     from pipeline.tuning.smbo import TrialsSection
 

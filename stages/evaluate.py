@@ -28,7 +28,7 @@ def evaluate(params_path: Path | None, sequence_dir: Path, trials_dir: Path, fix
              report_dir: Path) -> None:
     """Score baseline, fixed and adaptive parameters; write metrics, plots and the report."""
     from pipeline.config import load_section
-    from pipeline.report.evaluate import EvaluateSection
+    from pipeline.evaluate.section import EvaluateSection
     from pipeline.report.report import EvaluationPaths, run_evaluation
     from pipeline.tuning.smbo import TrialsSection
 

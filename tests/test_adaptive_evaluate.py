@@ -132,7 +132,7 @@ def test_evaluate_without_a_successful_joint_trial(tmp_path: Path, validation_se
 
 def test_trials_summary_counts_pruned_trials_apart_from_failed(tmp_path: Path) -> None:
     from pipeline.odometry import get_adapter
-    from pipeline.report.evaluate import trials_summary
+    from pipeline.report.metrics import trials_summary
     from pipeline.tuning.table import trials_path, write_trials
 
     space = get_adapter("ndt").space
@@ -185,7 +185,9 @@ def test_adaptive_and_evaluate_give_the_same_results_for_any_workers(
     from test_surrogate import build_model
 
     from pipeline.adaptive import run_adaptive
-    from pipeline.report.evaluate import EvaluateSection, evaluate, metrics
+    from pipeline.evaluate.runs import evaluate
+    from pipeline.evaluate.section import EvaluateSection
+    from pipeline.report.metrics import metrics
     from pipeline.sim.simulate import SimSpec, simulate_sequence
 
     model = build_model(tmp_path / "model", kitti_root)
@@ -225,11 +227,13 @@ def test_replicas_run_each_setting_with_its_perturbed_parameters(
     baseline replica's figures); the metrics pool the r-th runs of a split."""
     import numpy as np
 
+    from pipeline.evaluate.replicas import sequence_seed
+    from pipeline.evaluate.runs import evaluate
+    from pipeline.evaluate.section import EvaluateSection
     from pipeline.metrics.rte import mean_rte_pct
     from pipeline.odometry import get_adapter, run_sequence
     from pipeline.odometry.base import Schedule
-    from pipeline.report.evaluate import EvaluateSection, evaluate, metrics
-    from pipeline.report.replicas import sequence_seed
+    from pipeline.report.metrics import metrics
     from pipeline.sequence import SequenceReader
     from pipeline.trajectory import write_trajectory
 

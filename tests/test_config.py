@@ -61,7 +61,7 @@ def test_repository_params_file_has_base_section() -> None:
 def test_length_is_set_once_in_base(tmp_path: Path) -> None:
     """trials, rte and evaluate take L from base.length_m; a copy in a section is refused."""
     from pipeline.database.store import RteSection
-    from pipeline.report.evaluate import EvaluateSection
+    from pipeline.evaluate.section import EvaluateSection
     from pipeline.tuning.smbo import TrialsSection
 
     p = tmp_path / "params.yaml"

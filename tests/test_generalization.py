@@ -113,9 +113,9 @@ def test_world_of_draws_from_the_named_suite() -> None:
 
 
 def test_replica_factors_and_perturbed_parameters() -> None:
+    from pipeline.evaluate.replicas import factors, perturbed_params, perturbed_schedule
     from pipeline.odometry import get_adapter
     from pipeline.odometry.base import Schedule
-    from pipeline.report.replicas import factors, perturbed_params, perturbed_schedule
 
     f = factors(7, 1, 6, 0.005)
     assert np.all(np.abs(f - 1.0) <= 0.005) and len(set(f.tolist())) == 6

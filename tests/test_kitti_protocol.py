@@ -67,7 +67,7 @@ def test_the_preset_sets_the_protocol(protocol: Path, kitti_root: Path) -> None:
 
 
 def test_train_and_test_sequences_are_scored(protocol: Path) -> None:
-    from pipeline.report.evaluate import SETTINGS
+    from pipeline.evaluate.result import SETTINGS
     from pipeline.sequence import SequenceReader
 
     for seq in ("01", "04", "06", "10"):

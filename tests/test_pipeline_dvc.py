@@ -109,9 +109,9 @@ def test_every_stage_ran(repro: tuple[Path, str]) -> None:
 def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
     import duckdb
 
+    from pipeline.evaluate.result import SETTINGS
     from pipeline.odometry.base import Schedule
     from pipeline.pca import Pca
-    from pipeline.report.evaluate import SETTINGS
     from pipeline.runtime import load_model
     from pipeline.sequence import SequenceReader
     from pipeline.trajectory import read_trajectory

@@ -8,7 +8,6 @@ adaptive / min(baseline, fixed) per world below, with the issue's targets).
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,8 +42,8 @@ def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
                        adapter_options: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Score the suite ``section.suite``; write metrics, plot data and figure; return the
     metrics."""
-    from pipeline.report.evaluate import best_fixed_params
-    from pipeline.report.report import _csv, json_safe
+    from pipeline.evaluate.runs import best_fixed_params
+    from pipeline.report.outputs import csv_text, write_json
 
     algorithm, fixed = best_fixed_params(paths.fixed)
     inputs = SuiteInputs(paths.model, paths.fixed, algorithm, fixed, dict(adapter_options or {}),
@@ -52,8 +51,8 @@ def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
     scores = run_suite(section, inputs, paths.runs)
     result = suite_metrics(scores, section.suite, section.root, section.bootstrap, algorithm,
                            section.length_m)
-    atomic_write_text(paths.metrics, json.dumps(json_safe(result), indent=2) + "\n")
-    atomic_write_text(paths.plot_data, _csv(plot_rows(scores)))
+    write_json(paths.metrics, result)
+    atomic_write_text(paths.plot_data, csv_text(plot_rows(scores)))
     suite_figure(scores, result, paths.figure)
     return result
 
@@ -62,13 +61,13 @@ def suite_figure(scores: Sequence[WorldScore], metrics: Mapping[str, Any], out_p
     """RTE of every setting per world (top, log scale; with replicas a line over the range of
     its runs) and adaptive / min(baseline, fixed) per world (bottom, log scale; with replicas
     the ratio of the settings' medians as a diamond) with the median and the targets."""
-    from pipeline.report.evaluate import SETTINGS
-    from pipeline.report.figures import SETTING_COLOURS, _figure
+    from pipeline.evaluate.result import SETTINGS
+    from pipeline.report.outputs import SETTING_COLOURS, figure
 
     x = np.arange(len(scores))
     names = [f"{s.name}\n{'-'.join(lab[0] for lab in s.segments)} {s.sensor}" for s in scores]
     best = metrics["summary"]["adaptive_vs_best"]
-    with _figure(out_png, 2, 1, (max(8.0, 0.7 * len(scores) + 2), 7), sharex=True) as (fig, ax):
+    with figure(out_png, 2, 1, (max(8.0, 0.7 * len(scores) + 2), 7), sharex=True) as (fig, ax):
         for j, setting in enumerate(SETTINGS):
             ax[0, 0].bar(x + (j - 1) * 0.27, [s.rte_pct[setting] for s in scores], 0.27,
                          color=SETTING_COLOURS[setting], label=setting)

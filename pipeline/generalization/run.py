@@ -4,10 +4,10 @@ For every world (``pipeline.generalization.suite``), ``score_world``
 1. simulates it (``pipeline.sim.simulate.simulate_sequence``) into a scratch MCAP;
 2. runs the model's selector and odometry on it (``pipeline.adaptive.run_one``, the ``adaptive``
    stage's code);
-3. runs baseline and fixed and scores all three (``pipeline.report.evaluate.evaluate``, the
+3. runs baseline and fixed and scores all three (``pipeline.evaluate.runs.evaluate``, the
    ``evaluate`` stage's code: per-start-frame RTE at L = ``length_m``);
    with ``replicas`` R > 0 every setting runs R times more, its parameters moved by at most
-   ``replica_scale`` (``pipeline.report.replicas``);
+   ``replica_scale`` (``pipeline.evaluate.replicas``);
 4. deletes the MCAP (hundreds of MB a world) and keeps the trajectories and the schedule:
    ``<out>/adaptive/<world>/`` and ``<out>/runs/<world>/``.
 
@@ -25,8 +25,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pipeline.evaluate.result import SETTINGS
 from pipeline.generalization.suite import GeneralizeSection, SuiteWorld, suite_worlds
-from pipeline.report.evaluate import SETTINGS
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +35,7 @@ log = logging.getLogger(__name__)
 class WorldScore:
     """One world's result: mean per-start-frame RTE [%] of every setting, overall and per
     environment label, the adaptive run's parameter changes and the wall time [s]; with
-    replicas (``pipeline.report.replicas``) the RTE [%] of every replica run of every
+    replicas (``pipeline.evaluate.replicas``) the RTE [%] of every replica run of every
     setting (NaN: the odometry failed)."""
 
     name: str
@@ -136,7 +136,8 @@ def _logged(score: WorldScore, i: int, n: int) -> WorldScore:
 def score_world(world: SuiteWorld, inputs: SuiteInputs, out_dir: Path) -> WorldScore:
     """Simulate ``world``, run adaptive, baseline and fixed, score them (module docstring)."""
     from pipeline.adaptive import loaded_model, run_one
-    from pipeline.report.evaluate import EvaluateSection, evaluate
+    from pipeline.evaluate.runs import evaluate
+    from pipeline.evaluate.section import EvaluateSection
     from pipeline.sim.simulate import simulate_sequence
 
     t0 = time.perf_counter()

@@ -35,7 +35,7 @@ class GeneralizeSection(Section):
     max) frames per segment (10 Hz); bootstrap: resamples of the bootstrap interval of the
     median ratio; replicas: extra runs of every setting on every world with the parameters
     moved by at most ``replica_scale`` (relative), to measure how far one run is from the next
-    (``pipeline.report.replicas``; 0: none); workers: worlds run in parallel;
+    (``pipeline.evaluate.replicas``; 0: none); workers: worlds run in parallel;
     length_m: the RTE length L (from base).
     """
 

@@ -5,7 +5,7 @@ A ratio below 1 means adaptive beat the other setting on that world (lower RTE);
 is the fraction of worlds whose ratio is below 1. The interval is the percentile bootstrap
 (worlds resampled with replacement, ``resamples`` times, seeded) of the median ratio.
 
-With replicas (``pipeline.report.replicas``) two more blocks: ``replica_summary``, the
+With replicas (``pipeline.evaluate.replicas``) two more blocks: ``replica_summary``, the
 same figures of the ratios of every setting's median over its runs, and ``noise``, how far
 runs of one setting are from each other on a world: per setting the median over worlds of the
 coefficient of variation of its runs, and over the ordered pairs of two runs of baseline or of

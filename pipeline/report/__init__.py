@@ -1,1 +1,3 @@
-"""Evaluation of baseline, fixed and adaptive parameters, and the report (figures, markdown)."""
+"""Rendering: the evaluate stage's metrics JSON, plot data, report.md and figures, the KITTI
+Table II layout, and what every reporting stage writes with (``outputs``). The runs themselves
+are ``pipeline.evaluate``."""

@@ -11,39 +11,16 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pipeline.io_utils import atomic_path
-from pipeline.report.evaluate import SETTINGS, Evaluation
+from pipeline.evaluate.result import SETTINGS, Evaluation
+from pipeline.report.outputs import SETTING_COLOURS, figure
 from pipeline.sequence import EnvLabel
 from pipeline.sim.plot import LABEL_COLOURS
-
-SETTING_COLOURS = {"ground truth": "black", "baseline": "tab:gray", "fixed": "tab:orange",
-                   "adaptive": "tab:red"}
-
-
-@contextmanager
-def _figure(out_png: Path, nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (9, 4),
-            **kw: Any) -> Iterator[tuple[Any, Any]]:
-    """A matplotlib figure saved to ``out_png`` (atomically) and closed on exit."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(nrows, ncols, figsize=size, dpi=110, squeeze=False,
-                             layout="constrained", **kw)
-    try:
-        yield fig, axes
-        with atomic_path(out_png) as tmp:
-            fig.savefig(tmp, format="png")
-    finally:
-        plt.close(fig)
 
 
 def _shade(ax: Any, labels: Sequence[EnvLabel], frame_s: float) -> None:
@@ -66,7 +43,7 @@ def schedule_figure(ev: Evaluation, sequence: str, out_png: Path) -> Path:
     names = list(sched.values)
     frame_s = _frame_s(ev.score("adaptive", sequence).trajectory.stamps_ns)
     t = np.arange(len(sched)) * frame_s
-    with _figure(out_png, len(names), 1, (9, 1.9 * len(names) + 0.6), sharex=True) as (fig, axes):
+    with figure(out_png, len(names), 1, (9, 1.9 * len(names) + 0.6), sharex=True) as (fig, axes):
         for ax, name in zip(axes[:, 0], names, strict=True):
             _shade(ax, ev.infos[sequence].labels, frame_s)
             ax.step(t, sched.values[name], where="post", color="tab:red", label="adaptive")
@@ -84,7 +61,7 @@ def schedule_figure(ev: Evaluation, sequence: str, out_png: Path) -> Path:
 def rte_figure(ev: Evaluation, sequence: str, out_png: Path) -> Path:
     """Per-start-frame RTE [%] of every setting over ``sequence``."""
     frame_s = _frame_s(ev.score("adaptive", sequence).trajectory.stamps_ns)
-    with _figure(out_png) as (_, axes):
+    with figure(out_png) as (_, axes):
         ax = axes[0, 0]
         _shade(ax, ev.infos[sequence].labels, frame_s)
         for setting in SETTINGS:
@@ -102,7 +79,7 @@ def rte_figure(ev: Evaluation, sequence: str, out_png: Path) -> Path:
 def trajectory_figure(ev: Evaluation, sequence: str, out_png: Path) -> Path:
     """Top-down trajectories: ground truth and every setting, started at the true first pose."""
     gt = ev.ground_truth[sequence]
-    with _figure(out_png, size=(7, 7)) as (_, axes):
+    with figure(out_png, size=(7, 7)) as (_, axes):
         ax = axes[0, 0]
         ax.plot(gt[:, 0, 3], gt[:, 1, 3], color="black", lw=2, label="ground truth")
         for setting in SETTINGS:
@@ -132,7 +109,7 @@ def trials_figure(rows: list[dict[str, Any]], names: Sequence[str], out_png: Pat
     x_name, y_name = (names[0], names[1]) if len(names) > 1 else (names[0], names[0])
     ok = [r["objective"] for r in rows if r["status"] == "ok"]
     vmin, vmax = (min(ok), max(ok)) if ok else (0.1, 1.0)
-    with _figure(out_png, nrows, ncols, (3.2 * ncols + 1, 3.0 * nrows + 0.4)) as (fig, axes):
+    with figure(out_png, nrows, ncols, (3.2 * ncols + 1, 3.0 * nrows + 0.4)) as (fig, axes):
         import matplotlib.colors as mcolors
 
         norm = mcolors.LogNorm(vmin=max(vmin, 1e-3), vmax=max(vmax, vmin * 1.01, 1e-3))

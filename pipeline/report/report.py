@@ -1,34 +1,25 @@
 """The ``evaluate`` stage's outputs: metrics JSON, plot data for ``dvc plots``, report.md + PNGs.
 
 ``run_evaluation`` reads like the stage's table of contents: take the fixed parameters from the
-joint SMBO, run and score the three settings (``pipeline.report.evaluate``), then write the
+joint SMBO, run and score the three settings (``pipeline.evaluate``), then write the
 metrics, the plot data and the report.
 """
 
 from __future__ import annotations
 
-import csv
-import io
-import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from pipeline.evaluate.result import SETTINGS, Evaluation
+from pipeline.evaluate.runs import best_fixed_params, evaluate
+from pipeline.evaluate.section import EvaluateSection
 from pipeline.io_utils import atomic_write_text
 from pipeline.report import figures
-from pipeline.report.evaluate import (
-    SETTINGS,
-    EvaluateSection,
-    Evaluation,
-    best_fixed_params,
-    evaluate,
-    metrics,
-    trials_summary,
-)
+from pipeline.report.metrics import metrics, trials_summary
+from pipeline.report.outputs import csv_text, write_json
 from pipeline.report.table2 import table2_json, table2_markdown
 
 
@@ -58,7 +49,7 @@ def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection,
     ev = evaluate(list(split_of), algorithm, fixed, paths.adaptive, paths.runs, settings,
                   adapter_options, paths.fixed, {p.stem: split for p, split in split_of.items()})
     result = metrics(ev, trials_summary({"trials": paths.trials, "fixed": paths.fixed}))
-    atomic_write_text(paths.metrics, json.dumps(json_safe(result), indent=2) + "\n")
+    write_json(paths.metrics, result)
     write_plot_data(ev, paths.plots)
     trial_rows = [r for r in read_trials_tables(paths.trials).to_pylist()
                   if r["algorithm"] == algorithm]
@@ -68,15 +59,6 @@ def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection,
 
 
 # ----------------------------------------------------------------------------- plot data
-
-
-def _csv(rows: list[dict[str, Any]]) -> str:
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(rows[0]) if rows else ["frame"],
-                            lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    return buf.getvalue()
 
 
 def _num(v: float) -> float | str:
@@ -113,10 +95,10 @@ def write_plot_data(ev: Evaluation, plots_dir: Path) -> None:
             traj[k] += [{"sequence": name, "frame": i, "x_m": round(float(p[0]), 4),
                          "y_m": round(float(p[1]), 4)} for i, p in enumerate(pos)]
     for n, rows in sched.items():
-        atomic_write_text(plots_dir / "schedule" / f"{n}.csv", _csv(rows))
-    atomic_write_text(plots_dir / "rte_frames.csv", _csv(rte))
+        atomic_write_text(plots_dir / "schedule" / f"{n}.csv", csv_text(rows))
+    atomic_write_text(plots_dir / "rte_frames.csv", csv_text(rte))
     for k, rows in traj.items():
-        atomic_write_text(plots_dir / f"trajectory_{k}.csv", _csv(rows))
+        atomic_write_text(plots_dir / f"trajectory_{k}.csv", csv_text(rows))
 
 
 # -------------------------------------------------------------------------------- report
@@ -231,16 +213,3 @@ def _per_split(m: Mapping[str, Any]) -> list[str]:
                      + f" | {_fmt(sm['ratio']['adaptive_vs_baseline'], 2)}"
                      f" | {_fmt(sm['ratio']['adaptive_vs_fixed'], 2)} |")
     return [*lines, ""]
-
-
-def json_safe(value: Any) -> Any:
-    """``value`` with NaN and infinities as null and numpy scalars as Python numbers."""
-    if isinstance(value, Mapping):
-        return {str(k): json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_safe(v) for v in value]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value

@@ -3,7 +3,7 @@
 One block per algorithm, one row per setting (baseline, fixed, adaptive), one column per
 sequence grouped by split (training sequences first), each split followed by its average: the
 devkit t_err [%] pooled over every segment of the split's sequences, as the devkit pools a
-benchmark. The input is the ``evaluate`` stage's metrics JSON (``pipeline.report.evaluate.
+benchmark. The input is the ``evaluate`` stage's metrics JSON (``pipeline.report.metrics.
 metrics``) of each algorithm; ``table2_json`` and ``table2_markdown`` lay them out.
 """
 
@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.errors import InputError
-from pipeline.report.evaluate import SETTINGS
+from pipeline.evaluate.result import SETTINGS
 
 SPLIT_TITLES = {"train": "training"}
 """How a split is named in the table's headers (others by their own name)."""
@@ -141,7 +141,7 @@ def write_table2(metrics_paths: Sequence[Path], out_dir: Path,
     import json
 
     from pipeline.io_utils import atomic_write_text
-    from pipeline.report.report import json_safe
+    from pipeline.report.outputs import write_json
 
     blocks = []
     for path in metrics_paths:
@@ -158,6 +158,6 @@ def write_table2(metrics_paths: Sequence[Path], out_dir: Path,
           f"every segment of its sequences; SMBO objective L = {table['length_m']:g} m; the "
           "best setting of each column in bold.\n\n"
           + table2_markdown(table, split_titles))
-    atomic_write_text(out_dir / "table.json", json.dumps(json_safe(table), indent=2) + "\n")
+    write_json(out_dir / "table.json", table)
     atomic_write_text(out_dir / "table.md", md)
     return table

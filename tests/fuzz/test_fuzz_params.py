@@ -17,9 +17,9 @@ from hypothesis import strategies as st
 from pipeline.config import BaseSection, Section, load_section
 from pipeline.database.store import RteSection
 from pipeline.descriptors.dataset import DescriptorsSection
+from pipeline.evaluate.section import EvaluateSection
 from pipeline.odometry import get_adapter
 from pipeline.odometry.base import Schedule
-from pipeline.report.evaluate import EvaluateSection
 from pipeline.sim.dataset import SimulateSection
 from pipeline.sources.dataset import IngestSection
 from pipeline.surrogates.fit import SurrogateSection

@@ -186,8 +186,8 @@ def generated(dvc_yaml: str) -> str:
                            r"\[[^\]]*\]")
         if not block.search(dvc_yaml):
             raise SystemExit(f"dvc.yaml: stage {stage!r} has no one-list deps: [...] to rewrite")
-        dvc_yaml = block.sub(lambda m: m.group(1) + _flow(deps, 11).replace("\\", "\\\\"),
-                             dvc_yaml, count=1)
+        listed = _flow(deps, 11)
+        dvc_yaml = block.sub(lambda m, listed=listed: m.group(1) + listed, dvc_yaml, count=1)
     return dvc_yaml
 
 
