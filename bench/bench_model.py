@@ -3,7 +3,7 @@ scans.
 
 - descriptor of one ~120k-point HDL-64E scan, one core (paper: 40 ms; target <= 4 ms);
 - one parameter selection with a surrogate of 8 sequences x 300 frames x 256 trials = 614k rows
-  (paper: 700 ms; target <= 5 ms), also risk-aware (``surrogate.risk`` = 0.5). The rows are
+  (paper: 700 ms; target <= 5 ms), also risk-aware (``select.risk`` = 0.5). The rows are
   synthetic but realistic: environments are mixtures of the real KITTI descriptors, parameters
   TPE-like (clustered per sequence), and the RTE depends on both. The selection is timed
   from the environment E_t (the descriptor is the row above) and also end to end from the
@@ -24,6 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from common import Row, best_of, data_root
 
 from pipeline.descriptors.ndt_histogram import describe
+from pipeline.selection import SelectionSettings
 
 
 def kitti_scans() -> list[np.ndarray]:
@@ -72,13 +73,14 @@ def synthetic_rows(
 
 
 def run() -> list[Row]:
-    from pipeline.artifact import ArtifactInfo, write_artifact
     from pipeline.descriptors import NdtHistogram
     from pipeline.odometry.registry import get_adapter
     from pipeline.runtime import Selector, load_model
     from pipeline.surrogates.base import environment_d2
-    from pipeline.surrogates.fit import SurrogateSection, fit_surrogate
+    from pipeline.surrogates.fit import fit_surrogate
     from pipeline.surrogates.knn_search import Neighbourhood
+    from pipeline.surrogates.section import SurrogateSection
+    from pipeline.surrogates.writer import ArtifactInfo, write_artifact
 
     scans = kitti_scans()
     per_scan = [best_of(lambda s=s: describe(s), repeat=5) for s in scans]
@@ -96,25 +98,16 @@ def run() -> list[Row]:
     space = get_adapter("gicp").space.to_json()
     rows, pca = synthetic_rows(descs, len(space))
     fitted = fit_surrogate(rows, space, SurrogateSection(n_sobol=1024, cv_max_frames=2))
-    selection = {
-        "period_s": 1.0,
-        "hysteresis": 0.02,
-        "min_scan_points": 1000,
-        "subset_rows": 4096,
-        "refine_iters": 4,
-    }
+    selection = SelectionSettings()  # the default selector (params select)
     with tempfile.TemporaryDirectory() as tmp:
-        write_artifact(
-            Path(tmp) / "model",
-            fitted,
-            pca,
-            ArtifactInfo("gicp", space, NdtHistogram(), selection),
-        )
+        write_artifact(Path(tmp) / "model", fitted, pca,
+                       ArtifactInfo("gicp", space, NdtHistogram(),
+                                    {"mode": "defaults", "chosen": "defaults"}))
         model = load_model(Path(tmp) / "model")
     envs = [model.environment(s) for s in scans]
-    sel = Selector(model)
-    tree = Selector(model, grouped=False)  # the reference: the certified kd-tree path
-    wary = Selector(model, risk=0.5)  # risk-aware: mean + 0.5 std of the neighbours' targets
+    sel = Selector(model, selection)
+    tree = Selector(model, selection, grouped=False)  # the reference: the certified kd-tree
+    wary = Selector(model, selection.replace(risk=0.5))  # mean + 0.5 std of the k targets
     for s_ in (sel, tree, wary):
         s_.novelty_distance = float("inf")  # time the full search, never the novelty fallback
 
@@ -128,7 +121,7 @@ def run() -> list[Row]:
     exact = []
     for e in envs:
         nb = Neighbourhood(model.surrogate, environment_d2(model.env, e),
-                           selection["subset_rows"], model.x_scale)
+                           selection.subset_rows, model.x_scale)
         exact.append(nb.predict(sel.candidates).exact.mean())
 
     def fresh_scan(s: np.ndarray) -> None:
@@ -147,7 +140,7 @@ def run() -> list[Row]:
             "<= 5 ms",
         ),
         Row(
-            "  the same, risk-aware (surrogate.risk = 0.5: mean + 0.5 std of the k targets)",
+            "  the same, risk-aware (select.risk = 0.5: mean + 0.5 std of the k targets)",
             1e3 * float(np.median(wary_times)),
             "ms",
             f"risk 0 (same run) {1e3 * float(np.median(times)):.2f} ms",

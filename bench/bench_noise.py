@@ -84,7 +84,7 @@ def run() -> list[Row]:
             path = Path(tmp) / f"{world.name}.mcap"
             simulate_sequence(world.spec, path, name=world.name)
             with SequenceReader(path) as reader:
-                gt = reader.ground_truth()
+                gt = reader.require_ground_truth("to score against")
             for algorithm in runs:
                 from pipeline.odometry import get_adapter
 

@@ -52,13 +52,14 @@ def selections(model, descs: np.ndarray, pca: tuple | None = None,
 def toy_inputs() -> tuple[object, np.ndarray, Path | None, str]:
     """(model, descriptors of the selection scans, validation sequence or None, what it is)."""
     from pipeline.runtime import load_model
+    from pipeline.selection import SelectionSettings
     from pipeline.sequence import SequenceReader
 
     seq = REPO / "data" / "sequences" / "composite_0.mcap"
     if (REPO / "model" / "manifest.json").is_file() and seq.is_file():
         model = load_model(REPO / "model")
         with SequenceReader(seq) as reader:
-            step = round(model.selection["period_s"] * 10)  # 10 Hz: a selection every step
+            step = round(SelectionSettings().period_s * 10)  # 10 Hz: a selection every step
             descs = np.stack([model.descriptor.describe(reader[i].points_lidar)
                               for i in range(0, len(reader), step)])
         return model, descs, seq, "toy validation composite_0"
@@ -70,22 +71,22 @@ def synthetic_inputs() -> tuple[object, np.ndarray]:
 
     from bench_model import kitti_scans, synthetic_rows
 
-    from pipeline.artifact import ArtifactInfo, write_artifact
     from pipeline.descriptors import NdtHistogram
     from pipeline.odometry.registry import get_adapter
     from pipeline.runtime import load_model
-    from pipeline.surrogates.fit import SurrogateSection, fit_surrogate
+    from pipeline.surrogates.fit import fit_surrogate
+    from pipeline.surrogates.section import SurrogateSection
+    from pipeline.surrogates.writer import ArtifactInfo, write_artifact
 
     scans = kitti_scans()
     descs = np.stack([NdtHistogram().describe(s) for s in scans])
     space = get_adapter("ndt").space.to_json()
     rows, pca = synthetic_rows(descs, len(space))
     fitted = fit_surrogate(rows, space, SurrogateSection(n_sobol=1024, cv_max_frames=2))
-    selection = {"period_s": 1.0, "hysteresis": 0.02, "min_scan_points": 1000,
-                 "subset_rows": 4096, "refine_iters": 4}
     with tempfile.TemporaryDirectory() as tmp:
         write_artifact(Path(tmp) / "model", fitted, pca,
-                       ArtifactInfo("ndt", space, NdtHistogram(), selection))
+                       ArtifactInfo("ndt", space, NdtHistogram(),
+                                    {"mode": "defaults", "chosen": "defaults"}))
         return load_model(Path(tmp) / "model"), descs
 
 

@@ -27,12 +27,12 @@ REPO = Path(__file__).resolve().parents[1]
 
 def compare(rows, space, base, what: str) -> list[Row]:
     """CV, fit time and one selection of every registered surrogate on ``rows``."""
-    from pipeline.artifact import ArtifactInfo, write_artifact
     from pipeline.descriptors import NdtHistogram
     from pipeline.pca import Pca
     from pipeline.runtime import Selector, load_model
     from pipeline.surrogates import SURROGATES
     from pipeline.surrogates.fit import fit_surrogate
+    from pipeline.surrogates.writer import ArtifactInfo, write_artifact
 
     out, ref = [], {}
     for name in SURROGATES:
@@ -44,7 +44,8 @@ def compare(rows, space, base, what: str) -> list[Row]:
         d = fitted.env.shape[1]
         pca = Pca(np.zeros(90), np.ones(90), np.eye(d, 90), np.ones(d) / d)
         with tempfile.TemporaryDirectory() as tmp:
-            info = ArtifactInfo("gicp", space, NdtHistogram(), section.selection())
+            info = ArtifactInfo("gicp", space, NdtHistogram(), {"mode": "defaults",
+                                                                "chosen": "defaults"})
             write_artifact(Path(tmp) / "model", fitted, pca, info)
             model = load_model(Path(tmp) / "model")
         sel = Selector(model)
@@ -76,8 +77,8 @@ def run() -> list[Row]:
     from pipeline.config import load_section
     from pipeline.descriptors.ndt_histogram import describe
     from pipeline.odometry.registry import get_adapter
-    from pipeline.surrogates.fit import SurrogateSection
     from pipeline.surrogates.rows import read_training_rows
+    from pipeline.surrogates.section import SurrogateSection
 
     out = []
     db = Path(os.environ.get("ADAPTUNE_RESULTS_DB", REPO / "results" / "adaptune.duckdb"))

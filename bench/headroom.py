@@ -58,7 +58,7 @@ def per_frame_errors(path: Path, values: np.ndarray, out: Path) -> np.ndarray:
     if out.is_file():
         return np.load(out)
     with SequenceReader(path) as reader:
-        gt = reader.ground_truth()
+        gt = reader.require_ground_truth("to score against")
     schedule = Schedule(np.arange(len(gt), dtype=np.int32),
                         {"resolution": values[:, 0].copy(),
                          "keyframe_interval": values[:, 1].copy()})

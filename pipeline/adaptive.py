@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.io_utils import atomic_write_text
+from pipeline.selection import SelectionSettings
 
 log = logging.getLogger(__name__)
 
@@ -50,10 +51,12 @@ class AdaptiveRun:
 
 def run_adaptive(model_dir: str | Path, sequence_paths: Sequence[str | Path], out_dir: str | Path,
                  adapter_options: Mapping[str, Any] | None = None,
-                 time_limit_s: float | None = None, workers: int = 1) -> list[AdaptiveRun]:
+                 time_limit_s: float | None = None, workers: int = 1,
+                 selection: SelectionSettings | None = None) -> list[AdaptiveRun]:
     """Schedule and run every sequence with the model of ``model_dir``; see the module docstring.
 
-    adapter_options: untuned settings of the model's adapter (as in the trials); workers:
+    adapter_options: untuned settings of the model's adapter (as in the trials); selection: the
+    selector's runtime settings (params ``select``; None: their defaults); workers:
     sequences run at a time, in spawned processes (each sequence's run depends on the model and
     the sequence alone, so the outputs are the same for any number).
     Raises ArtifactError for a bad model, InputError for bad sequences, OdometryError when the
@@ -64,15 +67,16 @@ def run_adaptive(model_dir: str | Path, sequence_paths: Sequence[str | Path], ou
 
     load_model(model_dir)  # a bad artifact fails here, once, before any worker starts
     jobs = [(Path(model_dir), Path(p), Path(out_dir) / Path(p).stem, adapter_options,
-             time_limit_s) for p in sequence_paths]
+             time_limit_s, selection) for p in sequence_paths]
     return map_in_processes(_run_loaded, jobs, workers)
 
 
 def _run_loaded(model_dir: Path, sequence_path: Path, out_dir: Path,
-                adapter_options: Mapping[str, Any] | None,
-                time_limit_s: float | None) -> AdaptiveRun:
+                adapter_options: Mapping[str, Any] | None, time_limit_s: float | None,
+                selection: SelectionSettings | None) -> AdaptiveRun:
     """``run_one`` with the artifact at ``model_dir``, loaded once per process."""
-    return run_one(loaded_model(model_dir), sequence_path, out_dir, adapter_options, time_limit_s)
+    return run_one(loaded_model(model_dir), sequence_path, out_dir, adapter_options, time_limit_s,
+                   selection)
 
 
 @functools.lru_cache(maxsize=2)
@@ -86,22 +90,22 @@ def loaded_model(model_dir: Path) -> Any:
 
 def run_one(model: Any, sequence_path: Path, out_dir: Path,
             adapter_options: Mapping[str, Any] | None = None,
-            time_limit_s: float | None = None) -> AdaptiveRun:
+            time_limit_s: float | None = None,
+            selection: SelectionSettings | None = None) -> AdaptiveRun:
     """One sequence: schedule, run, write (module docstring)."""
-    from pipeline.odometry import get_adapter, run_sequence
-    from pipeline.odometry.base import ParameterSpace, with_space
+    from pipeline.odometry import run_sequence
+    from pipeline.odometry.registry import build_adapter
     from pipeline.runtime import Selector
     from pipeline.sequence import SequenceReader
     from pipeline.trajectory import write_trajectory
 
-    selector = Selector(model)
+    selector = Selector(model, selection)
     t0 = time.perf_counter()
     with SequenceReader(sequence_path) as reader:
         schedule = selector.schedule(reader)
         frames = len(reader)
     select_s = time.perf_counter() - t0
-    adapter = with_space(get_adapter(model.algorithm, **dict(adapter_options or {})),
-                         ParameterSpace.from_json(model.space))  # the space it was trained on
+    adapter = build_adapter(model.algorithm, adapter_options, model.space)  # as trained
     t0 = time.perf_counter()
     traj = run_sequence(adapter, sequence_path, schedule, time_limit_s=time_limit_s)
     odometry_s = time.perf_counter() - t0

@@ -1,10 +1,13 @@
-"""The model artifact (``model/``): a folder of ``manifest.json`` and plain ``.npy`` arrays.
+"""The model artifact (``model/``): a folder of ``manifest.json`` and plain ``.npy`` arrays;
+its format and its loader (the writer: ``pipeline.surrogates.writer``).
 
 The manifest (schemas/artifact.schema.json) names the algorithm and its parameter space, the
-descriptor, the PCA, the surrogate and its scalings, the selection settings, the training
-summary, the cross-validation error, the sha256 of every other file and where the model came
-from; its own canonical sha256 is stored in it (``MANIFEST_HASH_KEY``). No pickle anywhere:
-loading never runs code from the folder (docs/design.md, "Formats").
+descriptor, the PCA, the surrogate and its scalings, the novelty guard (its distance and
+fallback), the training summary, the cross-validation error, the sha256 of every other file
+and where the model came from; its own canonical sha256 is stored in it
+(``MANIFEST_HASH_KEY``). The selector's runtime settings are not in it (params ``select``,
+``pipeline.selection``). No pickle anywhere: loading never runs code from the folder
+(docs/design.md, "Formats").
 
 numpy and the standard library at import time: the deployable runtime imports this module.
 """
@@ -14,20 +17,15 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ArtifactError
-from pipeline.npy_files import MAX_ARRAY_BYTES, parse_npy, read_regular_file, save_npy
-
-if TYPE_CHECKING:
-    from pipeline.descriptors import Descriptor
-    from pipeline.pca import Pca
-    from pipeline.surrogates.fit import FittedSurrogate
+from pipeline.npy_files import MAX_ARRAY_BYTES, parse_npy, read_regular_file
 
 Arrays = dict[str, NDArray[Any]]
 
@@ -43,6 +41,10 @@ class ArraySpec:
 
 ARTIFACT_KIND = "adaptune.surrogate"
 ARTIFACT_SCHEMA = "artifact.schema.json"
+ARTIFACT_SCHEMA_VERSION = "2.0"
+"""The artifact's own format version (the other formats follow ``schemas.SCHEMA_VERSION``);
+readers refuse another major version. 2.0: the selector's runtime settings left the manifest
+(params ``select``) and the novelty guard has its own block."""
 MANIFEST_HASH_KEY = "manifest_sha256"
 
 
@@ -54,92 +56,8 @@ def canonical_manifest_hash(manifest: Mapping[str, Any]) -> str:
     ).hexdigest()
 
 
-@dataclass
-class ArtifactInfo:
-    """What the manifest says besides the arrays."""
-
-    algorithm: str
-    space: list[dict[str, Any]]
-    descriptor: Descriptor
-    selection: Mapping[str, Any]
-    inputs: Mapping[str, str] = field(default_factory=dict)
-
-
-def write_artifact(
-    out: str | Path,
-    fitted: FittedSurrogate,
-    pca: Pca,
-    info: ArtifactInfo,
-    repo: str | Path | None = None,
-) -> dict[str, Any]:
-    """Write ``out``/ (manifest.json + .npy arrays) atomically; returns the manifest.
-
-    The manifest is validated against schemas/artifact.schema.json before the rename.
-    """
-    from pipeline.io_utils import atomic_dir
-    from pipeline.provenance import provenance
-    from schemas import SCHEMA_VERSION
-
-    arrays = {
-        "env.npy": fitted.env,
-        "env_frames.npy": fitted.env_frames,
-        "candidates.npy": fitted.candidates_u,
-        "pca_mean.npy": pca.mean,
-        "pca_components.npy": pca.components,
-        "pca_scale.npy": pca.scale,
-        **fitted.surrogate.arrays(),
-    }
-    with atomic_dir(out) as tmp:
-        files = {name: save_npy(tmp / name, arr) for name, arr in arrays.items()}
-        manifest = {
-            "schema_version": SCHEMA_VERSION,
-            "kind": ARTIFACT_KIND,
-            "algorithm": info.algorithm,
-            "parameter_space": info.space,
-            "descriptor": info.descriptor.to_json(),
-            "pca": pca.to_json(),
-            "model": fitted.surrogate.to_json(),
-            "scaling": {
-                "environment": {
-                    "w_e": fitted.settings.w_e,
-                    "e_scale": fitted.e_scale,
-                    "formula": "E_s = w_e * E / e_scale",
-                },
-                "parameters": {
-                    "w_x": fitted.settings.w_x,
-                    "x_scale": fitted.x_scale,
-                    "formula": "X_s = x_scale * to_unit(x), x_scale = w_x*sqrt(12)",
-                },
-                "target": fitted.settings.target,
-            },
-            "selection": {**info.selection, "novelty_distance": fitted.novelty_distance},
-            "training": {**fitted.summary, "env_sequences": fitted.env_sequences},
-            "cross_validation": fitted.cv,
-            "files": files,
-            "provenance": provenance(repo, info.inputs),
-        }
-        validate_manifest(manifest)
-        manifest[MANIFEST_HASH_KEY] = canonical_manifest_hash(manifest)
-        (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2), encoding="utf-8")
-    return manifest
-
-
-def validate_manifest(manifest: dict[str, Any]) -> None:
-    """ArtifactError unless ``manifest`` follows schemas/artifact.schema.json."""
-    import jsonschema
-
-    from schemas import read_text
-
-    try:
-        jsonschema.validate(manifest, json.loads(read_text(ARTIFACT_SCHEMA)))
-    except jsonschema.ValidationError as exc:
-        path = "/".join(str(p) for p in exc.absolute_path) or "(root)"
-        raise ArtifactError(f"manifest.json: {path}: {exc.message}") from None
-
-
 # ---------------------------------------------------------------------------------- reading
 
-SCHEMA_VERSION = "1.0"  # = schemas.SCHEMA_VERSION, repeated: the runtime does not import schemas
 COMMON_FILES: dict[str, ArraySpec] = {
     "env.npy": ArraySpec(2),
     "env_frames.npy": ArraySpec(1, "i"),
@@ -150,9 +68,6 @@ COMMON_FILES: dict[str, ArraySpec] = {
 }
 """The arrays of every artifact, whatever its surrogate (which adds its ``files``)."""
 MAX_MANIFEST_BYTES = 64 << 20
-MAX_REFINE_ITERS = 64
-MAX_WINDOW = 60
-"""The most scans a selection may average over (selection.window)."""
 
 
 def read_manifest(path: Path) -> dict[str, Any]:
@@ -171,9 +86,10 @@ def read_manifest(path: Path) -> dict[str, Any]:
     if manifest.get(MANIFEST_HASH_KEY) != canonical_manifest_hash(manifest):
         raise ArtifactError(f"{mpath}: manifest checksum mismatch (the manifest was altered)")
     major = str(manifest.get("schema_version", "")).split(".")[0]
-    if major != SCHEMA_VERSION.split(".")[0]:
+    if major != ARTIFACT_SCHEMA_VERSION.split(".")[0]:
         raise ArtifactError(f"{path}: artifact schema version {manifest.get('schema_version')!r}, "
-                            f"this adaptune reads {SCHEMA_VERSION}")
+                            f"this adaptune reads {ARTIFACT_SCHEMA_VERSION} (refit the model: "
+                            "the surrogate stage)")
     return manifest
 
 
@@ -221,14 +137,6 @@ def _number(value: Any, what: str, low: float | None = None, strict: bool = Fals
     return float(value)
 
 
-def _integer(value: Any, what: str, low: int, high: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < low or (
-            high is not None and value > high):
-        bounds = f"in [{low}, {high}]" if high is not None else f">= {low}"
-        raise ValueError(f"{what} must be an integer {bounds}, got {value!r}")
-    return value
-
-
 def validate_values(manifest: Mapping[str, Any]) -> None:
     """The manifest's numbers and names make sense (its checksum only says they were not
     altered): the parameter space, the scalings, the selection settings, the fallback.
@@ -264,41 +172,32 @@ def validate_values(manifest: Mapping[str, Any]) -> None:
     model = manifest.get("model") or {}
     if model.get("target") not in ("log", "linear"):
         raise ValueError(f"model.target must be 'log' or 'linear', got {model.get('target')!r}")
-    _validate_selection(manifest.get("selection"), space)
+    _validate_novelty(manifest.get("novelty"), space)
 
 
-def _validate_selection(sel: Any, space: list[dict[str, Any]]) -> None:
-    if not isinstance(sel, dict):
-        raise ValueError("selection must be an object")
-    _number(sel.get("period_s"), "selection.period_s", 0.0, strict=True)
-    _number(sel.get("hysteresis"), "selection.hysteresis", 0.0)
-    _integer(sel.get("min_scan_points"), "selection.min_scan_points", 0)
-    _integer(sel.get("subset_rows"), "selection.subset_rows", 1)
-    _integer(sel.get("refine_iters"), "selection.refine_iters", 0, MAX_REFINE_ITERS)
-    if sel.get("novelty_distance") is not None:
-        _number(sel["novelty_distance"], "selection.novelty_distance", 0.0)
-    if sel.get("window") is not None:
-        _integer(sel["window"], "selection.window", 1, MAX_WINDOW)
-    if sel.get("anchor_margin") is not None:
-        _number(sel["anchor_margin"], "selection.anchor_margin", 0.0)
-    if "risk" in sel:  # absent: 0.0 (artifacts from before the setting)
-        _number(sel["risk"], "selection.risk", 0.0)
-    chosen = sel.get("novelty_fallback_params")
-    record = sel.get("novelty_fallback")
-    if isinstance(record, dict) and record.get("chosen") == "per_scan" and chosen is None:
-        raise ValueError("selection.novelty_fallback 'per_scan' needs novelty_fallback_params "
+def _validate_novelty(novelty: Any, space: list[dict[str, Any]]) -> None:
+    if not isinstance(novelty, dict):
+        raise ValueError("novelty must be an object")
+    if novelty.get("distance") is not None:
+        _number(novelty["distance"], "novelty.distance", 0.0)
+    chosen = novelty.get("fallback_params")
+    record = novelty.get("fallback")
+    if not isinstance(record, dict):
+        raise ValueError(f"novelty.fallback must be an object, got {record!r}")
+    if record.get("chosen") == "per_scan" and chosen is None:
+        raise ValueError("novelty.fallback 'per_scan' needs novelty.fallback_params "
                          "(the fixed parameters it weighs against the defaults)")
     if chosen is None:
         return
     specs = {s["name"]: s for s in space}
     if not isinstance(chosen, dict) or set(chosen) != set(specs):
         got = sorted(chosen) if isinstance(chosen, dict) else chosen
-        raise ValueError(f"selection.novelty_fallback_params must name the parameters "
+        raise ValueError(f"novelty.fallback_params must name the parameters "
                          f"{sorted(specs)}, got {got}")
     for name, value in chosen.items():
-        v = _number(value, f"selection.novelty_fallback_params.{name}")
+        v = _number(value, f"novelty.fallback_params.{name}")
         if not specs[name]["low"] <= v <= specs[name]["high"]:
-            raise ValueError(f"selection.novelty_fallback_params.{name} = {v:g} is outside "
+            raise ValueError(f"novelty.fallback_params.{name} = {v:g} is outside "
                              f"[{specs[name]['low']:g}, {specs[name]['high']:g}]")
 
 

@@ -1,19 +1,26 @@
-"""Typed, validated params.yaml sections.
+"""Typed, validated params.yaml sections under one root.
 
-Each stage has one model (a ``Section`` subclass) next to the code that uses it. ``load_section``
-reads params.yaml and validates; errors name the value and the rule it breaks, e.g.
-``trials.iterations must be >= 1, got 0``.
+Each stage has one model (a ``Section`` subclass) next to the code that uses it; ``SECTIONS`` is
+the one map from a section's name to its model. Loading a params file (``load_params``,
+``load_section``) refuses unknown sections and validates every section it holds, so a typo
+anywhere (``surogate:``, ``trials.iteratons``) is one line naming it, whichever stage reads the
+file; errors name the value and the rule it breaks, e.g. ``trials.iterations must be >= 1,
+got 0``. The models are imported by name when a file is loaded (``importlib``), not at import:
+this module stays at the bottom layer, and a stage's dvc.yaml deps stay the code it runs.
 """
 
 from __future__ import annotations
 
+import importlib
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from pipeline.errors import ConfigError
+from pipeline.selection import SelectionSettings
 
 S = TypeVar("S", bound="Section")
 
@@ -38,13 +45,64 @@ class BaseSection(Section):
 
 FROM_BASE: dict[str, tuple[str, ...]] = {
     "trials": ("length_m",),
-    "rte": ("length_m",),
     "evaluate": ("length_m",),
     "generalize": ("length_m",),
 }
 """Keys that a section takes from ``base``: set once there (dvc.yaml lists ``base.length_m`` as
 a param of these stages, so ``dvc exp run -S base.length_m=100`` re-runs them); a section that
 sets one itself is refused, so that no copy can disagree."""
+SHARED: dict[str, tuple[str, ...]] = {
+    "evaluate": ("devkit",),
+}
+"""Whole sections that a section takes as a key of its own (``evaluate.devkit`` is the
+``devkit`` section, which the ``rte`` stage reads too): set once, refused when copied."""
+
+
+class SelectSection(Section):
+    """params.yaml ``select``: the selector's runtime settings. Their fields, defaults and
+    bounds are ``pipeline.selection.SelectionSettings`` (the runtime's own, pydantic-free
+    definition); this model checks a mapping against it."""
+
+    model_config = ConfigDict(extra="allow", frozen=True)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _settings(cls, data: Any) -> Any:
+        if not isinstance(data, Mapping):
+            raise ValueError(f"select must be a mapping of settings, got {data!r}")
+        SelectionSettings.from_mapping(data)
+        return data
+
+    def settings(self) -> SelectionSettings:
+        """The checked runtime settings."""
+        return SelectionSettings.from_mapping(self.model_dump())
+
+
+SECTIONS: dict[str, str] = {
+    "base": "pipeline.config:BaseSection",
+    "simulate": "pipeline.sim.dataset:SimulateSection",
+    "ingest": "pipeline.sources.dataset:IngestSection",
+    "simulate_kitti": "pipeline.sim.kitti_dataset:SimulateKittiSection",
+    "descriptors": "pipeline.descriptors.dataset:DescriptorsSection",
+    "trials": "pipeline.tuning.smbo:TrialsSection",
+    "fixed": "pipeline.tuning.smbo:FixedSection",
+    "devkit": "pipeline.metrics.section:DevkitSection",
+    "surrogate": "pipeline.surrogates.section:SurrogateSection",
+    "select": "pipeline.config:SelectSection",
+    "evaluate": "pipeline.evaluate.section:EvaluateSection",
+    "generalize": "pipeline.generalization.suite:GeneralizeSection",
+}
+"""Every params.yaml section: name -> ``module:Model``, in the order of params.yaml."""
+
+
+def section_model(name: str) -> type[Section]:
+    """The model of section ``name``; ConfigError naming an unknown section and the known."""
+    ref = SECTIONS.get(name)
+    if ref is None:
+        raise ConfigError(f"unknown params section {name!r} (known: {', '.join(SECTIONS)})")
+    module, attr = ref.split(":")
+    model: type[Section] = getattr(importlib.import_module(module), attr)
+    return model
 
 
 def format_validation_error(section: str, exc: ValidationError) -> str:
@@ -56,7 +114,10 @@ def format_validation_error(section: str, exc: ValidationError) -> str:
         if err["type"] == "extra_forbidden":
             msg = "unknown parameter"
         got = err.get("input")
-        lines.append(f"{loc}: {msg}, got {got!r}" if "got" not in msg else f"{loc}: {msg}")
+        if msg.startswith(f"{loc}."):  # the message names its own field (select's settings)
+            lines.append(msg)
+        else:
+            lines.append(f"{loc}: {msg}, got {got!r}" if "got" not in msg else f"{loc}: {msg}")
     return "; ".join(lines)
 
 
@@ -91,27 +152,52 @@ def read_params(path: str | Path | None) -> dict[str, Any]:
 
 
 def load_section(path: str | Path | None, section: str, model: type[S]) -> S:
-    """Read ``section`` of the params file at ``path`` and validate it as ``model``.
+    """Section ``section`` of the params file at ``path``, validated as ``model``, after the
+    whole file is checked (``check_params``: unknown sections and keys, every section's rules).
 
     The keys ``FROM_BASE`` names for the section come from the validated ``base`` section;
     ``path`` None gives the section's defaults.
     """
-    return validate_section(model, section, section_data(read_params(path), section))
+    params = read_params(path)
+    check_params(params, where=str(path) if path is not None else "params")
+    return validate_section(model, section, section_data(params, section))
+
+
+def load_params(path: str | Path | None) -> dict[str, Section]:
+    """Every section of the params file at ``path`` (the defaults for those it leaves out),
+    validated; ConfigError naming an unknown section or key, or a rule a value breaks."""
+    params = read_params(path)
+    check_params(params, where=str(path) if path is not None else "params")
+    return {name: validate_section(section_model(name), name, section_data(params, name))
+            for name in SECTIONS}
+
+
+def check_params(params: Mapping[str, Any], where: str = "params") -> None:
+    """ConfigError unless every section of ``params`` is known and valid (the root model:
+    one line naming the first unknown section, or the section's own error)."""
+    unknown = [name for name in params if name not in SECTIONS]
+    if unknown:
+        raise ConfigError(f"{where}: unknown params section {unknown[0]!r} (known: "
+                          f"{', '.join(SECTIONS)})")
+    for name in params:
+        validate_section(section_model(name), name, section_data(dict(params), name))
 
 
 def section_data(params: dict[str, Any], section: str) -> Any:
-    """The raw data of ``section`` with the keys it takes from ``base`` filled in.
+    """The raw data of ``section`` with the keys it takes from ``base`` and the sections it
+    shares (``FROM_BASE``, ``SHARED``) filled in.
 
     ConfigError when the section sets such a key itself.
     """
     data = params.get(section)
-    keys = FROM_BASE.get(section, ())
-    if not keys or (data is not None and not isinstance(data, dict)):
+    keys, shared = FROM_BASE.get(section, ()), SHARED.get(section, ())
+    if not (keys or shared) or (data is not None and not isinstance(data, dict)):
         return data
     data = dict(data or {})
-    for key in keys:
+    for key, home in [*((k, f"base.{k}") for k in keys), *((k, k) for k in shared)]:
         if key in data:
-            raise ConfigError(f"{section}.{key}: set once in base.{key}, not per section, "
+            raise ConfigError(f"{section}.{key}: set once in {home}, not per section, "
                               f"got {data[key]!r}")
-    base = validate_section(BaseSection, "base", params.get("base"))
-    return {**data, **{key: getattr(base, key) for key in keys}}
+    base = validate_section(BaseSection, "base", params.get("base")) if keys else None
+    return {**data, **{key: getattr(base, key) for key in keys},
+            **{name: params.get(name) or {} for name in shared}}

@@ -80,10 +80,8 @@ def export_ground_truth(sequence: str | Path, fmt: str, out: str | Path, *,
     _check_choices(fmt, "identity", frame)
     refuse_input_as_output(out, [sequence, calib])
     with SequenceReader(sequence) as reader:
-        gt = reader.ground_truth()
+        gt = reader.require_ground_truth("to export")
         stamps = np.asarray(reader.stamps_ns, dtype=np.int64)
-    if gt is None:
-        raise InputError(f"{sequence}: no ground truth to export")
     if frame == "kitti-camera":
         gt = lidar_to_camera(gt, calibration(Path(sequence), calib))
     _write(out, fmt, stamps, gt)
@@ -131,10 +129,8 @@ def _first_ground_truth(sequence: Path, frames: NDArray[np.int32],
     from pipeline.sequence import SequenceReader
 
     with SequenceReader(sequence) as reader:
-        gt = reader.ground_truth()
+        gt = reader.require_ground_truth("to anchor at; use --anchor identity")
         seq_stamps = np.asarray(reader.stamps_ns, dtype=np.int64)
-    if gt is None:
-        raise InputError(f"{sequence}: no ground truth to anchor at; use --anchor identity")
     k = int(frames[0])
     if not 0 <= k < len(gt) or seq_stamps[k] != stamps_ns[0]:
         raise InputError(f"{sequence}: the trajectory's first frame {k} (stamp {stamps_ns[0]} ns) "

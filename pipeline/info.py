@@ -11,7 +11,7 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.geometry import path_distances
 from pipeline.ros2_cdr import decode_pointcloud2
-from pipeline.sequence import POINTS_TOPIC, SequenceReader
+from pipeline.sequence import POINTS_TOPIC, SequenceReader, mcap_errors
 
 
 @dataclass(frozen=True)
@@ -70,17 +70,10 @@ def _points_per_scan(path: Path, frames: int) -> np.ndarray:
     from mcap.reader import make_reader
 
     counts: list[int] = []
-    with open(path, "rb") as fh:
-        try:
-            for _, _, msg in make_reader(fh).iter_messages(topics=[POINTS_TOPIC]):
-                m = decode_pointcloud2(msg.data, f"{path} frame {len(counts)}")
-                counts.append(m.width * m.height)
-        except InputError:
-            raise
-        except Exception as exc:
-            raise InputError(
-                f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})"
-            ) from None
+    with open(path, "rb") as fh, mcap_errors(path):
+        for _, _, msg in make_reader(fh).iter_messages(topics=[POINTS_TOPIC]):
+            m = decode_pointcloud2(msg.data, f"{path} frame {len(counts)}")
+            counts.append(m.width * m.height)
     if len(counts) != frames or not counts:
         raise InputError(f"{path}: {len(counts)} point clouds for {frames} frames")
     return np.array(counts, np.int64)

@@ -53,14 +53,13 @@ def run_live(
     ``adapter_options``: the adapter's untuned settings, as in the trials (params
     ``trials.adapter_options``). ConfigError for an adapter that cannot stream (``command``).
     """
-    from pipeline.odometry.base import ParameterSpace, StreamingAdapter, with_space
-    from pipeline.odometry.registry import get_adapter
+    from pipeline.odometry.base import StreamingAdapter
+    from pipeline.odometry.registry import build_adapter
     from pipeline.ros2_cdr import PARAMETER_EVENT, encode
     from pipeline.sequence import WORLD_FRAME, SequenceReader, SequenceWriter
 
     selector = selector or Selector(model)
-    adapter = with_space(get_adapter(model.algorithm, **dict(adapter_options or {})),
-                         ParameterSpace.from_json(model.space))
+    adapter = build_adapter(model.algorithm, adapter_options, model.space)
     if not isinstance(adapter, StreamingAdapter):
         raise ConfigError(f"{model.algorithm}: adaptune live needs an adapter that streams "
                           "scan by scan (start); this one runs whole sequences (use adaptive)")

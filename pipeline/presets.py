@@ -24,7 +24,7 @@ from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
-from pipeline.config import Section, section_data, validate_section
+from pipeline.config import Section, check_params
 from pipeline.errors import ConfigError
 
 KITTI_TRAIN = ("00", "01", "02", "03", "04", "05")
@@ -110,11 +110,10 @@ def kitti_protocol(protocol: KittiProtocol, params: Mapping[str, Any]) -> dict[s
     if protocol.time_limit_s is not None:
         data["trials.time_limit_s"] = protocol.time_limit_s
     if protocol.kitti_lengths_m is not None:
-        data["rte.kitti_lengths_m"] = protocol.kitti_lengths_m
-        data["evaluate.kitti_lengths_m"] = protocol.kitti_lengths_m
+        data["devkit.lengths_m"] = protocol.kitti_lengths_m
     if protocol.replicas is not None:
         data["evaluate.replicas"] = protocol.replicas
-    check(apply(params, data))
+    check_params(apply(params, data), "the preset's params")
     return data
 
 
@@ -155,33 +154,6 @@ def apply(params: Mapping[str, Any], values: Mapping[str, Any]) -> dict[str, Any
         section, key = dotted.split(".", 1)
         out.setdefault(section, {})[key] = value
     return out
-
-
-def check(params: Mapping[str, Any]) -> None:
-    """Validate every section of ``params`` that has a model; ConfigError names the value."""
-    for name, model in section_models().items():
-        if name in params:
-            validate_section(model, name, section_data(dict(params), name))
-
-
-def section_models() -> dict[str, type[Section]]:
-    """params.yaml section -> its model (the stages' sections)."""
-    from pipeline.config import BaseSection
-    from pipeline.database.store import RteSection
-    from pipeline.descriptors.dataset import DescriptorsSection
-    from pipeline.evaluate.section import EvaluateSection
-    from pipeline.generalization.suite import GeneralizeSection
-    from pipeline.sim.dataset import SimulateSection
-    from pipeline.sim.kitti_dataset import SimulateKittiSection
-    from pipeline.sources.dataset import IngestSection
-    from pipeline.surrogates.fit import SurrogateSection
-    from pipeline.tuning.smbo import FixedSection, TrialsSection
-
-    return {"base": BaseSection, "simulate": SimulateSection, "ingest": IngestSection,
-            "simulate_kitti": SimulateKittiSection, "descriptors": DescriptorsSection,
-            "trials": TrialsSection, "fixed": FixedSection, "rte": RteSection,
-            "surrogate": SurrogateSection, "evaluate": EvaluateSection,
-            "generalize": GeneralizeSection}
 
 
 def set_params(values: Mapping[str, Any]) -> list[str]:

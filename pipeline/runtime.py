@@ -5,19 +5,22 @@ importing this module pulls in none of sklearn, duckdb, hyperopt, open3d, dvc, p
 pydantic), so a robot can carry ``model/`` and this code alone (numba, when installed, speeds
 up the descriptor and the kNN search).
 
-Selection (x_t = argmin_x S(E_t, x), S = the artifact's surrogate), every ``period_s``:
+Selection (x_t = argmin_x S(E_t, x), S = the artifact's surrogate), every ``period_s``; the
+settings named below are the runtime's own (params ``select``: ``pipeline.selection``), not the
+artifact's, so changing one refits nothing:
 
 1. E_t = PCA(descriptor(scan)), scaled as the manifest says (``Model.environment``).
 2. A scan with fewer than ``min_scan_points`` points keeps the last parameters (the defaults
    before the first selection).
 3. Novelty guard (not in the paper): when E_t is farther from every training environment than
-   ``novelty_distance`` (a quantile, by default the largest, of the training frames' distances
-   to the nearest frame of another training sequence, computed when the model is fitted), the
+   the manifest's ``novelty.distance`` (a quantile, by default the largest, of the training
+   frames' distances to the nearest frame of another training sequence, computed when the
+   model is fitted), the
    surrogate would be extrapolating; the selector then falls back to the manifest's
    ``novelty_fallback_params`` (the joint study's fixed parameters, when the surrogate stage
    found them better than the defaults on every training sequence:
    ``pipeline.surrogates.novelty.choose_fallback``), else the adapter's defaults, until the
-   scans look familiar again. ``null`` as novelty_distance disables it. With the fallback
+   scans look familiar again. ``null`` as the distance disables it. With the fallback
    ``per_scan`` (``Model.per_scan_fallback``) the surrogate does not search, but weighs those
    two only: each unfamiliar scan gets the defaults or the fixed parameters, whichever has the
    lower S (mean over the last W unfamiliar scans, the hysteresis as in step 7, ties to the
@@ -66,6 +69,7 @@ from pipeline.artifact import (
 )
 from pipeline.descriptors import Descriptor, descriptor_from_json
 from pipeline.errors import ArtifactError, ConfigError
+from pipeline.selection import SelectionSettings
 from pipeline.surrogates.base import Query, Surrogate, environment_d2
 from pipeline.unit_cube import UnitCube
 
@@ -105,8 +109,15 @@ class Model:
         return str(self.manifest["model"]["target"])
 
     @property
-    def selection(self) -> dict[str, Any]:
-        return dict(self.manifest["selection"])
+    def novelty_distance(self) -> float | None:
+        """The novelty guard's distance in E_s (None: off; step 3)."""
+        d = self.manifest["novelty"].get("distance")
+        return None if d is None else float(d)
+
+    @property
+    def novelty_fallback(self) -> dict[str, Any]:
+        """How the fallback was chosen: {"mode": ..., "chosen": ...} (surrogate stage)."""
+        return dict(self.manifest["novelty"]["fallback"])
 
     @property
     def e_factor(self) -> float:
@@ -124,13 +135,12 @@ class Model:
     def per_scan_fallback(self) -> bool:
         """True when every unfamiliar scan chooses between the defaults and the fixed
         parameters (surrogate.novelty_fallback ``per_scan``), not one fallback for all."""
-        record = self.manifest["selection"].get("novelty_fallback")
-        return isinstance(record, dict) and record.get("chosen") == "per_scan"
+        return self.novelty_fallback.get("chosen") == "per_scan"
 
     def fallback(self) -> Params:
         """The parameters for unfamiliar scans (step 3): the manifest's
-        ``novelty_fallback_params``, else the adapter's defaults."""
-        chosen = self.manifest["selection"].get("novelty_fallback_params")
+        ``novelty.fallback_params``, else the adapter's defaults."""
+        chosen = self.manifest["novelty"].get("fallback_params")
         return {n: float(chosen[n]) for n in self.names} if chosen else self.defaults()
 
     def environment(self, points_lidar: NDArray[np.floating]) -> NDArray[np.float64]:
@@ -200,46 +210,32 @@ TIE_TOL = 1e-9
 
 
 class Selector:
-    """Online parameter selection from scans (module docstring). Settings default to the
-    manifest's ``selection`` block; ``window``, ``anchor_margin`` and ``risk`` default to the
-    paper's selection (one scan, no anchor, the plain mean) for artifacts that do not name
-    them. ConfigError when ``risk`` > 0 for a surrogate that cannot weigh it."""
+    """Online parameter selection from scans with ``model`` (module docstring) and the runtime
+    ``settings`` (params ``select``: ``pipeline.selection.SelectionSettings``; the defaults
+    when not given). ConfigError when ``settings.risk`` > 0 for a surrogate that cannot weigh
+    it. ``n_starts``: the candidates the pattern search starts from; ``grouped`` False forces
+    the certified kd-tree search (the reference of the grouped one)."""
 
-    def __init__(
-        self,
-        model: Model,
-        period_s: float | None = None,
-        hysteresis: float | None = None,
-        min_scan_points: int | None = None,
-        subset_rows: int | None = None,
-        refine_iters: int | None = None,
-        n_starts: int = 3,
-        grouped: bool = True,
-        window: int | None = None,
-        anchor_margin: float | None = None,
-        risk: float | None = None,
-    ) -> None:
+    def __init__(self, model: Model, settings: SelectionSettings | None = None, *,
+                 n_starts: int = 3, grouped: bool = True) -> None:
         from pipeline.surrogates import check_risk
 
-        sel = model.selection
+        self.settings = settings = settings or SelectionSettings()
         self.model = model
-        self.period_s = float(sel["period_s"] if period_s is None else period_s)
-        self.hysteresis = float(sel["hysteresis"] if hysteresis is None else hysteresis)
-        self.min_scan_points = int(
-            sel["min_scan_points"] if min_scan_points is None else min_scan_points
-        )
-        self.subset_rows = int(sel["subset_rows"] if subset_rows is None else subset_rows)
-        self.refine_iters = int(sel["refine_iters"] if refine_iters is None else refine_iters)
-        self.window = int(sel.get("window", 1) if window is None else window)
-        margin = sel.get("anchor_margin") if anchor_margin is None else anchor_margin
-        self.anchor_margin = None if margin is None else float(margin)
-        self.risk = float(sel.get("risk", 0.0) if risk is None else risk)
+        self.period_s = settings.period_s
+        self.hysteresis = settings.hysteresis
+        self.min_scan_points = settings.min_scan_points
+        self.subset_rows = settings.subset_rows
+        self.refine_iters = settings.refine_iters
+        self.window = settings.window
+        self.anchor_margin = settings.anchor_margin
+        self.risk = settings.risk
         try:
             check_risk(model.surrogate.type, self.risk)
         except ValueError as exc:
-            raise ConfigError(f"surrogate.{exc}") from None
-        novelty = sel.get("novelty_distance")
-        self.novelty_distance = math.inf if novelty is None else float(novelty)
+            raise ConfigError(f"select.{exc}") from None
+        novelty = model.novelty_distance
+        self.novelty_distance = math.inf if novelty is None else novelty
         self.n_starts = n_starts
         self.candidates = np.unique(model.snap(model.candidates_u), axis=0)
         self.search = model.surrogate.search(

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.errors import InputError, SchemaError
+from pipeline.errors import AdaptuneError, InputError, SchemaError
 from pipeline.geometry import MAX_POSITION_M, refuse_non_rotations
 from pipeline.io_utils import atomic_path, input_file
 from pipeline.ros2_cdr import (
@@ -299,6 +299,20 @@ class SequenceWriter:
             log.warning("%s: dropped %d non-finite points", self.info.name, self.dropped_points)
 
 
+@contextlib.contextmanager
+def mcap_errors(path: str | Path) -> Iterator[None]:
+    """The block's failures while reading the MCAP at ``path`` as one InputError line: the
+    mcap reader raises many types for a damaged or truncated file (adaptune's own errors pass
+    through as they are)."""
+    try:
+        yield
+    except AdaptuneError:
+        raise
+    except Exception as exc:
+        raise InputError(
+            f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})") from exc
+
+
 class SequenceReader:
     """Random access to the frames of a sequence MCAP. Use as a context manager or ``close()``.
 
@@ -312,17 +326,13 @@ class SequenceReader:
         input_file(self.path, "sequence file")
         self._fh = open(self.path, "rb")  # noqa: SIM115 - closed by close()
         try:
-            self._reader = make_reader(self._fh, validate_crcs=True)
-            summary = self._reader.get_summary()
-            meta = {m.name: m.metadata for m in self._reader.iter_metadata()}
+            with mcap_errors(self.path):
+                self._reader = make_reader(self._fh, validate_crcs=True)
+                summary = self._reader.get_summary()
+                meta = {m.name: m.metadata for m in self._reader.iter_metadata()}
         except InputError:
             self.close()
             raise
-        except Exception as exc:  # mcap raises many types for a damaged file
-            self.close()
-            raise InputError(
-                f"{self.path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})"
-            ) from exc
         if summary is None:
             self.close()
             raise InputError(f"{self.path}: corrupt or truncated MCAP (no summary section)")
@@ -370,16 +380,10 @@ class SequenceReader:
         self._fh.close()
 
     def _messages(self, topics: list[str], start: int | None = None, end: int | None = None):
-        try:
+        with mcap_errors(self.path):
             yield from self._reader.iter_messages(
                 topics=topics, starting_at=start, ending_before=end
             )
-        except InputError:
-            raise
-        except Exception as exc:
-            raise InputError(
-                f"{self.path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})"
-            ) from exc
 
     def _scan(self, frame: int, stamp_ns: int, data: bytes,
               gt: NDArray[np.float64] | None) -> Scan:
@@ -410,6 +414,14 @@ class SequenceReader:
                     )
                 self._gt = np.stack([poses[int(s)] for s in self.stamps_ns])
         return self._gt  # type: ignore[return-value]
+
+    def require_ground_truth(self, purpose: str) -> NDArray[np.float64]:
+        """(N, 4, 4) T_world_lidar of every frame (``ground_truth``); InputError naming the file
+        and ``purpose`` (what it is needed for: "to export") when the sequence has none."""
+        gt = self.ground_truth()
+        if gt is None:
+            raise InputError(f"{self.path}: no ground truth {purpose}")
+        return gt
 
     def __getitem__(self, frame: int) -> Scan:
         n = len(self)
@@ -445,3 +457,10 @@ class SequenceReader:
         """(stamp_ns, (4, 4) pose) of a PoseStamped channel such as ``/odometry/pose``."""
         for _, _, msg in self._messages([topic]):
             yield decode_pose_stamped(msg.data, f"{self.path} {topic}")
+
+
+def read_ground_truth(path: str | Path, purpose: str) -> NDArray[np.float64]:
+    """(N, 4, 4) ground-truth T_world_lidar of the sequence MCAP at ``path``
+    (``SequenceReader.require_ground_truth``: InputError naming ``purpose`` when it has none)."""
+    with SequenceReader(path) as reader:
+        return reader.require_ground_truth(purpose)

@@ -2,7 +2,8 @@
 
 The model picks the parameters of every period from the scans, the model's odometry runs with
 that schedule; ``pipeline.adaptive`` documents the outputs. Untuned adapter settings come from
-the params section ``trials`` (the runs must match the trials).
+the params section ``trials`` (the runs must match the trials), the selector's runtime settings
+from ``select``.
 """
 
 from __future__ import annotations
@@ -26,15 +27,16 @@ def adaptive(params_path: Path | None, model_dir: Path, sequence_dir: Path, spli
              out_dir: Path) -> None:
     """Schedule every sequence of the evaluated splits with the model and run its odometry."""
     from pipeline.adaptive import run_adaptive
-    from pipeline.config import load_section
+    from pipeline.config import SelectSection, load_section
     from pipeline.evaluate.section import EvaluateSection
     from pipeline.sequence_index import read_index
     from pipeline.tuning.smbo import TrialsSection
 
     trials = load_section(params_path, "trials", TrialsSection)
     section = load_section(params_path, "evaluate", EvaluateSection)
+    selection = load_section(params_path, "select", SelectSection).settings()
     paths = list(read_index(sequence_dir).split_paths(list(splits) or section.splits))
     for run in run_adaptive(model_dir, paths, out_dir, trials.adapter_options,
-                            workers=section.workers):
+                            workers=section.workers, selection=selection):
         click.echo(f"{run.sequence}: {run.frames} frames, {run.selections} selections, "
                    f"{run.changes} parameter changes, {run.wall_time_s:.1f} s", err=True)

@@ -26,16 +26,17 @@ from stages.common import dir_option, file_option, params_option
 def generalize(params_path: Path, model_dir: Path, fixed_dir: Path, runs_dir: Path,
                metrics_path: Path, plots_path: Path, figure_path: Path) -> None:
     """Score baseline, fixed and adaptive on a suite of worlds the model never saw."""
-    from pipeline.config import load_section
+    from pipeline.config import SelectSection, load_section
     from pipeline.generalization.report import GeneralizationPaths, run_generalization
     from pipeline.generalization.suite import GeneralizeSection
     from pipeline.tuning.smbo import TrialsSection
 
     section = load_section(params_path, "generalize", GeneralizeSection)
     trials = load_section(params_path, "trials", TrialsSection)
+    selection = load_section(params_path, "select", SelectSection).settings()
     paths = GeneralizationPaths(model_dir, fixed_dir, runs_dir, metrics_path, plots_path,
                                 figure_path)
-    m = run_generalization(paths, section, trials.adapter_options)
+    m = run_generalization(paths, section, trials.adapter_options, selection)
     best = m["summary"]["adaptive_vs_best"]
     lo, hi = best["median_interval"]
     click.echo(f"{m['algorithm']} on the {m['suite']} suite ({m['worlds']} worlds): "

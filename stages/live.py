@@ -18,17 +18,20 @@ from stages.common import model_run_options, params_option, report_selection
 @model_run_options("Output MCAP (scans, ground truth, estimated poses, chosen parameters).")
 def live(params_path: Path | None, model_dir: Path, sequence: Path, out: Path,
          algorithm: str | None, as_json: bool) -> None:
-    """Stream a sequence through odometry with online parameter selection."""
-    from pipeline.config import load_section
+    """Stream a sequence through odometry with online parameter selection (the selector's
+    settings: params ``select``)."""
+    from pipeline.config import SelectSection, load_section
     from pipeline.io_utils import refuse_input_as_output
     from pipeline.live import run_live
-    from pipeline.runtime import load_model
+    from pipeline.runtime import Selector, load_model
     from pipeline.tuning.smbo import TrialsSection
 
     refuse_input_as_output(out, [sequence, params_path, *sorted(model_dir.glob("*"))])
     # the adapter's untuned settings as in the trials (without a params file, its defaults)
     options = load_section(params_path, "trials", TrialsSection).adapter_options
+    selection = load_section(params_path, "select", SelectSection).settings()
     model = load_model(model_dir, expected_algorithm=algorithm)
+    selector = Selector(model, selection)
     report_selection({"algorithm": model.algorithm,
-                      **run_live(model, sequence, out, adapter_options=options),
+                      **run_live(model, sequence, out, selector, adapter_options=options),
                       "out": str(out)}, as_json)

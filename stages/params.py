@@ -25,7 +25,7 @@ def params(algorithm: str, options: tuple[str, ...], params_path: Path | None,
            as_json: bool) -> None:
     """List the parameters ALGORITHM tunes: range, default, kind, scale, unit."""
     from pipeline.config import load_section, validate_section
-    from pipeline.tuning.job import resolve_adapter
+    from pipeline.odometry.registry import build_adapter
     from pipeline.tuning.smbo import TrialsSection, study_adapter
     from stages.run import parse_options
 
@@ -39,9 +39,9 @@ def params(algorithm: str, options: tuple[str, ...], params_path: Path | None,
             adapter = study_adapter(settings)
             source = f"{params_path} trials.space" if trials.space else source
         else:
-            adapter = resolve_adapter(algorithm, given)
+            adapter = build_adapter(algorithm, given)
     else:
-        adapter = resolve_adapter(algorithm, given)
+        adapter = build_adapter(algorithm, given)
     specs = adapter.space.to_json()
     if as_json:
         click.echo(json.dumps({"algorithm": adapter.name, "source": source,

@@ -21,13 +21,16 @@ def rte(params_path: Path | None, sequence_dir: Path, trials_dir: Path | None,
         fixed_dir: Path | None, descriptors: Path | None, environment: Path | None,
         db: Path) -> None:
     """Build the results database: sequences, trials, rte_frames, rte_kitti, descriptors."""
-    from pipeline.config import load_section
-    from pipeline.database.store import RteSection, build_database
+    from pipeline.config import BaseSection, load_section
+    from pipeline.database.store import build_database
+    from pipeline.metrics.section import DevkitSection
 
-    settings = load_section(params_path, "rte", RteSection)
+    length_m = load_section(params_path, "base", BaseSection).length_m
+    devkit = load_section(params_path, "devkit", DevkitSection)
     studies = {name: path for name, path in (("trials", trials_dir), ("fixed", fixed_dir))
                if path is not None}
-    summary = build_database(db, sequence_dir, studies, settings, descriptors, environment)
+    summary = build_database(db, sequence_dir, studies, length_m, devkit, descriptors,
+                             environment)
     click.echo(f"{db}: {summary.sequences} sequences, {summary.trials} trials, "
                f"{summary.rte_frames} rte_frames rows, {summary.rte_kitti} rte_kitti rows",
                err=True)

@@ -7,24 +7,34 @@ from pathlib import Path
 
 import click
 
-from stages.common import model_run_options, report_selection
+from stages.common import model_run_options, params_option, report_selection
 
 
 @click.command()
+@params_option
 @model_run_options("The schedule Parquet (frame, stamp_ns, one column per parameter).")
-@click.option("--period-s", type=float, default=None, help="Override the model's period [s].")
+@click.option("--period-s", type=float, default=None,
+              help="Override select.period_s of the params [s].")
 def select(
-    model_dir: Path, sequence: Path, out: Path, algorithm: str | None, period_s: float | None,
-    as_json: bool,
+    params_path: Path | None, model_dir: Path, sequence: Path, out: Path, algorithm: str | None,
+    period_s: float | None, as_json: bool,
 ) -> None:
-    """Parameter schedule of a recorded sequence from a model artifact."""
+    """Parameter schedule of a recorded sequence from a model artifact (the selector's
+    settings: params ``select``)."""
+    from pipeline.config import SelectSection, load_section
+    from pipeline.errors import ConfigError
     from pipeline.io_utils import refuse_input_as_output
     from pipeline.runtime import Selector, load_model
     from pipeline.sequence import SequenceReader
 
-    refuse_input_as_output(out, [sequence, *sorted(model_dir.glob("*"))])
+    refuse_input_as_output(out, [sequence, params_path, *sorted(model_dir.glob("*"))])
+    try:
+        selection = load_section(params_path, "select", SelectSection).settings().replace(
+            period_s=period_s)
+    except ValueError as exc:  # --period-s out of range, named as its params key
+        raise ConfigError(str(exc)) from None
     model = load_model(model_dir, expected_algorithm=algorithm)
-    selector = Selector(model, period_s=period_s)
+    selector = Selector(model, selection)
     with SequenceReader(sequence) as reader:
         schedule = selector.schedule(reader)
     schedule.write(out)

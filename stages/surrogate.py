@@ -34,7 +34,8 @@ def surrogate(
     from pipeline.descriptors.dataset import DescriptorsSection
     from pipeline.io_utils import atomic_write_text
     from pipeline.odometry.registry import get_adapter
-    from pipeline.surrogates.fit import ModelInputs, SurrogateSection, build_model
+    from pipeline.surrogates.fit import ModelInputs, build_model
+    from pipeline.surrogates.section import SurrogateSection
     from pipeline.tuning.smbo import TrialsSection
     from pipeline.tuning.table import read_space
 

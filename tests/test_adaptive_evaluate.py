@@ -22,15 +22,14 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def test_every_section_of_the_repository_params_validates() -> None:
-    from pipeline.presets import section_models
+    from pipeline.config import SECTIONS, section_model
 
-    models = section_models()
     params = yaml.safe_load((REPO / "params.yaml").read_text())
-    assert set(params) == set(models)
-    for name, model in models.items():
-        load_section(REPO / "params.yaml", name, model)
+    assert set(params) == set(SECTIONS)
+    for name in SECTIONS:
+        load_section(REPO / "params.yaml", name, section_model(name))
     # one L for trials, rte, evaluate and generalize: base.length_m, no copy in their sections
-    assert not any("length_m" in params[s] for s in ("trials", "rte", "evaluate", "generalize"))
+    assert not any("length_m" in params[s] for s in ("trials", "evaluate", "generalize"))
 
 
 def _params(tmp_path: Path, **sections: dict) -> Path:
@@ -79,11 +78,11 @@ def test_fixed_section_is_validated(tmp_path: Path) -> None:
 ])
 def test_replica_settings_are_validated(tmp_path: Path, section: str, model: str,
                                         value: dict, rule: str) -> None:
-    from pipeline.presets import section_models
+    from pipeline.config import section_model
 
     with pytest.raises(ConfigError, match=rule):
-        load_section(_params(tmp_path, **{section: value}), section, section_models()[section])
-    assert model == section_models()[section].__name__
+        load_section(_params(tmp_path, **{section: value}), section, section_model(section))
+    assert model == section_model(section).__name__
 
 
 @pytest.fixture(scope="module")
@@ -182,7 +181,7 @@ def test_adaptive_and_evaluate_give_the_same_results_for_any_workers(
     """Sequences run in worker processes (evaluate.workers) give the outputs of one process:
     the same schedules and trajectories, the same figures in the same order."""
     import pyarrow.parquet as pq
-    from test_surrogate import build_model
+    from helpers.models import build_model
 
     from pipeline.adaptive import run_adaptive
     from pipeline.evaluate.runs import evaluate
@@ -231,6 +230,7 @@ def test_replicas_run_each_setting_with_its_perturbed_parameters(
     from pipeline.evaluate.runs import evaluate
     from pipeline.evaluate.section import EvaluateSection
     from pipeline.metrics.rte import mean_rte_pct
+    from pipeline.metrics.section import DevkitSection
     from pipeline.odometry import get_adapter, run_sequence
     from pipeline.odometry.base import Schedule
     from pipeline.report.metrics import metrics
@@ -246,7 +246,7 @@ def test_replicas_run_each_setting_with_its_perturbed_parameters(
     write_trajectory(adaptive / "trajectory.parquet", traj, {"setting": "adaptive"})
     (adaptive / "run.json").write_text(json.dumps({"algorithm": "ndt", "wall_time_s": 1.0}))
     fixed = {"resolution": 2.0, "keyframe_interval": 7.0}
-    settings = EvaluateSection(length_m=4.0, kitti_lengths_m=(4.0,), replicas=2,
+    settings = EvaluateSection(length_m=4.0, devkit=DevkitSection(lengths_m=(4.0,)), replicas=2,
                                replica_scale=0.01)
     ev = evaluate([path], "ndt", fixed, tmp_path / "adaptive", tmp_path / "ev", settings,
                   fixed_dir=_joint_table(tmp_path / "fixed"))

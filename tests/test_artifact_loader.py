@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from test_surrogate import build_model, write_tiny_sequence
+from helpers.models import build_model, write_tiny_sequence
 
 from pipeline.artifact import canonical_manifest_hash
 from pipeline.errors import ArtifactError
@@ -103,16 +103,13 @@ def set_path(manifest: dict[str, Any], dotted: str, value: Any) -> None:
 @pytest.mark.parametrize(("field", "value", "words"), [
     ("model.k", 0, ("model.k",)),
     ("model.k", 10**9, ("model.k",)),
-    ("selection.period_s", 0.0, ("period_s",)),
-    ("selection.hysteresis", -1.0, ("hysteresis",)),
     ("parameter_space.0.low", 50.0, ("resolution", "low")),
     ("scaling.parameters.x_scale", float("nan"), ("x_scale",)),
-    ("selection.novelty_fallback_params", {"no_such_param": 1.0}, ("no_such_param",)),
-    ("selection.novelty_distance", -2.0, ("novelty_distance",)),
-    ("selection.novelty_fallback", {"mode": "per_scan", "chosen": "per_scan"},
-     ("per_scan", "novelty_fallback_params")),
-    ("selection.risk", -0.5, ("selection.risk", ">= 0")),
-    ("selection.risk", None, ("selection.risk", "finite number")),
+    ("novelty.fallback_params", {"no_such_param": 1.0}, ("no_such_param",)),
+    ("novelty.distance", -2.0, ("novelty.distance",)),
+    ("novelty.fallback", {"mode": "per_scan", "chosen": "per_scan"},
+     ("per_scan", "fallback_params")),
+    ("novelty.distance", "far", ("novelty.distance", "finite number")),
 ])
 def test_bad_manifest_values_are_refused(good: Path, tmp_path: Path, field: str, value: Any,
                                          words: tuple[str, ...]) -> None:

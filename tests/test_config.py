@@ -7,7 +7,16 @@ from pathlib import Path
 import pytest
 from pydantic import Field, model_validator
 
-from pipeline.config import BaseSection, Section, load_section, read_params
+from pipeline.config import (
+    SECTIONS,
+    BaseSection,
+    Section,
+    load_params,
+    load_section,
+    read_params,
+    section_model,
+    validate_section,
+)
 from pipeline.errors import ConfigError
 
 REPO = Path(__file__).resolve().parents[1]
@@ -25,24 +34,53 @@ class RangeSection(Section):
         return self
 
 
-def test_rule_error_names_values(tmp_path: Path) -> None:
-    p = tmp_path / "params.yaml"
-    p.write_text("r:\n  min_range: 5.0\n  max_range: 2.0\n")
+def test_rule_error_names_values() -> None:
     with pytest.raises(
         ConfigError,
         match=r"max_range must be > min_range, got \(min_range=5.0, max_range=2.0\)",
     ):
-        load_section(p, "r", RangeSection)
+        validate_section(RangeSection, "r", {"min_range": 5.0, "max_range": 2.0})
 
 
-def test_unknown_key_and_type_error(tmp_path: Path) -> None:
-    p = tmp_path / "params.yaml"
-    p.write_text("r:\n  min_rnage: 5.0\n")
+def test_unknown_key_and_type_error() -> None:
     with pytest.raises(ConfigError, match=r"r.min_rnage: unknown parameter"):
-        load_section(p, "r", RangeSection)
-    p.write_text("r:\n  min_range: -1\n")
+        validate_section(RangeSection, "r", {"min_rnage": 5.0})
     with pytest.raises(ConfigError, match=r"r.min_range: .*greater than or equal to 0.*-1"):
-        load_section(p, "r", RangeSection)
+        validate_section(RangeSection, "r", {"min_range": -1})
+
+
+def test_the_root_refuses_unknown_sections_and_keys_whatever_is_read(tmp_path: Path) -> None:
+    """A misspelt section or key anywhere in the file is one line naming it, whichever section
+    a stage asks for (``surogate: {k: 5}`` used to load silently with k = 20)."""
+    p = tmp_path / "params.yaml"
+    p.write_text("surogate: {k: 5}\n")
+    with pytest.raises(ConfigError, match=r"unknown params section 'surogate' \(known: base, "):
+        load_section(p, "base", BaseSection)
+    p.write_text("base: {seed: 1}\ntrials: {iteratons: 5}\n")
+    with pytest.raises(ConfigError, match=r"^trials.iteratons: unknown parameter"):
+        load_section(p, "base", BaseSection)
+    with pytest.raises(ConfigError, match=r"^unknown params section 'nope'"):
+        section_model("nope")
+
+
+def test_every_section_has_a_model_and_the_repository_file_loads() -> None:
+    params = load_params(REPO / "params.yaml")
+    assert list(params) == list(SECTIONS) == list(read_params(REPO / "params.yaml"))
+    assert all(isinstance(v, Section) for v in params.values())
+
+
+@pytest.mark.parametrize(("text", "rule"), [
+    ("select: {window: 0}", r"^select.window must be an integer in \[1, 60\], got 0$"),
+    ("select: {period_s: 0}", r"^select.period_s must be a finite number > 0, got 0$"),
+    ("select: {period_s: .nan}", r"^select.period_s must be a finite number > 0, got nan$"),
+    ("select: {hysteresis: -1}", r"^select.hysteresis must be a finite number >= 0, got -1$"),
+    ("select: {widow: 3}", r"^select.widow: unknown setting"),
+])
+def test_select_settings_are_checked_on_load(tmp_path: Path, text: str, rule: str) -> None:
+    p = tmp_path / "params.yaml"
+    p.write_text(text + "\n")
+    with pytest.raises(ConfigError, match=rule):
+        load_section(p, "base", BaseSection)
 
 
 def test_missing_file_and_bad_yaml(tmp_path: Path) -> None:
@@ -58,21 +96,41 @@ def test_repository_params_file_has_base_section() -> None:
     assert isinstance(base.seed, int)
 
 
+@pytest.mark.parametrize(("lengths", "rule"), [
+    ("[-5]", r"^devkit\.lengths_m: lengths_m must all be > 0, got \[-5\.0\]"),
+    ("[10, 10]", r"^devkit\.lengths_m: lengths_m must be distinct, 10 is listed twice"),
+    ("[]", r"^devkit\.lengths_m: .*at least 1"),
+])
+def test_one_devkit_setting_refuses_lengths_that_give_wrong_numbers(
+        tmp_path: Path, lengths: str, rule: str) -> None:
+    """A negative length gave a negative t_err in evaluate while rte refused it; now both read
+    the one ``devkit`` section."""
+    from pipeline.evaluate.section import EvaluateSection
+
+    p = tmp_path / "params.yaml"
+    p.write_text(f"devkit:\n  lengths_m: {lengths}\n")
+    with pytest.raises(ConfigError, match=rule):
+        load_section(p, "evaluate", EvaluateSection)
+
+
 def test_length_is_set_once_in_base(tmp_path: Path) -> None:
-    """trials, rte and evaluate take L from base.length_m; a copy in a section is refused."""
-    from pipeline.database.store import RteSection
+    """trials and evaluate take L from base.length_m, evaluate the devkit section; a copy in a
+    section is refused."""
     from pipeline.evaluate.section import EvaluateSection
     from pipeline.tuning.smbo import TrialsSection
 
     p = tmp_path / "params.yaml"
-    p.write_text("base:\n  length_m: 100.0\n")
-    for name, model in (("trials", TrialsSection), ("rte", RteSection),
-                        ("evaluate", EvaluateSection)):
+    p.write_text("base:\n  length_m: 100.0\ndevkit:\n  lengths_m: [20, 10]\n")
+    for name, model in (("trials", TrialsSection), ("evaluate", EvaluateSection)):
         assert load_section(p, name, model).length_m == 100.0
-    p.write_text("base:\n  length_m: 100.0\nrte:\n  length_m: 25.0\n")
-    with pytest.raises(ConfigError, match=r"^rte\.length_m: set once in base\.length_m, not per "
-                                          r"section, got 25\.0$"):
-        load_section(p, "rte", RteSection)
+    assert load_section(p, "evaluate", EvaluateSection).devkit.lengths_m == (10.0, 20.0)
+    p.write_text("base:\n  length_m: 100.0\nevaluate:\n  length_m: 25.0\n")
+    with pytest.raises(ConfigError, match=r"^evaluate\.length_m: set once in base\.length_m, "
+                                          r"not per section, got 25\.0$"):
+        load_section(p, "evaluate", EvaluateSection)
+    p.write_text("evaluate:\n  devkit: {lengths_m: [5]}\n")
+    with pytest.raises(ConfigError, match=r"^evaluate\.devkit: set once in devkit, not per "):
+        load_section(p, "evaluate", EvaluateSection)
     p.write_text("base:\n  length_m: 0\n")
     with pytest.raises(ConfigError, match=r"^base\.length_m: .*greater than 0"):
         load_section(p, "trials", TrialsSection)

@@ -61,7 +61,7 @@ def test_the_preset_sets_the_protocol(protocol: Path, kitti_root: Path) -> None:
     assert params["evaluate"]["replicas"] == 1
     assert (params["trials"]["iterations"], params["trials"]["startup_trials"],
             params["fixed"]["iterations"]) == (3, 2, 2)
-    assert params["rte"]["kitti_lengths_m"] == params["evaluate"]["kitti_lengths_m"] == [2, 4]
+    assert params["devkit"]["lengths_m"] == [2, 4] and "kitti_lengths_m" not in params["evaluate"]
     lock = yaml.safe_load((protocol / "dvc.lock").read_text())["stages"]
     assert any(d["path"] == "data/kitti" for d in lock["trials"]["deps"])
 

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 from click.testing import CliRunner
-from test_surrogate import build_model, write_tiny_sequence
+from helpers.models import build_model, write_tiny_sequence
 
 from pipeline.odometry.registry import get_adapter
 from pipeline.sequence import SequenceReader
@@ -18,26 +18,19 @@ from stages.cli import main
 
 
 def test_live_writes_poses_and_params(tmp_path: Path, kitti_root: Path) -> None:
-    model_dir = build_model(
-        tmp_path / "model",
-        kitti_root,
-        selection={
-            "period_s": 0.2,
-            "hysteresis": 0.0,
-            "min_scan_points": 1000,
-            "subset_rows": 256,
-            "refine_iters": 2,
-        },
-    )
+    model_dir = build_model(tmp_path / "model", kitti_root)
+    params = tmp_path / "params.yaml"  # the selector's runtime settings
+    params.write_text("select: {period_s: 0.2, hysteresis: 0.0, subset_rows: 256, "
+                      "refine_iters: 2, window: 1}\n")
     seq = tmp_path / "s.mcap"
     write_tiny_sequence(seq, kitti_root, "04", n=5, step=4)
     out = tmp_path / "live.mcap"
-    res = CliRunner().invoke(main, ["live", str(model_dir), str(seq), "--out", str(out),
-                                    "--json"])
+    res = CliRunner().invoke(main, ["live", "--params", str(params), str(model_dir), str(seq),
+                                    "--out", str(out), "--json"])
     assert res.exit_code == 0, res.output
     live = json.loads(res.stdout)
-    res = CliRunner().invoke(main, ["select", str(model_dir), str(seq), "--out",
-                                    str(tmp_path / "schedule.parquet"), "--json"])
+    res = CliRunner().invoke(main, ["select", "--params", str(params), str(model_dir), str(seq),
+                                    "--out", str(tmp_path / "schedule.parquet"), "--json"])
     assert res.exit_code == 0, res.output
     select = json.loads(res.stdout)
     space = get_adapter("ndt").space

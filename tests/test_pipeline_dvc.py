@@ -145,7 +145,7 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
     model = load_model(root / "model", expected_algorithm="ndt")
     assert len(model.surrogate.rows_t) == counts["surrogate_rows"]
     # the novelty fallback was decided on the joint study vs each study's defaults trial
-    fallback = model.selection["novelty_fallback"]
+    fallback = model.novelty_fallback
     assert fallback["mode"] == "auto" and set(fallback["per_sequence"]) == set(index["train"])
     run = root / "results/adaptive/composite_0"
     schedule = Schedule.read(run / "schedule.parquet")
@@ -292,7 +292,7 @@ def test_metrics_and_plot_data_are_committed(repro: tuple[Path, str]) -> None:
     assert git(root, "status", "--porcelain") == ""
 
 
-PAPER_SELECTOR = "surrogate.k=5,surrogate.window=1"
+PAPER_SELECTOR = "surrogate.k=5,select.window=1"
 
 
 def readme_variations() -> dict[str, list[str]]:
@@ -356,7 +356,7 @@ def test_gicp_on_dask_experiment(repro: tuple[Path, str]) -> None:
     shown = exp_shown(root)["gicp-dask"]
     metrics = shown["metrics"]["metrics/evaluation.json"]["data"]
     params = shown["params"]["params.yaml"]["data"]
-    assert (params["surrogate"]["k"], params["surrogate"]["window"]) == (5, 1)
+    assert (params["surrogate"]["k"], params["select"]["window"]) == (5, 1)
     assert metrics["algorithm"] == "gicp" and metrics["length_m"] == TINY_L_M
     assert all(0 < v < 100 for v in metrics["rte_pct"].values()), metrics
     assert git(root, "status", "--porcelain") == ""
@@ -371,7 +371,7 @@ def test_kitti_and_kiss_icp_experiment_with_a_new_length(repro: tuple[Path, str]
     stage up to the evaluate stage reads the new L, and `dvc metrics diff main` and `dvc exp
     diff` compare the experiments' metrics."""
     import duckdb
-    from dask_cluster import tcp_cluster
+    from helpers.dask_cluster import tcp_cluster
 
     from pipeline.sequence import SequenceReader
 

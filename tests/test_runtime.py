@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers.models import SEL, build_model, kitti_scan, write_tiny_sequence
 from sklearn.neighbors import KNeighborsRegressor
-from test_surrogate import SELECTION, build_model, kitti_scan, write_tiny_sequence
 
 from pipeline.artifact import canonical_manifest_hash
 from pipeline.errors import ArtifactError
@@ -22,8 +22,8 @@ from pipeline.runtime import TIE_TOL, Selector, load_model
 from pipeline.sequence import SequenceReader
 from pipeline.surrogates import knn_search
 from pipeline.surrogates.base import environment_d2
-from pipeline.surrogates.fit import SurrogateSection
 from pipeline.surrogates.knn_search import GroupedNeighbourhood, Neighbourhood, knn_mean_numpy
+from pipeline.surrogates.section import SurrogateSection
 from stages.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -98,8 +98,8 @@ def rewrite_manifest(dst: Path, **changes: object) -> None:
 
 def test_wrong_schema_version_and_algorithm(model_dir: Path, tmp_path: Path) -> None:
     bad = copy_model(model_dir, tmp_path / "v2")
-    rewrite_manifest(bad, schema_version="2.0")
-    with pytest.raises(ArtifactError, match=r"schema version '2\.0'"):
+    rewrite_manifest(bad, schema_version="3.0")
+    with pytest.raises(ArtifactError, match=r"schema version '3\.0'"):
         load_model(bad)
     with pytest.raises(ArtifactError, match="algorithm 'ndt', expected 'gicp'"):
         load_model(model_dir, expected_algorithm="gicp")
@@ -117,8 +117,10 @@ def test_cli_refuses_bad_artifacts(model_dir: Path, tmp_path: Path, kitti_root: 
     data[-3] ^= 0x10
     (flipped / "env.npy").write_bytes(bytes(data))
     v2 = copy_model(model_dir, tmp_path / "v2")
-    rewrite_manifest(v2, schema_version="2.0")
+    rewrite_manifest(v2, schema_version="3.0")
     cases = [
+        *[(["select", str(model_dir), str(seq), "--period-s", v],
+           f"select.period_s must be a finite number > 0, got {v}") for v in ("0", "-1", "nan")],
         (["select", str(flipped), str(seq)], "sha256 mismatch"),
         (["select", str(v2), str(seq)], "schema version"),
         (["select", str(model_dir), str(seq), "--algorithm", "gicp"], "expected 'gicp'"),
@@ -141,7 +143,7 @@ def test_schedule_in_range_for_every_scan(
     model = load_model(model_dir, "ndt")
     space = get_adapter("ndt").space
     with SequenceReader(seq) as reader:
-        sched = Selector(model, period_s=0.3).schedule(reader)
+        sched = Selector(model, SEL.replace(period_s=0.3)).schedule(reader)
     sched.validate(space, 8)  # every frame covered, every value in range
     # selections at frames 0, 3, 6 (0.3 s at 10 Hz), held in between
     for a, b in ((0, 1), (1, 2), (3, 4), (4, 5), (6, 7)):
@@ -151,12 +153,12 @@ def test_schedule_in_range_for_every_scan(
     assert res.exit_code == 0, res.output
     read = Schedule.read(out)
     read.validate(space, 8)
-    assert len(read.changes()) == 1  # period 1 s from the manifest: one selection in 0.8 s
+    assert len(read.changes()) == 1  # period 1 s (select's default): one selection in 0.8 s
 
 
 def test_too_few_points_keep_last(model_dir: Path, kitti_root: Path) -> None:
     model = load_model(model_dir)
-    sel = Selector(model)
+    sel = Selector(model, SEL)
     assert sel.select(np.zeros((10, 4), np.float32)) == model.defaults()  # before any selection
     first = sel.select(kitti_scan(kitti_root, "01", 0))
     assert sel.select(kitti_scan(kitti_root, "04", 0)[:999]) == sel.current
@@ -187,7 +189,7 @@ def test_grouped_search_is_the_exact_knn_over_every_row(
     model_dir: Path, kitti_root: Path, risk: float
 ) -> None:
     model = load_model(model_dir)
-    sel = Selector(model, hysteresis=0.0, refine_iters=0, risk=risk)
+    sel = Selector(model, SEL.replace(hysteresis=0.0, refine_iters=0, risk=risk))
     groups = sel.search.groups
     assert groups is not None and len(groups.trees) == 4  # one group per sequence
     off = np.random.default_rng(3).random((50, 2))  # points off the candidate set too
@@ -223,7 +225,7 @@ def test_frames_with_their_own_row_order_form_their_own_group(
     perm[a:b] = perm[a:b][::-1]  # frame 0 lists its trials backwards
     shuffled = replace(model, surrogate=replace(knn, rows_x=knn.rows_x[perm],
                                                 rows_t=knn.rows_t[perm]))
-    sel = Selector(shuffled, hysteresis=0.0, refine_iters=0)
+    sel = Selector(shuffled, SEL.replace(hysteresis=0.0, refine_iters=0))
     assert sel.search.groups is not None and len(sel.search.groups.trees) == 5
     e_s = model.environment(kitti_scan(kitti_root, "01", 0))
     np.testing.assert_allclose(
@@ -239,10 +241,11 @@ def test_ungrouped_artifacts_use_the_certified_tree(
 ) -> None:
     model = load_model(model_dir)
     monkeypatch.setattr(knn_search, "MAX_GROUPS", 3)  # the 4 sequences no longer qualify
-    assert Selector(model).search.groups is None
+    assert Selector(model, SEL).search.groups is None
     for seq, frame in (("01", 5), ("10", 2), ("06", 9)):
         e_s = model.environment(kitti_scan(kitti_root, seq, frame))
-        sel = Selector(model, hysteresis=0.0, refine_iters=0, subset_rows=200, risk=risk)
+        sel = Selector(model, SEL.replace(hysteresis=0.0, refine_iters=0, subset_rows=200,
+                                          risk=risk))
         nb = sel.neighbourhood(e_s)
         assert isinstance(nb, Neighbourhood)
         pred = nb.predict(sel.candidates)
@@ -269,12 +272,12 @@ def test_ungrouped_artifacts_use_the_certified_tree(
 def test_refinement_and_hysteresis(model_dir: Path, kitti_root: Path) -> None:
     model = load_model(model_dir)
     e_s = model.environment(kitti_scan(kitti_root, "01", 1))
-    plain = Selector(model, refine_iters=0)
-    refined = Selector(model, refine_iters=6)
+    plain = Selector(model, SEL.replace(refine_iters=0))
+    refined = Selector(model, SEL.replace(refine_iters=6))
     plain.select_environment(e_s)
     refined.select_environment(e_s)
     assert refined.last["predicted_t"] <= plain.last["predicted_t"]
-    sticky = Selector(model, hysteresis=1e9)
+    sticky = Selector(model, SEL.replace(hysteresis=1e9))
     p0 = sticky.select_environment(model.environment(kitti_scan(kitti_root, "01", 0)))
     assert sticky.select_environment(model.environment(kitti_scan(kitti_root, "10", 9))) == p0
     assert sticky.last["kept"] == "hysteresis"
@@ -285,9 +288,9 @@ def test_unfamiliar_scans_get_the_fallback(tmp_path: Path, kitti_root: Path) -> 
     gets the fallback (the defaults unless the manifest names parameters); a familiar one gets
     the surrogate's choice again."""
     model = load_model(build_model(tmp_path / "model", kitti_root))
-    limit = model.selection["novelty_distance"]
+    limit = model.novelty_distance
     assert limit > 0
-    sel = Selector(model, hysteresis=0.0)
+    sel = Selector(model, SEL.replace(hysteresis=0.0))
     familiar = model.env[3]
     far = familiar + 3.0 * limit / np.sqrt(len(familiar))  # 3 limits from that frame
     assert np.sqrt(((model.env - far) ** 2).sum(1)).min() > limit
@@ -299,18 +302,16 @@ def test_unfamiliar_scans_get_the_fallback(tmp_path: Path, kitti_root: Path) -> 
     assert first != model.defaults()
     # a manifest with fallback parameters (the joint study's, chosen by the surrogate stage)
     chosen = {"resolution": 2.5, "keyframe_interval": 6.0}
-    selection = {**SELECTION, "novelty_fallback": {"mode": "fixed", "chosen": "fixed"},
-                 "novelty_fallback_params": chosen}
-    fixed = Selector(load_model(build_model(tmp_path / "fixed", kitti_root, selection=selection)),
-                     hysteresis=0.0)
+    fixed_record = {"mode": "fixed", "chosen": "fixed"}
+    fixed = Selector(load_model(build_model(tmp_path / "fixed", kitti_root, fallback=fixed_record,
+                                            fallback_params=chosen)), SEL)
     assert fixed.select_environment(far) == chosen and fixed.last["kept"] == "novel"
     assert fixed.select_environment(familiar) == first
     # fallback values that do not survive the unit-cube round trip bit for bit (the base NDT
     # artifact's fixed parameters): what a novel scan returns is what is then held
     odd = {"resolution": 2.1933988413775443, "keyframe_interval": 7.774158360578929}
-    selection = {**selection, "novelty_fallback_params": odd}
-    held = Selector(load_model(build_model(tmp_path / "odd", kitti_root, selection=selection)),
-                    hysteresis=0.0)
+    held = Selector(load_model(build_model(tmp_path / "odd", kitti_root, fallback=fixed_record,
+                                           fallback_params=odd)), SEL)
     assert held.model.params_of(held.anchor_u) != odd  # the case at hand
     got = held.select_environment(far)
     assert got == held.current and got == pytest.approx(odd, rel=1e-15)
@@ -319,7 +320,7 @@ def test_unfamiliar_scans_get_the_fallback(tmp_path: Path, kitti_root: Path) -> 
     off = load_model(build_model(tmp_path / "off", kitti_root,
                                  settings=SurrogateSection(n_sobol=256, cv_max_frames=5,
                                                             novelty_quantile=None)))
-    assert off.selection["novelty_distance"] is None
-    unguarded = Selector(off, hysteresis=0.0)
+    assert off.novelty_distance is None
+    unguarded = Selector(off, SEL.replace(hysteresis=0.0))
     unguarded.select_environment(far)
     assert unguarded.last["kept"] != "novel"

@@ -9,16 +9,18 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_surrogate import build_model, kitti_scan
+from helpers.models import DEFAULTS_FALLBACK, SEL, build_model, kitti_scan
 
-from pipeline.artifact import ArtifactInfo, write_artifact
 from pipeline.descriptors import NdtHistogram
 from pipeline.odometry.registry import get_adapter
 from pipeline.pca import Pca
 from pipeline.runtime import Model, Selector, load_model
-from pipeline.surrogates.fit import SurrogateSection, fit_surrogate
+from pipeline.selection import SelectionSettings
+from pipeline.surrogates.fit import fit_surrogate
 from pipeline.surrogates.knn_search import canonical_mean, canonical_value, knn_mean_numpy
 from pipeline.surrogates.rows import TrainingRows
+from pipeline.surrogates.section import SurrogateSection
+from pipeline.surrogates.writer import ArtifactInfo, write_artifact
 
 
 @pytest.fixture(scope="module")
@@ -50,14 +52,14 @@ def test_the_candidates_order_does_not_choose(model: Model, kitti_root: Path) ->
     """Many candidates share their predicted value exactly (the same k neighbours); which one
     is chosen must not depend on where it stands in the candidate set."""
     envs = drive(model, kitti_root)
-    ref = schedule(Selector(model, refine_iters=2), envs)
-    sel = Selector(model)
+    ref = schedule(Selector(model, SEL.replace(refine_iters=2)), envs)
+    sel = Selector(model, SEL)
     ties = [(v == v.min()).sum() for v in
             (sel.neighbourhood(e).candidate_values(sel.candidates) for e in envs)]
     assert max(ties) > 1, ties  # exact ties at the minimum: the case at hand
     for seed in range(3):
         order = np.random.default_rng(seed).permutation(len(sel.candidates))
-        shuffled = with_candidates(Selector(model, refine_iters=2), order)
+        shuffled = with_candidates(Selector(model, SEL.replace(refine_iters=2)), order)
         assert schedule(shuffled, envs) == ref
 
 
@@ -65,11 +67,11 @@ def test_last_bit_changes_do_not_choose(model: Model, kitti_root: Path) -> None:
     """A 1e-12 relative change of E (another BLAS's PCA, another machine's descriptor) leaves
     every selection as it was."""
     envs = drive(model, kitti_root)
-    ref = schedule(Selector(model, refine_iters=2, window=2), envs)
+    ref = schedule(Selector(model, SEL.replace(refine_iters=2, window=2)), envs)
     rng = np.random.default_rng(0)
     for _ in range(3):
         nudged = [e * (1 + 1e-12 * rng.standard_normal(e.shape)) for e in envs]
-        assert schedule(Selector(model, refine_iters=2, window=2), nudged) == ref
+        assert schedule(Selector(model, SEL.replace(refine_iters=2, window=2)), nudged) == ref
 
 
 @pytest.mark.parametrize("risk", [0.0, 0.5])
@@ -83,7 +85,7 @@ def test_the_same_neighbours_give_the_same_bits(model: Model, kitti_root: Path,
     np.testing.assert_allclose(canonical_value(t, risk), t.mean(1) + risk * t.std(1),
                                rtol=1e-13)
     assert (shuffled.mean(axis=1) != t.mean(axis=1)).any()  # what a plain mean does
-    sel = Selector(model, risk=risk)
+    sel = Selector(model, SEL.replace(risk=risk))
     groups = sel.search.groups
     assert groups is not None
     for e_s in drive(model, kitti_root)[:4]:
@@ -95,11 +97,11 @@ def test_the_same_neighbours_give_the_same_bits(model: Model, kitti_root: Path,
 
 
 def test_risk_zero_is_the_plain_mean_to_the_last_bit(model: Model, kitti_root: Path) -> None:
-    """risk = 0 (the default, and what an artifact without ``selection.risk`` reads as) gives
-    the kNN mean of before, bit for bit, and the same schedule."""
-    assert "risk" not in model.selection
+    """risk = 0 (the default) gives the kNN mean of before, bit for bit, and the same
+    schedule."""
     envs = drive(model, kitti_root)
-    plain, zero = Selector(model, refine_iters=2), Selector(model, refine_iters=2, risk=0.0)
+    plain = Selector(model, SEL.replace(refine_iters=2))
+    zero = Selector(model, SEL.replace(refine_iters=2, risk=0.0))
     assert zero.risk == plain.risk == 0.0
     assert schedule(zero, envs) == schedule(plain, envs)
     U = zero.candidates[:40]
@@ -138,13 +140,15 @@ def four_frame_rows(u_a: tuple[float, ...] | np.ndarray, u_b: tuple[float, ...] 
 
 
 def write_small(out: Path, fitted: Any, space: list[dict[str, Any]],
-                selection: dict[str, Any]) -> None:
+                fallback: dict[str, Any] | None = None,
+                fallback_params: dict[str, float] | None = None) -> None:
     """The artifact of a one-dimensional environment (a PCA that keeps the first bin)."""
     pca = Pca(np.zeros(90), np.ones(90), np.eye(1, 90), np.ones(1))
-    write_artifact(out, fitted, pca, ArtifactInfo("ndt", space, NdtHistogram(), selection))
+    write_artifact(out, fitted, pca, ArtifactInfo("ndt", space, NdtHistogram(),
+                                                  fallback or DEFAULTS_FALLBACK, fallback_params))
 
 
-def spread_model(out: Path, risk: float) -> Path:
+def spread_model(out: Path) -> Path:
     """An artifact of two trials, A = (0.1, 0.5) and B = (0.9, 0.5) in the cube, run on four
     frames (two sequences x two frames, E = -1 or +1): A scores 0.2 % or 2.4 % RTE by frame
     (log1p: mean 0.703, std 0.521), B 1.2 % everywhere (0.788, std 0). With k = 4 the
@@ -152,37 +156,33 @@ def spread_model(out: Path, risk: float) -> Path:
     in E_s), of B the four B rows."""
     rows = four_frame_rows((0.1, 0.5), (0.9, 0.5),
                            lambda i, e: (0.2 if (i == 0) == (e < 0) else 2.4, 1.2))
-    section = SurrogateSection(k=4, n_sobol=0, cv_max_frames=2, novelty_quantile=None,
-                               risk=risk)
+    section = SurrogateSection(k=4, n_sobol=0, cv_max_frames=2, novelty_quantile=None)
     space = get_adapter("ndt").space.to_json()
-    write_small(out, fit_surrogate(rows, space, section), space, section.selection())
+    write_small(out, fit_surrogate(rows, space, section), space)
     return out
 
 
 @pytest.mark.parametrize("grouped", [True, False])
 def test_risk_prefers_the_parameters_whose_neighbours_agree(tmp_path: Path,
                                                            grouped: bool) -> None:
-    """risk = 0 picks A (the lower mean), risk = 1 picks B (A's neighbours disagree), with
-    the value read from the manifest or given to the selector, by either search."""
-    plain = load_model(spread_model(tmp_path / "plain", 0.0))
-    wary = load_model(spread_model(tmp_path / "wary", 1.0))
-    assert (plain.selection["risk"], wary.selection["risk"]) == (0.0, 1.0)
-    a, b = (plain.params_of(np.array(u)) for u in ((0.1, 0.5), (0.9, 0.5)))
+    """risk = 0 (the default) picks A (the lower mean), risk = 1 picks B (A's neighbours
+    disagree), by either search."""
+    model = load_model(spread_model(tmp_path / "spread"))
+    a, b = (model.params_of(np.array(u)) for u in ((0.1, 0.5), (0.9, 0.5)))
     t_a, t_b = np.log1p([0.2, 2.4, 2.4, 0.2]), np.log1p([1.2] * 4)
-    for model in (plain, wary):
-        e_s = model.env[0]
-        for risk, want, t in ((0.0, a, t_a.mean()), (1.0, b, t_b.mean()),
-                              (0.1, a, t_a.mean() + 0.1 * t_a.std())):
-            sel = Selector(model, risk=risk, grouped=grouped)
-            assert sel.select_environment(e_s) == want
-            assert sel.last["predicted_t"] == pytest.approx(t, rel=1e-12)
-        assert Selector(model, grouped=grouped).select_environment(e_s) == (
-            a if model is plain else b)
+    e_s = model.env[0]
+    for risk, want, t in ((0.0, a, t_a.mean()), (1.0, b, t_b.mean()),
+                          (0.1, a, t_a.mean() + 0.1 * t_a.std())):
+        sel = Selector(model, SelectionSettings(risk=risk), grouped=grouped)
+        assert sel.select_environment(e_s) == want
+        assert sel.last["predicted_t"] == pytest.approx(t, rel=1e-12)
+    assert Selector(model, grouped=grouped).select_environment(e_s) == a
     # the hysteresis weighs risk-adjusted values: from A (1.224), B (0.788) is 0.436 better
     for hysteresis, want, kept in ((0.4, b, ""), (0.5, a, "hysteresis")):
-        sel = Selector(wary, hysteresis=hysteresis, grouped=grouped)
-        sel.current_u = next(u for u in sel.candidates if wary.params_of(u) == a)
-        assert sel.select_environment(wary.env[0]) == want
+        sel = Selector(model, SelectionSettings(risk=1.0, hysteresis=hysteresis),
+                       grouped=grouped)
+        sel.current_u = next(u for u in sel.candidates if model.params_of(u) == a)
+        assert sel.select_environment(model.env[0]) == want
         assert sel.last["kept"] == kept
 
 
@@ -191,7 +191,7 @@ def test_the_window_minimises_the_mean_over_recent_environments(model: Model, ki
                                                                   risk: float) -> None:
     """The window averages S, risk-adjusted when risk > 0, over the last W scans."""
     a, b, c = drive(model, kitti_root)[:3]
-    sel = Selector(model, window=2, refine_iters=0, risk=risk)
+    sel = Selector(model, SEL.replace(window=2, refine_iters=0, risk=risk))
     sel.select_environment(a)
     sel.select_environment(b)
     chosen = sel.select_environment(c)
@@ -200,7 +200,7 @@ def test_the_window_minimises_the_mean_over_recent_environments(model: Model, ki
     assert sel.last["predicted_t"] == pytest.approx(mean.min(), abs=1e-9)
     assert mean[[model.params_of(u) == chosen for u in sel.candidates]].min() == pytest.approx(
         mean.min(), abs=1e-9)
-    one = Selector(model, window=1, refine_iters=0, risk=risk)
+    one = Selector(model, SEL.replace(window=1, refine_iters=0, risk=risk))
     for e in (a, b, c):
         one.select_environment(e)
     assert one.last["predicted_t"] == pytest.approx(
@@ -209,12 +209,16 @@ def test_the_window_minimises_the_mean_over_recent_environments(model: Model, ki
 
 def test_the_anchor_is_left_only_for_a_predicted_gain(model: Model, kitti_root: Path) -> None:
     e_s = drive(model, kitti_root)[0]
-    free = Selector(model, anchor_margin=0.0)
+    free = Selector(model, SEL.replace(anchor_margin=0.0))
     assert free.select_environment(e_s) != model.fallback()
     assert free.last["kept"] == ""
-    anchored = Selector(model, anchor_margin=1e9)
+    anchored = Selector(model, SEL.replace(anchor_margin=1e9))
     assert anchored.select_environment(e_s) == model.fallback()
     assert anchored.last["kept"] == "anchor"
+
+
+ONE_SCAN = SelectionSettings(window=1)
+"""The default selector on the newest scan only (the per-scan fallback's tests)."""
 
 
 def two_sets_model(out: Path, per_scan: bool) -> tuple[Path, dict[str, float], dict[str, float]]:
@@ -229,16 +233,13 @@ def two_sets_model(out: Path, per_scan: bool) -> tuple[Path, dict[str, float], d
     cube_d = space_obj.to_unit(space_obj.defaults())
     cube_f = np.array([0.9, 0.9])
     rows = four_frame_rows(cube_d, cube_f, lambda i, e: (0.3, 3.0) if e < 0 else (3.0, 0.3))
-    section = SurrogateSection(k=2, n_sobol=0, cv_max_frames=2, novelty_quantile=None,
-                               window=1)
+    section = SurrogateSection(k=2, n_sobol=0, cv_max_frames=2, novelty_quantile=None)
     fitted = fit_surrogate(rows, space, section)
     fitted.novelty_distance = 2.0 * float(np.abs(fitted.env).max())  # E = +-1 is env +-max
     d, f = space_obj.from_unit(cube_d[None]), space_obj.from_unit(cube_f[None])
     record = ({"mode": "per_scan", "chosen": "per_scan"} if per_scan
               else {"mode": "defaults", "chosen": "defaults"})
-    selection = {**section.selection(), "novelty_fallback": record,
-                 **({"novelty_fallback_params": f} if per_scan else {})}
-    write_small(out, fitted, space, selection)
+    write_small(out, fitted, space, record, f if per_scan else None)
     return out, d, f
 
 
@@ -252,22 +253,22 @@ def test_a_per_scan_fallback_weighs_the_defaults_against_the_fixed_parameters(
     assert model.per_scan_fallback and model.fallback() == pytest.approx(f)
     scale = float(np.abs(model.env).max())
     near_d, near_f, familiar = (np.array([v * scale]) for v in (-5.0, 5.0, -1.0))
-    sel = Selector(model)
+    sel = Selector(model, ONE_SCAN)
     assert sel.select_environment(near_d) == pytest.approx(d)
     assert sel.last["kept"] == "novel"
     assert sel.select_environment(near_f) == pytest.approx(f)  # better by 1.12 > 0.02
     assert sel.select_environment(familiar) == pytest.approx(d)  # the surrogate's own choice
     assert sel.last["kept"] == ""
     # a hysteresis larger than the predicted gain keeps the fallback in force
-    held = Selector(model, hysteresis=5.0)
+    held = Selector(model, ONE_SCAN.replace(hysteresis=5.0))
     assert held.select_environment(near_f) == pytest.approx(f)
     assert held.select_environment(near_d) == pytest.approx(f)
     # the window averages the unfamiliar scans' S: one scan each way ties, and ties hold
-    windowed = Selector(model, window=2, hysteresis=0.0)
+    windowed = Selector(model, ONE_SCAN.replace(window=2, hysteresis=0.0))
     assert windowed.select_environment(near_d) == pytest.approx(d)
     assert windowed.select_environment(near_f) == pytest.approx(d)
     assert windowed.select_environment(near_f) == pytest.approx(f)
     single = load_model(two_sets_model(tmp_path / "single", per_scan=False)[0])
     assert not single.per_scan_fallback
-    one = Selector(single)
+    one = Selector(single, ONE_SCAN)
     assert [one.select_environment(e) for e in (near_d, near_f)] == [d, d]

@@ -4,7 +4,6 @@ from real KITTI scans."""
 
 from __future__ import annotations
 
-import functools
 import json
 from pathlib import Path
 
@@ -14,87 +13,26 @@ import numpy as np
 import pyarrow as pa
 import pytest
 from click.testing import CliRunner
+from helpers.models import (
+    SEQS,
+    build_model,
+    kitti_descriptors,
+    kitti_scan,
+    synthetic_rows,
+    write_tiny_sequence,
+)
 
-from pipeline.artifact import ArtifactInfo, write_artifact
-from pipeline.descriptors import NdtHistogram
 from pipeline.descriptors.ndt_histogram import describe
 from pipeline.errors import ConfigError, InputError
 from pipeline.odometry.registry import get_adapter
 from pipeline.pca import Pca, fit_pca
 from pipeline.runtime import load_model
-from pipeline.sequence import SequenceInfo, SequenceWriter
-from pipeline.surrogates.fit import SurrogateSection, fit_surrogate
+from pipeline.surrogates.fit import fit_surrogate
 from pipeline.surrogates.novelty import choose_fallback, novelty_fallback, read_fallback_evidence
 from pipeline.surrogates.rows import TrainingRows
-from schemas import read_text
+from pipeline.surrogates.section import SurrogateSection
+from pipeline.surrogates.writer import artifact_schema
 from stages.cli import main
-
-SEQS = ("01", "04", "06", "10")
-SELECTION = {
-    "period_s": 1.0,
-    "hysteresis": 0.0,
-    "min_scan_points": 1000,
-    "subset_rows": 512,
-    "refine_iters": 0,
-}
-
-
-def kitti_scan(kitti_root: Path, seq: str, frame: int) -> np.ndarray:
-    path = kitti_root / "sequences" / seq / "velodyne" / f"{frame:06d}.bin"
-    return np.fromfile(path, np.float32).reshape(-1, 4)
-
-
-@functools.lru_cache(maxsize=2)
-def kitti_descriptors(kitti_root: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(sequence names (40,), frames (40,), descriptors (40, 90)) of the KITTI mini scans."""
-    names, frames, desc = [], [], []
-    for seq in SEQS:
-        for f in range(10):
-            names.append(seq)
-            frames.append(f)
-            desc.append(describe(kitti_scan(kitti_root, seq, f)))
-    return np.array(names), np.array(frames), np.stack(desc)
-
-
-def true_y(E: np.ndarray, U: np.ndarray) -> np.ndarray:
-    """A synthetic RTE [%]: the best first parameter depends on the environment."""
-    best = 1.0 / (1.0 + np.exp(-E[:, 0] / 2.0))
-    return 0.3 + 4.0 * (U[:, 0] - best) ** 2 + 0.5 * (U[:, 1] - 0.3) ** 2
-
-
-def synthetic_rows(kitti_root: Path, trials: int = 24, seed: int = 0) -> tuple[TrainingRows, Pca]:
-    names, frames, desc = kitti_descriptors(kitti_root)
-    pca = fit_pca(desc, 10, list(SEQS))
-    pca.descriptor = NdtHistogram().to_json()
-    E_f = pca.transform(desc)
-    rng = np.random.default_rng(seed)
-    U_trials = {s: rng.random((trials, 2)) for s in SEQS}  # each sequence has its own trials
-    E, U, S, F, T = [], [], [], [], []
-    for i, (s, f) in enumerate(zip(names, frames, strict=True)):
-        E.append(np.repeat(E_f[i][None], trials, 0))
-        U.append(U_trials[s])
-        S += [s] * trials
-        F += [f] * trials
-        T += list(range(trials))
-    E, U = np.vstack(E), np.vstack(U)
-    y = true_y(E, U) * np.exp(rng.normal(0, 0.05, len(U)))
-    return TrainingRows(E, U, y, np.array(S), np.array(F), np.array(T)), pca
-
-
-def build_model(
-    out: Path,
-    kitti_root: Path,
-    algorithm: str = "ndt",
-    selection: dict | None = None,
-    trials: int = 24,
-    settings: SurrogateSection | None = None,
-) -> Path:
-    rows, pca = synthetic_rows(kitti_root, trials)
-    space = get_adapter(algorithm).space.to_json()
-    fitted = fit_surrogate(rows, space, settings or SurrogateSection(n_sobol=256, cv_max_frames=5))
-    info = ArtifactInfo(algorithm, space, NdtHistogram(), selection or SELECTION)
-    write_artifact(out, fitted, pca, info)
-    return out
 
 
 def test_pca_fit_on_training_frames_only(kitti_root: Path) -> None:
@@ -113,7 +51,7 @@ def test_pca_fit_on_training_frames_only(kitti_root: Path) -> None:
 def test_artifact_round_trip(tmp_path: Path, kitti_root: Path) -> None:
     model_dir = build_model(tmp_path / "model", kitti_root)
     manifest = json.loads((model_dir / "manifest.json").read_text())
-    jsonschema.validate(manifest, json.loads(read_text("artifact.schema.json")))
+    jsonschema.validate(manifest, artifact_schema())
     assert manifest["algorithm"] == "ndt" and manifest["model"]["k"] == 20
     assert set(manifest["files"]) == {p.name for p in model_dir.iterdir()} - {"manifest.json"}
     assert manifest["provenance"]["git_revision"]
@@ -164,14 +102,6 @@ def test_novelty_distance_is_the_leave_one_sequence_out_quantile(kitti_root: Pat
     off = fit_surrogate(rows, space, SurrogateSection(n_sobol=0, cv_max_frames=2,
                                                        novelty_quantile=None))
     assert off.novelty_distance is None
-
-
-def write_tiny_sequence(path: Path, kitti_root: Path, seq: str, n: int = 4, step: int = 3) -> None:
-    with SequenceWriter(path, SequenceInfo(name=path.stem, sensor="hdl64", source="kitti")) as w:
-        for f in range(n):
-            w.add(
-                1_000_000_000 + f * 100_000_000, kitti_scan(kitti_root, seq, f)[::step], np.eye(4)
-            )
 
 
 def test_descriptors_stage(tmp_path: Path, kitti_root: Path) -> None:
@@ -288,7 +218,7 @@ def test_surrogate_stage(tmp_path: Path, kitti_root: Path) -> None:
     model = load_model(out, "ndt")
     assert model.manifest["training"]["rows"] == 40 * 8
     # no trials tables in this database: no joint study to compare, the defaults stay
-    assert model.selection["novelty_fallback"]["chosen"] == "defaults"
+    assert model.novelty_fallback["chosen"] == "defaults"
     assert model.fallback() == model.defaults()
     assert json.loads(metrics.read_text())["folds"] == 4
     # an algorithm the database does not have: one line, exit 1, no new artifact

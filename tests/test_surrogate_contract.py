@@ -12,18 +12,19 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 import pytest
-from test_surrogate import SELECTION, kitti_scan, synthetic_rows
+from helpers.models import DEFAULTS_FALLBACK, SEL, kitti_scan, synthetic_rows
 
-from pipeline.artifact import ArtifactInfo, canonical_manifest_hash, write_artifact
-from pipeline.config import validate_section
+from pipeline.artifact import canonical_manifest_hash
 from pipeline.descriptors import NdtHistogram
 from pipeline.errors import ArtifactError, ConfigError
 from pipeline.odometry.registry import get_adapter
 from pipeline.runtime import Selector, load_model
 from pipeline.surrogates import SURROGATES
 from pipeline.surrogates.base import Query, Surrogate
-from pipeline.surrogates.fit import FittedSurrogate, SurrogateSection, fit_surrogate
-from schemas import read_text
+from pipeline.surrogates.fit import fit_surrogate
+from pipeline.surrogates.fitted import FittedSurrogate
+from pipeline.surrogates.section import SurrogateSection
+from pipeline.surrogates.writer import ArtifactInfo, artifact_schema, write_artifact
 
 NAMES = list(SURROGATES)
 
@@ -45,12 +46,12 @@ def model_dir(fitted: FittedSurrogate, kitti_root: Path,
     _, pca = synthetic_rows(kitti_root, trials=12)
     out = tmp_path_factory.mktemp(fitted.settings.model) / "model"
     space = get_adapter("ndt").space.to_json()
-    write_artifact(out, fitted, pca, ArtifactInfo("ndt", space, NdtHistogram(), SELECTION))
+    write_artifact(out, fitted, pca, ArtifactInfo("ndt", space, NdtHistogram(), DEFAULTS_FALLBACK))
     return out
 
 
 def test_the_registry_and_the_manifest_schema_agree() -> None:
-    schema = json.loads(read_text("artifact.schema.json"))
+    schema = artifact_schema()
     assert schema["properties"]["model"]["properties"]["type"]["enum"] == NAMES
     assert NAMES[0] == "knn" and SurrogateSection().model == "knn"  # the default
     for name, cls in SURROGATES.items():
@@ -67,7 +68,7 @@ def test_fit_gives_a_surrogate_of_its_type(fitted: FittedSurrogate) -> None:
 def test_the_artifact_round_trip_keeps_every_array(fitted: FittedSurrogate,
                                                    model_dir: Path) -> None:
     manifest = json.loads((model_dir / "manifest.json").read_text())
-    jsonschema.validate(manifest, json.loads(read_text("artifact.schema.json")))
+    jsonschema.validate(manifest, artifact_schema())
     assert manifest["model"] == fitted.surrogate.to_json()
     model = load_model(model_dir)
     assert type(model.surrogate) is type(fitted.surrogate)
@@ -78,7 +79,7 @@ def test_the_artifact_round_trip_keeps_every_array(fitted: FittedSurrogate,
 def test_runtime_queries_agree_with_the_fitted_model(fitted: FittedSurrogate,
                                                      model_dir: Path) -> None:
     model = load_model(model_dir)
-    sel = Selector(model, hysteresis=0.0, refine_iters=0)
+    sel = Selector(model, SEL.replace(hysteresis=0.0, refine_iters=0))
     U = np.vstack([sel.candidates, np.random.default_rng(5).random((20, 2))])
     for g in (0, 7, len(model.env) - 1):
         e_s = model.env[g] + 0.01
@@ -97,19 +98,17 @@ def test_runtime_queries_agree_with_the_fitted_model(fitted: FittedSurrogate,
 
 
 def test_risk_is_weighed_or_refused(fitted: FittedSurrogate, model_dir: Path) -> None:
-    """``surrogate.risk``: a risk-aware surrogate adds risk * the neighbours' spread to every
-    value; any other refuses risk > 0, in the params and in the selector, naming both."""
+    """``select.risk``: a risk-aware surrogate adds risk * the neighbours' spread to every
+    value; any other refuses risk > 0 in the selector, naming both."""
     model = load_model(model_dir)
     name = fitted.settings.model
     if not SURROGATES[name].risk_aware:
         rule = re.escape(f"risk > 0 needs model knn, got (model={name}, risk=0.5)")
-        with pytest.raises(ConfigError, match=f"^surrogate: {rule}$"):
-            validate_section(SurrogateSection, "surrogate", {"model": name, "risk": 0.5})
-        with pytest.raises(ConfigError, match=f"^surrogate.{rule}$"):
-            Selector(model, risk=0.5)
-        assert Selector(model, risk=0.0).risk == 0.0
+        with pytest.raises(ConfigError, match=f"^select.{rule}$"):
+            Selector(model, SEL.replace(risk=0.5))
+        assert Selector(model, SEL.replace(risk=0.0)).risk == 0.0
         return
-    plain, wary = Selector(model, risk=0.0), Selector(model, risk=0.5)
+    plain, wary = Selector(model, SEL.replace(risk=0.0)), Selector(model, SEL.replace(risk=0.5))
     for g in (0, 7, len(model.env) - 1):
         e_s = model.env[g] + 0.01
         p = plain.neighbourhood(e_s).candidate_values(plain.candidates)
@@ -121,7 +120,7 @@ def test_risk_is_weighed_or_refused(fitted: FittedSurrogate, model_dir: Path) ->
 def test_selection_stays_in_range(model_dir: Path, kitti_root: Path) -> None:
     model = load_model(model_dir)
     space = get_adapter("ndt").space
-    sel = Selector(model)
+    sel = Selector(model, SEL)
     for seq, frame in (("01", 2), ("10", 8)):
         params = sel.select(kitti_scan(kitti_root, seq, frame))
         assert space.validate(params) == params

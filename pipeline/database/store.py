@@ -20,13 +20,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyarrow as pa
-from pydantic import Field, field_validator
 
-from pipeline.config import Section
 from pipeline.errors import InputError
 from pipeline.geometry import path_distances
 from pipeline.io_utils import atomic_path
-from pipeline.metrics.kitti import LENGTHS_M, STEP_FRAMES
+from pipeline.metrics.section import DevkitSection
 from pipeline.sequence_index import read_index
 from pipeline.tuning.layout import read_trials_tables
 from schemas import read_text
@@ -39,21 +37,6 @@ log = logging.getLogger(__name__)
 
 STUDIES = ("trials", "fixed")
 """Names of the SMBO outputs the database takes (per-sequence SMBO, joint SMBO)."""
-
-
-class RteSection(Section):
-    """params.yaml section ``rte``."""
-
-    length_m: float = Field(25.0, gt=0.0, description="sub-trajectory length L of rte_frames [m]")
-    kitti_lengths_m: tuple[float, ...] = Field(LENGTHS_M, description="devkit segment lengths [m]")
-    kitti_step_frames: int = Field(STEP_FRAMES, ge=1, description="devkit start-frame step")
-
-    @field_validator("kitti_lengths_m")
-    @classmethod
-    def _positive_lengths(cls, v: tuple[float, ...]) -> tuple[float, ...]:
-        if any(x <= 0 for x in v):
-            raise ValueError(f"kitti_lengths_m must all be > 0, got {list(v)}")
-        return v
 
 
 @dataclass
@@ -69,11 +52,13 @@ class DatabaseSummary:
 
 
 def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapping[str, Path],
-                   settings: RteSection, descriptors: Path | None = None,
+                   length_m: float, devkit: DevkitSection, descriptors: Path | None = None,
                    environment: Path | None = None) -> DatabaseSummary:
     """Build the results database at ``db_path`` atomically.
 
     sequences_dir: data/sequences (``*.mcap`` and optionally index.json with the splits);
+    length_m: L of the rte_frames segments [m] (params ``base.length_m``); devkit: the
+    rte_kitti segments (params ``devkit``);
     studies: study name ('trials' | 'fixed') -> SMBO output folder (pipeline.tuning.layout);
     descriptors / environment: the descriptor Parquet files, or None for empty tables.
     """
@@ -95,9 +80,8 @@ def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapp
                 ("sequences", lambda: load_sequences(con, Path(sequences_dir))),
                 ("trials", lambda: load_trials(con, studies)),
                 ("trajectories", lambda: load_trajectories(con, studies)),
-                ("rte_frames", lambda: score_frames(con, settings.length_m)),
-                ("rte_kitti", lambda: score_kitti(con, settings.kitti_lengths_m,
-                                                  settings.kitti_step_frames)),
+                ("rte_frames", lambda: score_frames(con, length_m)),
+                ("rte_kitti", lambda: score_kitti(con, devkit.lengths_m, devkit.step_frames)),
                 ("summary", lambda: apply_sql(con, "summary.sql")),
                 ("descriptors", lambda: load_frame_table(con, "descriptors", descriptors)),
                 ("environment", lambda: load_frame_table(con, "environment", environment)),

@@ -28,6 +28,8 @@ class Descriptor(Protocol):
     """One environment descriptor with its settings (module docstring)."""
 
     type: ClassVar[str]
+    manifest_schema: ClassVar[dict[str, Any]]
+    """The JSON Schema of ``to_json``'s settings (the artifact's descriptor block)."""
 
     @property
     def size(self) -> int:

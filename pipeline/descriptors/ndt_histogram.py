@@ -54,12 +54,15 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError
+
+if TYPE_CHECKING:
+    from pipeline.descriptors.ndt_histogram_kernel import Moments
 
 N_CLASSES = 3
 N_SUB = 3
@@ -83,6 +86,15 @@ class NdtHistogram:
     """
 
     type: ClassVar[str] = "ndt_histogram"
+    manifest_schema: ClassVar[dict[str, Any]] = {
+        "required": ["voxel_size_m", "min_points", "t_e", "range_bins", "bin_m", "normalize"],
+        "properties": {"voxel_size_m": {"type": "number", "exclusiveMinimum": 0},
+                       "min_points": {"type": "integer", "minimum": 3},
+                       "t_e": {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1},
+                       "range_bins": {"type": "integer", "minimum": 1},
+                       "bin_m": {"type": "number", "exclusiveMinimum": 0},
+                       "normalize": {"type": "boolean"}}}
+    """The JSON Schema of ``to_json`` (the artifact's descriptor block)."""
 
     voxel_size_m: float = 1.0
     min_points: int = 5
@@ -275,10 +287,6 @@ def voxel_moments(
     cov[:, 1, 2] = cov[:, 2, 1] = e[4] - s[1] * s[2]
     cov[:, 2, 2] = e[5] - s[2] * s[2]
     return n.astype(np.int64), np.stack(s, axis=1), cov
-
-
-# what the kernel returns: (ok, counts (M,), mean (M, 3), covariance (M, 3, 3))
-Moments = tuple[bool, NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]
 
 
 @functools.cache

@@ -11,7 +11,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.descriptors.ndt_histogram import Moments
+Moments = tuple[bool, NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]
+"""What the kernel returns: (ok, counts (M,), mean (M, 3), covariance (M, 3, 3))."""
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.metrics.kitti import LENGTHS_M, KittiSegments
+from pipeline.metrics.kitti import LENGTHS_M, STEP_FRAMES, KittiSegments
 from pipeline.odometry.base import Schedule
 from pipeline.sequence import SequenceInfo
 from pipeline.trajectory import Trajectory
@@ -67,6 +67,7 @@ class Evaluation:
     fixed_params: dict[str, float]
     baseline_params: dict[str, float]
     kitti_lengths_m: tuple[float, ...] = LENGTHS_M
+    kitti_step_frames: int = STEP_FRAMES
     scores: list[SettingScore] = field(default_factory=list)
     schedules: dict[str, Schedule] = field(default_factory=dict)
     infos: dict[str, SequenceInfo] = field(default_factory=dict)

@@ -35,6 +35,7 @@ from pipeline.evaluate.result import (
 from pipeline.evaluate.section import EvaluateSection
 from pipeline.metrics.kitti import KittiSegments
 from pipeline.metrics.rte import per_frame_rte
+from pipeline.metrics.section import DevkitSection
 from pipeline.odometry.base import Schedule
 from pipeline.sequence import SequenceInfo, SequenceReader
 from pipeline.trajectory import Trajectory, read_trajectory, write_trajectory
@@ -76,9 +77,10 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
     """
     from pipeline.executor import map_in_processes
 
-    adapter = study_adapter(algorithm, adapter_options, fixed_dir)
+    adapter = evaluated_adapter(algorithm, adapter_options, fixed_dir)
     result = Evaluation(algorithm, settings.length_m, adapter.space.validate(fixed_params),
-                        adapter.space.defaults(), settings.kitti_lengths_m)
+                        adapter.space.defaults(), settings.devkit.lengths_m,
+                        settings.devkit.step_frames)
     jobs = [(path, algorithm, adapter_options, fixed_dir, result.baseline_params,
              result.fixed_params, adaptive_dir, out_dir, settings) for path in sequences]
     scored = map_in_processes(_score_sequence, jobs, settings.workers)
@@ -93,16 +95,15 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
     return result
 
 
-def study_adapter(algorithm: str, adapter_options: Mapping[str, object] | None,
-                  fixed_dir: Path | None) -> Any:
+def evaluated_adapter(algorithm: str, adapter_options: Mapping[str, object] | None,
+                      fixed_dir: Path | None) -> Any:
     """The adapter with the space the studies searched (its defaults are the baseline), read
     from the joint study's output; the built-in space without one."""
-    from pipeline.odometry import get_adapter
-    from pipeline.odometry.base import with_space
+    from pipeline.odometry.registry import build_adapter
     from pipeline.tuning.table import read_space
 
-    adapter = get_adapter(algorithm, **dict(adapter_options or {}))
-    return adapter if fixed_dir is None else with_space(adapter, read_space(fixed_dir, algorithm))
+    space = None if fixed_dir is None else read_space(fixed_dir, algorithm)
+    return build_adapter(algorithm, adapter_options, space)
 
 
 @dataclass
@@ -121,7 +122,7 @@ def _score_sequence(path: Path, algorithm: str, adapter_options: Mapping[str, ob
                     fixed_params: dict[str, float], adaptive_dir: Path, out_dir: Path,
                     settings: EvaluateSection) -> _SequenceResult:
     """Baseline and fixed run on ``path``, the adaptive run read back, all three scored."""
-    adapter = study_adapter(algorithm, adapter_options, fixed_dir)
+    adapter = evaluated_adapter(algorithm, adapter_options, fixed_dir)
     name = path.stem
     gt, info = _ground_truth(path)
     labels = [info.label_of(i) for i in range(len(gt))]
@@ -140,7 +141,7 @@ def _score_sequence(path: Path, algorithm: str, adapter_options: Mapping[str, ob
         score.replicas = run_replicas(adapter, path, gt, nominal[score.setting], settings)
     return _SequenceResult(
         info, gt, scores, schedule,
-        _kitti_segments(gt, {s: t for s, (t, _) in runs.items()}, settings.kitti_lengths_m))
+        _kitti_segments(gt, {s: t for s, (t, _) in runs.items()}, settings.devkit))
 
 
 def run_replicas(adapter: Any, path: Path, gt: NDArray[np.float64],
@@ -161,16 +162,14 @@ def run_replicas(adapter: Any, path: Path, gt: NDArray[np.float64],
             out.append(Replica(None, None))
             continue
         t_err, _ = per_frame_rte(gt, traj.T_world_lidar, settings.length_m)
-        out.append(Replica(t_err, kitti_errors(gt, traj.T_world_lidar, settings.kitti_lengths_m)))
+        out.append(Replica(t_err, kitti_errors(gt, traj.T_world_lidar, settings.devkit.lengths_m,
+                                               settings.devkit.step_frames)))
     return out
 
 
 def _ground_truth(path: Path) -> tuple[NDArray[np.float64], SequenceInfo]:
     with SequenceReader(path) as reader:
-        gt, info = reader.ground_truth(), reader.info
-    if gt is None:
-        raise InputError(f"{path}: validation sequence has no ground truth")
-    return gt, info
+        return reader.require_ground_truth("to evaluate against"), reader.info
 
 
 def _run_fixed(adapter: Any, path: Path, params: Mapping[str, float], out_dir: Path,
@@ -200,11 +199,11 @@ def _read_adaptive(folder: Path, algorithm: str) -> tuple[Trajectory, float]:
 
 
 def _kitti_segments(gt: NDArray[np.float64], trajectories: Mapping[str, Trajectory],
-                    lengths_m: tuple[float, ...]) -> dict[str, KittiSegments]:
+                    devkit: DevkitSection) -> dict[str, KittiSegments]:
     """Devkit segments of every setting (the lengths that fit)."""
     from pipeline.metrics.kitti import kitti_errors
 
-    return {setting: kitti_errors(gt, traj.T_world_lidar, lengths_m)
+    return {setting: kitti_errors(gt, traj.T_world_lidar, devkit.lengths_m, devkit.step_frames)
             for setting, traj in trajectories.items()}
 
 

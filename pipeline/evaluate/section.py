@@ -6,7 +6,7 @@ from __future__ import annotations
 from pydantic import Field, field_validator
 
 from pipeline.config import Section
-from pipeline.metrics.kitti import LENGTHS_M
+from pipeline.metrics.section import DevkitSection
 
 
 class EvaluateSection(Section):
@@ -14,7 +14,7 @@ class EvaluateSection(Section):
 
     splits: the splits of index.json to evaluate on, the headline one first (e.g.
     [validation, train] for the KITTI protocol's test and training sequences); length_m: RTE
-    segment length [m] (the trials' L); kitti_lengths_m: devkit lengths to try (those longer
+    segment length [m] (the trials' L); devkit: the devkit metric's lengths to try (those longer
     than a sequence are left out, as the devkit does); workers: sequences run at a time by the
     ``adaptive`` and ``evaluate`` stages (processes; the same results for any number);
     replicas: extra runs of every setting with the parameters moved by at most
@@ -23,7 +23,7 @@ class EvaluateSection(Section):
 
     splits: list[str] = Field(default_factory=lambda: ["validation"], min_length=1)
     length_m: float = Field(25.0, gt=0)
-    kitti_lengths_m: tuple[float, ...] = LENGTHS_M
+    devkit: DevkitSection = DevkitSection.model_validate({})
     workers: int = Field(default=2, ge=1)
     replicas: int = Field(default=0, ge=0)
     replica_scale: float = Field(default=0.005, gt=0, le=0.1)

@@ -24,6 +24,7 @@ from pipeline.generalization.summary import (
     suite_metrics,
 )
 from pipeline.io_utils import atomic_write_text
+from pipeline.selection import SelectionSettings
 
 
 @dataclass(frozen=True)
@@ -39,15 +40,18 @@ class GeneralizationPaths:
 
 
 def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
-                       adapter_options: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """Score the suite ``section.suite``; write metrics, plot data and figure; return the
+                       adapter_options: Mapping[str, Any] | None = None,
+                       selection: SelectionSettings | None = None) -> dict[str, Any]:
+    """Score the suite ``section.suite`` with the selector's runtime ``selection`` (params
+    ``select``; None: the defaults); write metrics, plot data and figure; return the
     metrics."""
     from pipeline.evaluate.runs import best_fixed_params
     from pipeline.report.outputs import csv_text, write_json
 
     algorithm, fixed = best_fixed_params(paths.fixed)
     inputs = SuiteInputs(paths.model, paths.fixed, algorithm, fixed, dict(adapter_options or {}),
-                         section.length_m, section.replicas, section.replica_scale)
+                         section.length_m, section.replicas, section.replica_scale,
+                         selection or SelectionSettings())
     scores = run_suite(section, inputs, paths.runs)
     result = suite_metrics(scores, section.suite, section.root, section.bootstrap, algorithm,
                            section.length_m)

@@ -27,6 +27,7 @@ from typing import Any
 
 from pipeline.evaluate.result import SETTINGS
 from pipeline.generalization.suite import GeneralizeSection, SuiteWorld, suite_worlds
+from pipeline.selection import SelectionSettings
 
 log = logging.getLogger(__name__)
 
@@ -97,7 +98,8 @@ def _ratio(a: float, b: float) -> float:
 class SuiteInputs:
     """What every world is run with: the artifact, the joint study's output (its stored
     parameter space gives the baseline) and best parameters (and their algorithm), the
-    adapter's untuned options, L [m], replicas per setting and their relative scale."""
+    adapter's untuned options, L [m], replicas per setting and their relative scale, the
+    selector's runtime settings (params ``select``)."""
 
     model_dir: Path
     fixed_dir: Path
@@ -107,6 +109,7 @@ class SuiteInputs:
     length_m: float
     replicas: int = 0
     replica_scale: float = 0.005
+    selection: SelectionSettings = field(default_factory=SelectionSettings)
 
 
 def run_suite(section: GeneralizeSection, inputs: SuiteInputs, out_dir: Path) -> list[WorldScore]:
@@ -147,7 +150,7 @@ def score_world(world: SuiteWorld, inputs: SuiteInputs, out_dir: Path) -> WorldS
     try:
         simulate_sequence(world.spec, path, name=world.name)
         run = run_one(loaded_model(inputs.model_dir), path, out_dir / "adaptive" / world.name,
-                      inputs.adapter_options)
+                      inputs.adapter_options, selection=inputs.selection)
         settings = EvaluateSection(length_m=inputs.length_m, replicas=inputs.replicas,
                                    replica_scale=inputs.replica_scale)
         ev = evaluate([path], inputs.algorithm, inputs.fixed_params, out_dir / "adaptive",

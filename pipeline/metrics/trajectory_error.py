@@ -48,9 +48,7 @@ def load_poses(path: str | Path, fmt: PoseFormat = "auto") -> Poses:
         from pipeline.sequence import SequenceReader
 
         with SequenceReader(path) as reader:
-            gt = reader.ground_truth()
-            if gt is None:
-                raise InputError(f"{path}: the sequence has no ground truth")
+            gt = reader.require_ground_truth("to compare with")
             return Poses(str(path), gt, reader.stamps_ns.copy())
     if suffix == ".parquet":
         from pipeline.trajectory import read_trajectory

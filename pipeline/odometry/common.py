@@ -1,14 +1,21 @@
-"""Small pieces shared by the in-process adapters: option models, SE(3) updates, voxel keys."""
+"""Small pieces shared by the in-process adapters: their shell (``StreamingAdapterBase``),
+option models, SE(3) updates, voxel keys."""
 
 from __future__ import annotations
 
 import math
-from typing import Any, TypeVar
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.config import Section, validate_section
+from pipeline.odometry.base import Odometry, ParameterSpace, Params, Schedule, run_streaming
+from pipeline.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from pipeline.sequence import Scan
 
 F64 = NDArray[np.float64]
 OptionsT = TypeVar("OptionsT", bound=Section)
@@ -22,6 +29,30 @@ KEY_MAX = (1 << 21) - 1
 def parse_options(model: type[OptionsT], adapter: str, options: dict[str, Any]) -> OptionsT:
     """Validated adapter ``options`` (CLI strings are converted); ConfigError naming them."""
     return validate_section(model, f"{adapter} option", options)
+
+
+class StreamingAdapterBase:
+    """The shell every in-process adapter shares: ``name``, its parameter ``space`` (the
+    baseline = its defaults; ``with_space`` replaces it), its untuned options validated by
+    ``options_model``, ``start(params)`` -> a streaming ``odometry_class(params, options,
+    space)`` and ``run`` through ``run_streaming`` (one scan at a time, the schedule's
+    parameters pushed between scans). A new adapter subclasses it and writes its odometry."""
+
+    name: str
+    space: ParameterSpace
+    options_model: ClassVar[type[Section]]
+    odometry_class: ClassVar[Callable[..., Odometry]]
+
+    def __init__(self, **options: object) -> None:
+        self.options = parse_options(self.options_model, self.name, dict(options))
+
+    def start(self, params: Params) -> Odometry:
+        """A streaming odometry with ``params`` (validated; missing ones take defaults)."""
+        return self.odometry_class(params, self.options, self.space)
+
+    def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
+        """Run over ``scans`` with the per-frame ``schedule``."""
+        return run_streaming(self.start, scans, schedule)
 
 
 def voxel_indices(points: F64, voxel_m: float) -> NDArray[np.int64]:

@@ -16,7 +16,6 @@ velocity and keyframe pose are kept, so the trajectory stays continuous across a
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -24,17 +23,8 @@ from numpy.typing import NDArray
 from pydantic import Field
 
 from pipeline.config import Section
-from pipeline.odometry.base import (
-    Adapter,
-    ParameterSpace,
-    Params,
-    ParamSpec,
-    Schedule,
-    run_streaming,
-)
-from pipeline.odometry.common import F64, constant_velocity_guess, parse_options
-from pipeline.sequence import Scan
-from pipeline.trajectory import Trajectory
+from pipeline.odometry.base import Adapter, ParameterSpace, Params, ParamSpec
+from pipeline.odometry.common import F64, StreamingAdapterBase, constant_velocity_guess
 
 SPACE = ParameterSpace((
     ParamSpec("max_correspondence_distance", 1.0, 10.0, 4.0, unit="m"),
@@ -113,22 +103,13 @@ class GicpOdometry:
         return T.copy()
 
 
-class GicpAdapter:
+class GicpAdapter(StreamingAdapterBase):
     """The ``gicp`` adapter: keyframe GICP on small_gicp."""
 
     name = "gicp"
     space = SPACE
-
-    def __init__(self, **options: object) -> None:
-        self.options = parse_options(GicpOptions, self.name, dict(options))
-
-    def start(self, params: Params) -> GicpOdometry:
-        """A streaming odometry with ``params`` (validated; missing ones take defaults)."""
-        return GicpOdometry(params, self.options, self.space)
-
-    def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
-        """Run over ``scans`` with the per-frame ``schedule``."""
-        return run_streaming(self.start, scans, schedule)
+    options_model = GicpOptions
+    odometry_class = GicpOdometry
 
 
 _: type[Adapter] = GicpAdapter

@@ -20,7 +20,6 @@ the state the new min_motion_th / max_range would have reached). Nothing else is
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -28,17 +27,8 @@ from numpy.typing import NDArray
 from pydantic import Field
 
 from pipeline.config import Section
-from pipeline.odometry.base import (
-    Adapter,
-    ParameterSpace,
-    Params,
-    ParamSpec,
-    Schedule,
-    run_streaming,
-)
-from pipeline.odometry.common import F64, parse_options
-from pipeline.sequence import Scan
-from pipeline.trajectory import Trajectory
+from pipeline.odometry.base import Adapter, ParameterSpace, Params, ParamSpec
+from pipeline.odometry.common import F64, StreamingAdapterBase
 
 SPACE = ParameterSpace((
     ParamSpec("voxel_size", 0.2, 3.0, 1.0, log=True, unit="m"),
@@ -130,22 +120,13 @@ class KissOdometry:
         return T
 
 
-class KissIcpAdapter:
+class KissIcpAdapter(StreamingAdapterBase):
     """The ``kiss_icp`` adapter."""
 
     name = "kiss_icp"
     space = SPACE
-
-    def __init__(self, **options: object) -> None:
-        self.options = parse_options(KissOptions, self.name, dict(options))
-
-    def start(self, params: Params) -> KissOdometry:
-        """A streaming odometry with ``params`` (validated; missing ones take defaults)."""
-        return KissOdometry(params, self.options, self.space)
-
-    def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
-        """Run over ``scans`` with the per-frame ``schedule``."""
-        return run_streaming(self.start, scans, schedule)
+    options_model = KissOptions
+    odometry_class = KissOdometry
 
 
 _: type[Adapter] = KissIcpAdapter

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,14 +43,13 @@ from pipeline.odometry.base import (
     Params,
     ParamSpec,
     Schedule,
-    run_streaming,
 )
 from pipeline.odometry.common import (
     F64,
     DownsampleCache,
+    StreamingAdapterBase,
     constant_velocity_guess,
     orthonormalize,
-    parse_options,
     vector_norm,
 )
 from pipeline.odometry.ndt_kernel import (
@@ -62,7 +60,6 @@ from pipeline.odometry.ndt_kernel import (
     transform_points,
 )
 from pipeline.sequence import Scan
-from pipeline.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -199,24 +196,24 @@ class NdtOdometry:
         return orthonormalize(T)
 
 
-class NdtAdapter:
+class NdtAdapter(StreamingAdapterBase):
     """The ``ndt`` adapter: keyframe NDT, parameters ``resolution`` and ``keyframe_interval``."""
 
     name = "ndt"
     space = SPACE
+    options_model = NdtOptions
+    odometry_class = NdtOdometry
+    options: NdtOptions
 
     def __init__(self, **options: object) -> None:
-        self.options = parse_options(NdtOptions, self.name, dict(options))
+        super().__init__(**options)
         self.sources = DownsampleCache()
         """The source clouds of the scans this adapter was warmed with (``warm``)."""
 
     def start(self, params: Params) -> NdtOdometry:
-        """A streaming odometry with ``params`` (validated; missing ones take defaults)."""
+        """A streaming odometry with ``params`` (validated; missing ones take defaults) and the
+        source clouds of the warmed scans."""
         return NdtOdometry(params, self.options, self.sources, self.space)
-
-    def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
-        """Run over ``scans`` with the per-frame ``schedule``."""
-        return run_streaming(self.start, scans, schedule)
 
     def warm(self, scans: list[Scan]) -> None:
         """Downsample the source cloud of every scan once (it depends on no tuned parameter);

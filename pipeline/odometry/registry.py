@@ -8,11 +8,11 @@ Options are adapter-specific settings that are not tuned (e.g. ``source_voxel_m`
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from pipeline.errors import ConfigError
-from pipeline.odometry.base import Adapter
+from pipeline.odometry.base import Adapter, ParameterSpace, with_space
 
 
 def _ndt(**options: Any) -> Adapter:
@@ -58,3 +58,24 @@ def get_adapter(name: str, **options: Any) -> Adapter:
     if factory is None:
         raise ConfigError(f"unknown odometry algorithm {name!r} (known: {', '.join(ADAPTERS)})")
     return factory(**options)
+
+
+def build_adapter(name: str, options: Mapping[str, Any] | None = None,
+                  space: ParameterSpace | list[dict[str, Any]] | None = None) -> Adapter:
+    """The adapter every stage runs: ``name`` (a registry name, or a factory ``module:attr``
+    that tests and plugins use) with its untuned ``options`` (params
+    ``trials.adapter_options``) and, when given, ``space`` (a ParameterSpace or its JSON: the
+    space a study searched, stored with its trials and in the model) in place of its built-in
+    one. ConfigError for an unknown name or option."""
+    options = dict(options or {})
+    if ":" in name:
+        import importlib
+
+        module, attr = name.split(":", 1)
+        adapter: Adapter = getattr(importlib.import_module(module), attr)(**options)
+    else:
+        adapter = get_adapter(name, **options)
+    if space is None:
+        return adapter
+    return with_space(adapter, space if isinstance(space, ParameterSpace)
+                      else ParameterSpace.from_json(space))

@@ -170,7 +170,8 @@ def report_markdown(ev: Evaluation, m: Mapping[str, Any], pngs: Mapping[str, lis
         "## KITTI devkit metric (the paper's Table II layout)",
         "",
         "t_err [%] of the devkit (segments of "
-        f"{', '.join(f'{x:g}' for x in ev.kitti_lengths_m)} m that fit, a start every 10 frames); "
+        f"{', '.join(f'{x:g}' for x in ev.kitti_lengths_m)} m that fit, a start every "
+        f"{ev.kitti_step_frames} frames); "
         "a split's average pools all its segments.",
         "",
         table2_markdown(table2_json([m])),

@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 from pipeline.errors import ConfigError, InputError
 from pipeline.io_utils import input_file
 from pipeline.posefile import PoseFormat, read_pose_file
-from pipeline.sequence import SequenceInfo
+from pipeline.sequence import SequenceInfo, mcap_errors
 from pipeline.sources.base import (
     Frame,
     IngestReport,
@@ -44,27 +44,15 @@ def open_mcap(path: Path) -> Iterator[tuple[Any, Any]]:
     from mcap.reader import make_reader
 
     input_file(path, "MCAP file")
-    with open(path, "rb") as fh:
-        try:
-            reader = make_reader(fh, validate_crcs=True)
-            summary = reader.get_summary()
-        except Exception as exc:
-            raise InputError(
-                f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})"
-            ) from None
+    with open(path, "rb") as fh, mcap_errors(path):
+        reader = make_reader(fh, validate_crcs=True)
+        summary = reader.get_summary()
         if summary is None:
             raise InputError(
                 f"{path}: corrupt or truncated MCAP (no summary section; "
                 "`mcap recover` can rebuild it)"
             )
-        try:
-            yield reader, summary
-        except InputError:
-            raise
-        except Exception as exc:
-            raise InputError(
-                f"{path}: corrupt or truncated MCAP ({type(exc).__name__}: {exc})"
-            ) from None
+        yield reader, summary
 
 
 class _Decoder:

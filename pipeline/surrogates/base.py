@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from pipeline.artifact import Arrays, ArraySpec
 
 if TYPE_CHECKING:
-    from pipeline.surrogates.fit import SurrogateSection
+    from pipeline.surrogates.section import SurrogateSection
 
 
 
@@ -110,12 +110,15 @@ class Surrogate(Protocol):
     ``type`` is the manifest's ``model.type``; ``files`` the artifact arrays it adds to the
     common ones (env.npy, env_frames.npy, candidates.npy, pca_*.npy), with their specs;
     ``risk_aware``: its search honours the selector's ``risk`` option (mean + risk * std of the
-    neighbours' targets; ``pipeline.surrogates.check_risk``).
+    neighbours' targets; ``pipeline.surrogates.check_risk``); ``manifest_schema``: the JSON
+    Schema of what ``to_json`` writes besides ``type`` and ``target`` (the artifact's schema
+    takes it from the registry: ``pipeline.surrogates.writer.artifact_schema``).
     """
 
     type: ClassVar[str]
     files: ClassVar[dict[str, ArraySpec]]
     risk_aware: ClassVar[bool]
+    manifest_schema: ClassVar[dict[str, Any]]
 
     @classmethod
     def fit(cls, training: TrainingSet, section: SurrogateSection) -> Surrogate:

@@ -17,7 +17,7 @@ import numpy as np
 from pipeline.surrogates.rows import TrainingRows
 
 if TYPE_CHECKING:
-    from pipeline.surrogates.fit import SurrogateSection
+    from pipeline.surrogates.section import SurrogateSection
 
 METHOD = "leave-one-sequence-out"
 
@@ -35,7 +35,7 @@ def cross_validate(
     """Leave-one-sequence-out CV (module docstring). Held-out frames are subsampled to at most
     ``cv_max_frames`` per sequence (all trials of a kept frame stay, for the regret)."""
     from pipeline.surrogates import surrogate_class
-    from pipeline.surrogates.fit import from_target, to_target
+    from pipeline.surrogates.target import from_target, to_target
 
     kind = surrogate_class(settings.model)
 

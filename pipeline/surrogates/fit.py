@@ -24,114 +24,20 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field, field_validator, model_validator
 
-from pipeline.config import Section
 from pipeline.errors import ConfigError
 from pipeline.surrogates.base import Surrogate, TrainingSet
-from pipeline.surrogates.novelty import NoveltyFallback
+from pipeline.surrogates.fitted import FittedSurrogate
 from pipeline.surrogates.rows import TrainingRows
+from pipeline.surrogates.section import SurrogateSection
+from pipeline.surrogates.target import to_target
 
 if TYPE_CHECKING:
     from pipeline.descriptors.dataset import DescriptorsSection
-
-
-class ForestSection(Section):
-    """params.yaml ``surrogate.forest``: the random forest (pipeline/surrogates/forest.py)."""
-
-    trees: int = Field(32, ge=1)
-    min_samples_leaf: int = Field(5, ge=1)
-    max_samples: int | None = Field(20000, ge=1)
-
-
-class SurrogateSection(Section):
-    """params.yaml ``surrogate``: the model (its type, k, scalings, target, candidates, CV) and
-    the selection settings the artifact carries (pipeline/runtime.py documents them)."""
-
-    model: str = "knn"
-    k: int = Field(20, ge=1)
-    w_e: float = Field(1.0, gt=0)
-    w_x: float = Field(1.0, gt=0)
-    target: Literal["log", "linear"] = "log"
-    n_sobol: int = Field(1024, ge=0)
-    seed: int = 0
-    cv_max_frames: int = Field(200, ge=1)
-    period_s: float = Field(1.0, gt=0)
-    hysteresis: float = Field(0.02, ge=0)
-    min_scan_points: int = Field(1000, ge=0)
-    subset_rows: int = Field(4096, ge=1)
-    refine_iters: int = Field(4, ge=0)
-    window: int = Field(5, ge=1, le=60)
-    anchor_margin: float | None = Field(None, ge=0)
-    risk: float = Field(0.0, ge=0)
-    novelty_quantile: float | None = Field(1.0, gt=0, le=1)
-    novelty_fallback: NoveltyFallback = "auto"
-    forest: ForestSection = ForestSection.model_validate({})
-
-    @field_validator("model")
-    @classmethod
-    def _registered(cls, v: str) -> str:
-        from pipeline.surrogates import SURROGATES
-
-        if v not in SURROGATES:
-            raise ValueError(f"model must be one of {list(SURROGATES)}, got {v!r}")
-        return v
-
-    @model_validator(mode="after")
-    def _risk_needs_a_risk_aware_model(self) -> SurrogateSection:
-        from pipeline.surrogates import check_risk
-
-        check_risk(self.model, self.risk)
-        return self
-
-    def selection(self) -> dict[str, Any]:
-        """The manifest's ``selection`` block (the runtime's defaults)."""
-        return {
-            "period_s": self.period_s,
-            "hysteresis": self.hysteresis,
-            "min_scan_points": self.min_scan_points,
-            "subset_rows": self.subset_rows,
-            "refine_iters": self.refine_iters,
-            "window": self.window,
-            "anchor_margin": self.anchor_margin,
-            "risk": self.risk,
-        }
-
-
-@dataclass
-class FittedSurrogate:
-    """A fitted model and what the artifact stores beside it.
-
-    env (n_env, D): E_s of every training frame (env_sequences, env_frames: which one);
-    surrogate: the fitted ``Surrogate`` (``settings.model``); candidates_u (C, P): candidate
-    parameter vectors in [0, 1]; summary, cv: the training summary and the cross-validation.
-    """
-
-    settings: SurrogateSection
-    e_scale: float
-    x_scale: float
-    env: NDArray[np.float64]
-    env_sequences: list[str]
-    env_frames: NDArray[np.int64]
-    surrogate: Surrogate
-    candidates_u: NDArray[np.float64]
-    summary: dict[str, Any]
-    cv: dict[str, Any]
-    novelty_distance: float | None = None
-
-
-def to_target(y: NDArray[np.float64], target: str) -> NDArray[np.float64]:
-    """y [%] -> the averaged target t."""
-    return np.log1p(np.maximum(y, 0.0)) if target == "log" else np.asarray(y, np.float64)
-
-
-def from_target(t: NDArray[np.float64], target: str) -> NDArray[np.float64]:
-    """Inverse of ``to_target``."""
-    return np.expm1(t) if target == "log" else t
 
 
 def fit_surrogate(
@@ -139,10 +45,10 @@ def fit_surrogate(
 ) -> FittedSurrogate:
     """Scale the rows, group them by environment, fit ``settings.model``, build candidates,
     cross-validate."""
-    from pipeline.surrogates import surrogate_class
     from pipeline.surrogates.cross_validation import cross_validate
     from pipeline.surrogates.novelty import novelty_distance
 
+    kind = registered(settings.model)
     if settings.target not in ("log", "linear"):
         raise ConfigError(f"surrogate.target must be 'log' or 'linear', got {settings.target!r}")
     seq_names, seq_code = np.unique(rows.sequences.astype(str), return_inverse=True)
@@ -162,7 +68,7 @@ def fit_surrogate(
     rows_x = rows.U[order] * x_scale
     rows_t = to_target(rows.y[order], settings.target)
     training = TrainingSet(env, offsets, rows_x, rows_t)
-    surrogate = surrogate_class(settings.model).fit(training, settings)
+    surrogate = kind.fit(training, settings)
     cands = candidate_set(rows.U, len(space_json), settings.n_sobol, settings.seed)
     summary = {
         "rows": len(rows.y),
@@ -218,23 +124,30 @@ def build_model(
     The descriptor settings the PCA was fitted with win (pca.json); ``descriptors`` only
     stands in for a PCA folder that does not record them.
     """
-    from pipeline.artifact import ArtifactInfo, write_artifact
     from pipeline.descriptors import descriptor_from_json
     from pipeline.pca import Pca
     from pipeline.surrogates.novelty import novelty_fallback
     from pipeline.surrogates.rows import read_training_rows
+    from pipeline.surrogates.writer import ArtifactInfo, write_artifact
 
+    registered(section.model)  # a misspelt model fails before the rows are read
     pca = Pca.load(inputs.pca)
     algo, space, rows = read_training_rows(inputs.db, algorithm, space_of)
     fitted = fit_surrogate(rows, space, section)
-    selection = section.selection()
     fallback, record = novelty_fallback(inputs.db, algo, space, section.novelty_fallback)
-    selection["novelty_fallback"] = record
-    if fallback is not None:
-        selection["novelty_fallback_params"] = fallback
     descriptor = (
         descriptor_from_json(pca.descriptor) if pca.descriptor else descriptors.descriptor()
     )
-    info = ArtifactInfo(algo, space, descriptor, selection,
+    info = ArtifactInfo(algo, space, descriptor, record, fallback,
                         {"db": str(inputs.db), "pca": str(inputs.pca)})
     return write_artifact(out, fitted, pca, info)
+
+
+def registered(model: str) -> type[Surrogate]:
+    """The surrogate class ``surrogate.model`` names; ConfigError naming the known ones."""
+    from pipeline.surrogates import surrogate_class
+
+    try:
+        return surrogate_class(model)
+    except KeyError as exc:
+        raise ConfigError(f"surrogate.model: {exc.args[0]}") from None

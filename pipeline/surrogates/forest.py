@@ -32,7 +32,7 @@ from pipeline.surrogates.base import (
 )
 
 if TYPE_CHECKING:
-    from pipeline.surrogates.fit import SurrogateSection
+    from pipeline.surrogates.section import SurrogateSection
 
 
 @dataclass
@@ -46,6 +46,12 @@ class ForestSurrogate:
         "forest_left.npy": ArraySpec(1, "i"), "forest_right.npy": ArraySpec(1, "i"),
         "forest_value.npy": ArraySpec(1), "forest_roots.npy": ArraySpec(1, "i"),
     }
+    manifest_schema: ClassVar[dict[str, Any]] = {
+        "required": ["trees", "min_samples_leaf", "nodes"],
+        "properties": {"trees": {"type": "integer", "minimum": 1},
+                       "min_samples_leaf": {"type": "integer", "minimum": 1},
+                       "max_samples": {"type": ["integer", "null"], "minimum": 1},
+                       "nodes": {"type": "integer", "minimum": 1}}}
 
     feature: NDArray[np.int64]
     threshold: NDArray[np.float64]

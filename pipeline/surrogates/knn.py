@@ -30,7 +30,7 @@ from pipeline.surrogates.knn_search import (
 )
 
 if TYPE_CHECKING:
-    from pipeline.surrogates.fit import SurrogateSection
+    from pipeline.surrogates.section import SurrogateSection
 
 
 @dataclass
@@ -45,6 +45,10 @@ class KnnSurrogate:
         "rows_x.npy": ArraySpec(2),
         "rows_t.npy": ArraySpec(1),
     }
+    manifest_schema: ClassVar[dict[str, Any]] = {
+        "required": ["k"],
+        "properties": {"k": {"type": "integer", "minimum": 1}, "weights": {"const": "uniform"},
+                       "metric": {"const": "euclidean"}}}
 
     k: int
     target: str

@@ -32,7 +32,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, TypeAlias
+from typing import Protocol, TypeAlias
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,15 +40,24 @@ from scipy.spatial import cKDTree
 
 from pipeline.surrogates.base import Prediction
 
-if TYPE_CHECKING:
-    from pipeline.surrogates.knn import KnnSurrogate
+
+class KnnRows(Protocol):
+    """What the searches read of a kNN surrogate (``pipeline.surrogates.knn.KnnSurrogate``):
+    k, env (n_env, D) E_s of the training frames, env_offsets (n_env + 1,) the rows of each,
+    rows_x (M, P) X_s and rows_t (M,) their targets."""
+
+    k: int
+    env: NDArray[np.float64]
+    env_offsets: NDArray[np.int64]
+    rows_x: NDArray[np.float64]
+    rows_t: NDArray[np.float64]
 
 
 class Neighbourhood:
     """The rows near one environment E_s, as a (P + 1)-D tree (module docstring: the certified
     search)."""
 
-    def __init__(self, model: KnnSurrogate, d2: NDArray[np.float64], subset_rows: int,
+    def __init__(self, model: KnnRows, d2: NDArray[np.float64], subset_rows: int,
                  x_scale: float, risk: float = 0.0) -> None:
         """d2 (n_env,): squared E-distances of the training frames to E_s; risk: the weight of
         the neighbours' spread (``canonical_value``)."""
@@ -118,7 +127,7 @@ class TrialGroups:
     the k nearest trials of every candidate. Built once per Selector."""
 
     def __init__(
-        self, model: KnnSurrogate, blocks: list[list[int]], candidates_u: NDArray[np.float64],
+        self, model: KnnRows, blocks: list[list[int]], candidates_u: NDArray[np.float64],
         x_scale: float,
     ) -> None:
         """``blocks``: the frames of each group (frames whose rows hold the same trial vectors
@@ -135,7 +144,7 @@ class TrialGroups:
         self.candidate_trials = self.nearest_trials(candidates_u)
 
     @classmethod
-    def build(cls, model: KnnSurrogate, candidates_u: NDArray[np.float64],
+    def build(cls, model: KnnRows, candidates_u: NDArray[np.float64],
               x_scale: float) -> TrialGroups | None:
         """The groups of ``model``, or None when its frames form more than MAX_GROUPS groups
         (or it has fewer than k rows)."""

@@ -18,14 +18,14 @@ import json
 import logging
 from collections.abc import Mapping, MutableMapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.errors import AdaptuneError, InputError, OdometryError
+from pipeline.errors import AdaptuneError, OdometryError
 from pipeline.odometry.base import Adapter
+from pipeline.sequence import read_ground_truth
 from pipeline.trajectory import Trajectory
 from pipeline.tuning.layout import trajectory_path
 
@@ -35,6 +35,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 MAX_ERROR_CHARS = 400
+TRIALS_PURPOSE = "to score trials against"
+"""What a trial needs the ground truth for (``read_ground_truth``'s message)."""
 
 
 @dataclass(frozen=True)
@@ -82,27 +84,6 @@ class TrialResult:
     curve: tuple[float, ...] = ()  # values at the study's checkpoints (pruning.curve_of)
 
 
-def resolve_adapter(ref: str, options: Mapping[str, Any] | None = None,
-                    space: list[dict[str, Any]] | None = None) -> Adapter:
-    """The adapter named ``ref`` in the registry, or built by the factory ``module:attr``, with
-    ``space`` (``ParameterSpace.to_json``) in place of its built-in one when given."""
-    options = dict(options or {})
-    if ":" in ref:
-        import importlib
-
-        module, attr = ref.split(":", 1)
-        adapter: Adapter = getattr(importlib.import_module(module), attr)(**options)
-    else:
-        from pipeline.odometry.registry import get_adapter
-
-        adapter = get_adapter(ref, **options)
-    if space is not None:
-        from pipeline.odometry.base import ParameterSpace, with_space
-
-        adapter = with_space(adapter, ParameterSpace.from_json(space))
-    return adapter
-
-
 def evaluate_trial(job: TrialJob, adapter: Adapter,
                    scans: Mapping[str, list[Scan]] | None = None,
                    truths: MutableMapping[str, NDArray[np.float64]] | None = None
@@ -132,7 +113,7 @@ def evaluate_trial(job: TrialJob, adapter: Adapter,
     truths = {} if truths is None else truths
     for index, (name, path) in enumerate(job.sequences):
         if path not in truths:
-            truths[path] = load_ground_truth(path)
+            truths[path] = read_ground_truth(path, TRIALS_PURPOSE)
         gt = truths[path]
         t0 = time.perf_counter()
         try:
@@ -190,17 +171,6 @@ def _run(job: TrialJob, adapter: Adapter, index: int, path: str, cached: list[Sc
     stamps_ns = np.array([sc.stamp_ns for sc in cached])
     check_trajectory(traj, stamps_ns, f"{adapter.name} on {path}")
     return traj
-
-
-def load_ground_truth(path: str | Path) -> NDArray[np.float64]:
-    """(N, 4, 4) ground-truth T_world_lidar of a sequence MCAP; InputError when it has none."""
-    from pipeline.sequence import SequenceReader
-
-    with SequenceReader(path) as reader:
-        gt = reader.ground_truth()
-    if gt is None:
-        raise InputError(f"{path}: no ground truth to score trials against")
-    return gt
 
 
 def check_jump(traj: Trajectory, jump_limit_m: float) -> None:

@@ -10,9 +10,12 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
+from numpy.typing import NDArray
 
 from pipeline.errors import InputError
 from schemas.arrow import TRIAL_STATUSES, TRIALS_BASE, check_schema_version
@@ -35,6 +38,20 @@ def trajectory_path(out_dir: str | Path, algorithm: str, sequence: str, trial: i
     """Path of one trial's trajectory Parquet file under ``out_dir``."""
     return (Path(out_dir) / "trajectories" / f"algorithm={algorithm}" / f"sequence={sequence}"
             / f"trial={trial}" / "trajectory.parquet")
+
+
+def read_trial_trajectories(out_dir: str | Path, algorithm: str,
+                            sequences: Iterable[tuple[str, Any]], trial: int
+                            ) -> list[NDArray[np.float64] | None]:
+    """T_world_lidar (N, 4, 4) of ``trial``'s stored trajectory on each of ``sequences``
+    ((name, path) pairs; partial for a pruned trial), None where it has none."""
+    from pipeline.trajectory import read_trajectory
+
+    out: list[NDArray[np.float64] | None] = []
+    for name, _ in sequences:
+        path = trajectory_path(out_dir, algorithm, name, trial)
+        out.append(read_trajectory(path).T_world_lidar if path.is_file() else None)
+    return out
 
 
 def trials_table_path(out_dir: str | Path, algorithm: str, sequence: str) -> Path:

@@ -170,41 +170,39 @@ def reference_curves(done: Mapping[int, Any], tid: int, lag: int) -> list[Sequen
 
 
 class StudyPruner:
-    """The pruner of one study: its checkpoints, the curves of trials an earlier run finished
-    (from their trajectories), and each new trial's thresholds."""
+    """The pruner of one study: its checkpoints over the study's sequences (ground truths
+    ``gts``), the curves of trials an earlier run finished, and each new trial's thresholds.
+    It reads and writes nothing: the study hands it the ground truths and the stored
+    trajectories."""
 
-    def __init__(self, sequences: Sequence[tuple[str, str]], settings: PruningSection,
-                 length_m: float) -> None:
-        from pipeline.tuning.job import load_ground_truth
-
-        self.sequences = list(sequences)
+    def __init__(self, gts: Sequence[F64], settings: PruningSection, length_m: float) -> None:
         self.settings = settings
         self.length_m = length_m
         self.gts: list[F64] = []
         self.points: list[Checkpoint] = []
         if settings.percentile is not None:
-            self.gts = [load_ground_truth(path) for _, path in self.sequences]
+            self.gts = list(gts)
             self.points = checkpoints([len(g) for g in self.gts], settings)
 
-    def restore(self, results: Mapping[int, Any], out_dir: str, algorithm: str
-                ) -> dict[int, Any]:
-        """``results`` (TrialResult read from the table) with the curves of their stored
-        trajectories (a pruned trial's are partial)."""
-        from dataclasses import replace
+    @property
+    def active(self) -> bool:
+        """True when the study prunes (``percentile`` set)."""
+        return bool(self.points)
 
-        from pipeline.trajectory import read_trajectory
-        from pipeline.tuning.job import trajectory_path
+    def restore(self, results: Mapping[int, Any],
+                trajectories: Callable[[int], list[F64 | None]]) -> dict[int, Any]:
+        """``results`` (TrialResult read from the table) with the curves of their stored
+        trajectories (``trajectories(trial)``: per sequence T_world_lidar, partial for a pruned
+        trial, None where not run)."""
+        from dataclasses import replace
 
         if not self.points:
             return dict(results)
         out = {}
         for tid, r in results.items():
             if r.status in ("ok", "pruned"):
-                ests: list[F64 | None] = []
-                for name, _ in self.sequences:
-                    path = trajectory_path(out_dir, algorithm, name, tid)
-                    ests.append(read_trajectory(path).T_world_lidar if path.is_file() else None)
-                r = replace(r, curve=curve_of(self.points, self.gts, ests, self.length_m))
+                r = replace(r, curve=curve_of(self.points, self.gts, trajectories(tid),
+                                              self.length_m))
             out[tid] = r
         return out
 

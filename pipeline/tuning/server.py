@@ -4,8 +4,9 @@ trial's time limit.
 ``TrialServer(key)`` starts ``python -c <boot>`` with ``subprocess`` (not ``multiprocessing``:
 it works in daemonic processes such as plain Dask workers, and never forks a threaded process),
 connected by a socket pair over which jobs and results travel as pickles (our own two
-processes, nothing stored). The child (``serve``) imports the parent's ``sys.path``, decodes the
-sequences once and warms the adapter (its own ``WorkerState``), then answers each job with
+processes, nothing stored). The child (``pipeline.tuning.worker.serve``) imports the parent's
+``sys.path``, decodes the sequences once and warms the adapter (its own ``WorkerState``), then
+answers each job with
 ("ok", result) or ("error", one line). It ends with its parent: ``PR_SET_PDEATHSIG`` and a
 thread watching the socket (``pipeline.lifetime``); it ignores SIGINT, so that Ctrl-C is
 handled by the main process alone.
@@ -38,7 +39,7 @@ WARM_LIMIT_S = 600.0
 the trial's own limit, which covers the odometry alone)."""
 
 _BOOT = ("import sys, json; sys.path[:] = json.loads(sys.argv[3]); "
-         "from pipeline.tuning.server import serve; serve(int(sys.argv[1]), int(sys.argv[2]))")
+         "from pipeline.tuning.worker import serve; serve(int(sys.argv[1]), int(sys.argv[2]))")
 
 
 class TrialServer:
@@ -104,27 +105,3 @@ class TrialServer:
         if self.proc.poll() is None:
             self.proc.kill()
         self.proc.wait()
-
-
-def serve(fd: int, parent_pid: int) -> None:
-    """The server's loop (in the child): warm for the first job, answer "ready", then answer
-    every job with ``WorkerState.outcome``; returns when the parent closes the socket."""
-    from pipeline.lifetime import die_with_parent, exit_on_hangup
-    from pipeline.tuning.worker import WorkerState
-
-    die_with_parent(parent_pid)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    exit_on_hangup(fd)
-    conn = Connection(fd)
-    state = WorkerState()
-    first = True
-    while True:
-        try:
-            job = conn.recv()
-        except (EOFError, OSError):  # the parent is gone
-            return
-        if first:
-            state.warm_quietly(job)
-            conn.send("ready")
-            first = False
-        conn.send(state.outcome(job))

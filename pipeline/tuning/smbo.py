@@ -39,7 +39,8 @@ from pipeline.executor import open_executor
 from pipeline.io_utils import exclusive_folder
 from pipeline.odometry.base import Adapter, Params, with_space
 from pipeline.tuning.fingerprint import check_fingerprint, study_fingerprint
-from pipeline.tuning.job import TrialJob, TrialResult, one_line, resolve_adapter
+from pipeline.tuning.job import TrialJob, TrialResult, one_line
+from pipeline.tuning.layout import read_trial_trajectories
 from pipeline.tuning.progress import StudyProgress
 from pipeline.tuning.pruning import PruningSection, StudyPruner
 from pipeline.tuning.table import JOINT, read_study, read_trials, trials_path, write_trials
@@ -179,7 +180,9 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
 
 def study_adapter(settings: TrialsSection) -> Adapter:
     """The adapter of ``settings`` searching its space with ``settings.space`` applied."""
-    adapter = resolve_adapter(settings.algorithm, settings.adapter_options)
+    from pipeline.odometry.registry import build_adapter
+
+    adapter = build_adapter(settings.algorithm, settings.adapter_options)
     if not settings.space:
         return adapter
     changes = {name: r.model_dump(exclude_none=True) for name, r in settings.space.items()}
@@ -202,12 +205,23 @@ def make_studies(sequence_paths: Sequence[str | Path], joint: bool) -> list[Stud
     return [Study(n, ((n, p),)) for n, p in named]
 
 
+def study_pruner(study: Study, settings: TrialsSection) -> StudyPruner:
+    """The study's pruner, with its sequences' ground truths when it prunes."""
+    from pipeline.sequence import read_ground_truth
+    from pipeline.tuning.job import TRIALS_PURPOSE
+
+    on = settings.pruning.percentile is not None
+    gts = [read_ground_truth(path, TRIALS_PURPOSE) for _, path in study.sequences] if on else []
+    return StudyPruner(gts, settings.pruning, settings.length_m)
+
+
 def check_scorable(path: str | Path, length_m: float) -> None:
     """InputError unless the sequence has ground truth longer than ``length_m`` (RTE needs it)."""
     from pipeline.geometry import path_distances
-    from pipeline.tuning.job import load_ground_truth
+    from pipeline.sequence import read_ground_truth
+    from pipeline.tuning.job import TRIALS_PURPOSE
 
-    gt = load_ground_truth(path)
+    gt = read_ground_truth(path, TRIALS_PURPOSE)
     total_m = float(path_distances(gt)[-1]) if len(gt) else 0.0
     if not total_m > length_m:
         raise InputError(f"{path}: ground truth runs {total_m:.1f} m, not longer than "
@@ -227,9 +241,10 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
     if table.is_file():
         check_fingerprint(read_study(table), fingerprint, str(table))
     stored = [r for r in read_trials(table, space) if r.trial < settings.iterations]
-    pruner = StudyPruner(study.sequences, settings.pruning, settings.length_m)
-    done = pruner.restore({r.trial: r for r in stored if r.status != "lost"}, str(out_dir),
-                          adapter.name)
+    pruner = study_pruner(study, settings)
+    done = pruner.restore(
+        {r.trial: r for r in stored if r.status != "lost"},
+        lambda tid: read_trial_trajectories(out_dir, adapter.name, study.sequences, tid))
     lost: dict[int, TrialResult] = {}
     proposed = {t: r.params for t, r in done.items()}
     todo = [t for t in range(settings.iterations) if t not in done]

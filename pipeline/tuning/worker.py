@@ -32,13 +32,13 @@ from typing import Any
 
 from pipeline.errors import InfrastructureError, OdometryError
 from pipeline.odometry.base import Adapter
+from pipeline.odometry.registry import build_adapter
 from pipeline.tuning.job import (
     TrialJob,
     TrialResult,
     evaluate_trial,
     one_line,
     remove_trajectories,
-    resolve_adapter,
 )
 
 log = logging.getLogger(__name__)
@@ -164,7 +164,7 @@ class WorkerState:
         with self._lock:
             if self.adapter is not None and self.adapter[0] == key:
                 return self.adapter[1]
-            adapter = resolve_adapter(job.adapter, job.adapter_options, job.space)
+            adapter = build_adapter(job.adapter, job.adapter_options, job.space)
             paths = list(key[0])
             self._fill_cache(paths)
             warm = getattr(adapter, "warm", None)
@@ -224,3 +224,30 @@ def process_state() -> WorkerState:
 def run_trial(job: TrialJob) -> TrialResult:
     """Run ``job`` with this process's WorkerState (the function executors are given)."""
     return process_state().run(job)
+
+
+def serve(fd: int, parent_pid: int) -> None:
+    """A trial server's loop (``pipeline.tuning.server``, in the child): warm for the first
+    job, answer "ready", then answer every job with ``WorkerState.outcome``; returns when the
+    parent closes the socket."""
+    import signal
+    from multiprocessing.connection import Connection
+
+    from pipeline.lifetime import die_with_parent, exit_on_hangup
+
+    die_with_parent(parent_pid)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    exit_on_hangup(fd)
+    conn = Connection(fd)
+    state = WorkerState()
+    first = True
+    while True:
+        try:
+            job = conn.recv()
+        except (EOFError, OSError):  # the parent is gone
+            return
+        if first:
+            state.warm_quietly(job)
+            conn.send("ready")
+            first = False
+        conn.send(state.outcome(job))

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from fuzz_contract import fuzz, holds, mutate, scratch
+from helpers.fuzz_contract import fuzz, holds, mutate, scratch
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -25,7 +25,7 @@ from pipeline.runtime import Selector, load_model
 
 @pytest.fixture(scope="module")
 def good(tmp_path_factory: pytest.TempPathFactory, kitti_root: Path) -> Path:
-    from test_surrogate import build_model
+    from helpers.models import build_model
 
     return build_model(tmp_path_factory.mktemp("fuzz_model") / "model", kitti_root, trials=8)
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 from click.testing import CliRunner
-from fuzz_contract import NUMBER_TOKENS, digest, fuzz, mutate, no_hang, scratch
+from helpers.fuzz_contract import NUMBER_TOKENS, digest, fuzz, mutate, no_hang, scratch
 from hypothesis import given
 from hypothesis import strategies as st
 from test_fuzz_mcap import read_all

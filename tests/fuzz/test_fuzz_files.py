@@ -6,7 +6,17 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from fuzz_contract import NUMBER_TOKENS, RARELY, TOKENS, fuzz, holds, scratch, text_lines
+from helpers.fuzz_contract import (
+    NUMBER_TOKENS,
+    RARELY,
+    TOKENS,
+    fuzz,
+    holds,
+    is_pose,
+    scratch,
+    text_lines,
+    valid_stamps,
+)
 from hypothesis import given
 from hypothesis import strategies as st
 from numpy.typing import NDArray
@@ -15,22 +25,7 @@ from pipeline.kitti_calib import read_kitti_calib
 from pipeline.posefile import POSE_FORMATS, PoseFile, read_pose_file
 from pipeline.sources.poses import read_extrinsic
 from pipeline.sources.scanfiles import read_bin, read_pcd
-from pipeline.stamps import MAX_STAMP_S, read_times
-
-
-def is_pose(T: NDArray[np.float64], tol: float = 2e-2) -> bool:
-    """(..., 4, 4) finite rigid transforms."""
-    R = T[..., :3, :3]
-    eye = np.broadcast_to(np.eye(3), R.shape)
-    return bool(np.isfinite(T).all() and np.allclose(T[..., 3, :], [0, 0, 0, 1])
-                and np.allclose(np.swapaxes(R, -1, -2) @ R, eye, atol=tol)
-                and (np.linalg.det(R) > 0).all())
-
-
-def valid_stamps(stamps_ns: NDArray[np.int64]) -> bool:
-    return bool(stamps_ns.dtype == np.int64 and np.all(np.diff(stamps_ns) > 0)
-                and (stamps_ns >= 0).all() and (stamps_ns < MAX_STAMP_S * 10**9).all())
-
+from pipeline.stamps import read_times
 
 # ------------------------------------------------------------------------------- .bin
 

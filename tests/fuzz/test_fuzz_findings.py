@@ -25,7 +25,7 @@ from pipeline.sequence import (
 )
 from pipeline.sources.poses import read_extrinsic
 from pipeline.sources.scanfiles import read_pcd
-from pipeline.surrogates.fit import SurrogateSection
+from pipeline.surrogates.section import SurrogateSection
 from stages.cli import main
 
 

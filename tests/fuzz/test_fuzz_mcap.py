@@ -10,10 +10,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from fuzz_contract import NUMBER_TOKENS, RARELY, TOKENS, fuzz, holds, mutate, scratch
+from helpers.fuzz_contract import (
+    NUMBER_TOKENS,
+    RARELY,
+    TOKENS,
+    fuzz,
+    holds,
+    is_pose,
+    mutate,
+    scratch,
+    valid_stamps,
+)
 from hypothesis import given
 from hypothesis import strategies as st
-from test_fuzz_files import is_pose, valid_stamps
 
 from pipeline.sequence import (
     GT_TOPIC,

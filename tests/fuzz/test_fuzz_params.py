@@ -10,26 +10,26 @@ from typing import Any
 
 import numpy as np
 import yaml
-from fuzz_contract import RARELY, fuzz, holds, mutate, scratch
+from helpers.fuzz_contract import RARELY, fuzz, holds, mutate, scratch
 from hypothesis import given
 from hypothesis import strategies as st
 
 from pipeline.config import BaseSection, Section, load_section
-from pipeline.database.store import RteSection
 from pipeline.descriptors.dataset import DescriptorsSection
 from pipeline.evaluate.section import EvaluateSection
+from pipeline.metrics.section import DevkitSection
 from pipeline.odometry import get_adapter
 from pipeline.odometry.base import Schedule
 from pipeline.sim.dataset import SimulateSection
 from pipeline.sources.dataset import IngestSection
-from pipeline.surrogates.fit import SurrogateSection
+from pipeline.surrogates.section import SurrogateSection
 from pipeline.tuning.smbo import FixedSection, TrialsSection
 from stages.run import parse_params
 
 SECTIONS: dict[str, type[Section]] = {
     "base": BaseSection, "simulate": SimulateSection, "ingest": IngestSection,
     "descriptors": DescriptorsSection, "trials": TrialsSection, "fixed": FixedSection,
-    "rte": RteSection, "surrogate": SurrogateSection, "evaluate": EvaluateSection,
+    "devkit": DevkitSection, "surrogate": SurrogateSection, "evaluate": EvaluateSection,
 }
 DEFAULTS = yaml.safe_load((Path(__file__).parents[2] / "params.yaml").read_text())
 

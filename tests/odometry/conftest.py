@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from odometry_data import Seq, make_adapter, write_kitti_sequence, write_synthetic_sequence
+from helpers.odometry_data import Seq, make_adapter, write_kitti_sequence, write_synthetic_sequence
 
 from pipeline.odometry import adapter_names
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from odometry_data import Seq
+from helpers.odometry_data import Seq
 
 from pipeline.odometry import get_adapter, run_sequence
 from pipeline.odometry.base import Schedule

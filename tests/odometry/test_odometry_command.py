@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from odometry_data import SCRIPTS, Seq, command_options, final_errors
+from helpers.odometry_data import SCRIPTS, Seq, command_options, final_errors
 
 from pipeline.errors import ConfigError, OdometryError, TrialTimeout
 from pipeline.odometry import check_trajectory, get_adapter, run_sequence

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from odometry_data import Seq, final_errors, make_adapter
+from helpers.odometry_data import Seq, final_errors, make_adapter
 
 from pipeline.errors import ConfigError, InputError
 from pipeline.odometry import adapter_names, run_sequence

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from odometry_data import Seq
+from helpers.odometry_data import Seq
 
 from pipeline.odometry import get_adapter
 from pipeline.odometry.base import Schedule

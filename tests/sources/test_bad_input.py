@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from source_inputs import KittiFrames, load_kitti, typestore, write_bag, write_kitti_poses
+from helpers.source_inputs import KittiFrames, load_kitti, typestore, write_bag, write_kitti_poses
 
 from pipeline.sequence import SequenceReader
 from stages.cli import main
@@ -126,8 +126,8 @@ def test_calib_without_tr(mini_root: Path, tmp_path: Path) -> None:
 
 
 def test_bag_without_pointcloud2(small_frames: KittiFrames, tmp_path: Path) -> None:
+    from helpers.source_inputs import gt_msg
     from rosbags.rosbag2 import Writer
-    from source_inputs import gt_msg
 
     ts = typestore(ros1=False)
     bag = tmp_path / "nopoints"
@@ -193,7 +193,7 @@ def test_tf_ground_truth_needs_the_child_frame(small_frames: KittiFrames, tmp_pa
 
 
 def test_scans_outside_the_tum_time_span(small_frames: KittiFrames, tmp_path: Path) -> None:
-    from source_inputs import BAG_T0_NS, write_tum
+    from helpers.source_inputs import BAG_T0_NS, write_tum
 
     bag = write_bag(tmp_path / "b.bag", small_frames, ros=1, gt=None)
     tum = tmp_path / "late.tum"

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from source_inputs import KittiFrames, load_kitti, point_times_s, write_bag
+from helpers.source_inputs import KittiFrames, load_kitti, point_times_s, write_bag
 
 from pipeline.sequence import SequenceReader
 from stages.cli import main
@@ -97,7 +97,7 @@ def test_organized_big_endian_clouds_and_every_ground_truth_type(
         frames: KittiFrames, tmp_path: Path, ros: int, storage: str, gt: str) -> None:
     """Organized clouds (16 rows, each padded, as drivers of multi-beam sensors publish them),
     big-endian, with the pose types not covered above."""
-    from source_inputs import GT_TOPICS
+    from helpers.source_inputs import GT_TOPICS
 
     small = replace(frames, bins=frames.bins[:3], stamps_ns=frames.stamps_ns[:3],
                     T_world_cam=frames.T_world_cam[:3],

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from source_inputs import (
+from helpers.source_inputs import (
     BAG_T0_NS,
     KittiFrames,
     load_kitti,
@@ -105,8 +105,8 @@ def _mcap_ros2_recording(tmp: Path, root: Path, kf: KittiFrames) -> Case:
 
 def _mcap_ros1_encoding(tmp: Path, root: Path, kf: KittiFrames) -> Case:
     """An MCAP in ROS 1 encoding (ros1msg schemas), PoseStamped ground truth."""
+    from helpers.source_inputs import cloud_msg, gt_msg
     from mcap.writer import Writer
-    from source_inputs import cloud_msg, gt_msg
 
     ts = typestore(ros1=True)
     path = tmp / "ros1.mcap"

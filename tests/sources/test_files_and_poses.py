@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from source_inputs import write_pcd, write_tum
+from helpers.source_inputs import write_pcd, write_tum
 
 from pipeline.errors import InputError
 from pipeline.geometry import pose_from_xyz_quat, rot_z

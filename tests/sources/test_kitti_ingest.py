@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner, Result
-from source_inputs import load_kitti
+from helpers.source_inputs import load_kitti
 
 from pipeline.sequence import SequenceReader
 from stages.cli import main

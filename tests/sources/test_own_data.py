@@ -11,8 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers.source_inputs import (
+    KittiFrames,
+    load_kitti,
+    point_times_s,
+    write_kitti_poses,
+    write_tum,
+)
 from scipy.spatial.transform import Rotation
-from source_inputs import KittiFrames, load_kitti, point_times_s, write_kitti_poses, write_tum
 
 from pipeline.posefile import read_pose_file
 from pipeline.sequence import SequenceReader

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from source_inputs import write_pcd
+from helpers.source_inputs import write_pcd
 
 from stages.cli import main
 

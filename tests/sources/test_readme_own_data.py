@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from source_inputs import KittiFrames, load_kitti, write_bag, write_pcd
+from helpers.source_inputs import KittiFrames, load_kitti, write_bag, write_pcd
 
 from pipeline.sequence import SequenceReader
 from stages.cli import main

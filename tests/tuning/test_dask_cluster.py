@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-from conftest import settings
-from dask_cluster import stop, tcp_cluster
+from helpers.dask_cluster import stop, tcp_cluster
+from helpers.tuning_settings import settings
 
 from pipeline.tuning.smbo import run_trials
 from pipeline.tuning.table import JOINT, trials_path
@@ -40,7 +40,7 @@ def test_a_study_on_a_tcp_cluster_survives_a_killed_worker(
     from distributed import Client
 
     address, workers = cluster
-    s = settings(algorithm="tuning_adapters:sleepy", iterations=10, workers=2, dask=address)
+    s = settings(algorithm="helpers.tuning_adapters:sleepy", iterations=10, workers=2, dask=address)
     killed: list[str] = []
     watch = Client(address, timeout="20s")
 

@@ -14,7 +14,7 @@ from pipeline.tuning.worker import WorkerState
 def make_job(sequence: Path, out: Path, trial: int, fails: str | None = None,
              bias: float = 0.1, limit_s: float = 10.0) -> TrialJob:
     """A drift trial, or (``fails`` = a mode) a trial of the failing adapter."""
-    return TrialJob(adapter=f"tuning_adapters:{'failing' if fails else 'drift'}",
+    return TrialJob(adapter=f"helpers.tuning_adapters:{'failing' if fails else 'drift'}",
                     algorithm="drift", sequences=(("seq_a", str(sequence)),), trial=trial,
                     seed=trial, params={"bias": bias, "gain": 1.0, "window": 3.0},
                     out_dir=str(out), length_m=5.0, penalty_pct=100.0, jump_limit_m=5.0,

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-from conftest import Interrupt, settings
+from helpers.tuning_settings import Interrupt, settings
 
 from pipeline.errors import InfrastructureError
 from pipeline.tuning.smbo import run_trials
@@ -26,7 +26,7 @@ def oom_once(tmp_path: Path, **kw: object) -> object:
     itself when the trial runs in-process), later runs are the drift adapter's."""
     markers = tmp_path / "markers"
     markers.mkdir(exist_ok=True)
-    return settings(algorithm="tuning_adapters:failing",
+    return settings(algorithm="helpers.tuning_adapters:failing",
                     adapter_options={"mode": "oom_once", "threshold": -2.0,
                                      "marker_dir": str(markers)}, **kw)
 
@@ -69,7 +69,8 @@ def test_a_resumed_parallel_study_proposes_what_an_uninterrupted_one_does(
     """With two trials in flight (lag 3) trial t is proposed with t-2 and t-1 still pending.
     The run is killed right after a new best trial finishes: a resume that showed it to the
     next proposals as finished would propose other parameters than the uninterrupted run."""
-    s = settings(algorithm="tuning_adapters:sleepy", workers=2, iterations=12, startup_trials=2)
+    s = settings(algorithm="helpers.tuning_adapters:sleepy", workers=2, iterations=12,
+                 startup_trials=2)
     best: list[float] = []
 
     def stop_at_a_new_best(study: object, result: object) -> None:
@@ -99,13 +100,14 @@ def test_sigkill_of_adaptune_trials_then_a_resume_loses_and_repeats_nothing(
     import sys
     import time
 
-    s = settings(algorithm="tuning_adapters:sleepy", workers=2, iterations=10, startup_trials=2)
+    s = settings(algorithm="helpers.tuning_adapters:sleepy", workers=2, iterations=10,
+                 startup_trials=2)
     params = tmp_path / "params.yaml"
     params.write_text(json.dumps({"base": {"seed": 5, "length_m": s.length_m}, "trials": {
         **{k: getattr(s, k) for k in ("algorithm", "iterations", "workers", "startup_trials",
                                       "time_limit_s")}, "pruning": s.pruning.model_dump()}}))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-        [str(Path(__file__).parent), *filter(None, [os.environ.get("PYTHONPATH")])])}
+        [str(Path(__file__).parents[1]), *filter(None, [os.environ.get("PYTHONPATH")])])}
     table = trials_path(tmp_path / "k", "sleepy", "seq_a")
     killed = subprocess.Popen([sys.executable, "-m", "stages.cli", "trials", str(sequences[0]),
                                "--out", str(tmp_path / "k"), "--params", str(params)], env=env,

@@ -11,7 +11,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from conftest import Interrupt, interrupt_after, settings
+from helpers.tuning_settings import Interrupt, interrupt_after, settings
 
 from pipeline.sequence import SequenceReader
 from pipeline.trajectory import read_trajectory
@@ -89,7 +89,8 @@ def test_the_rows_a_pruned_trial_earned_reach_the_results_database(
         sequences: list[Path], pool: Executor, tmp_path: Path) -> None:
     import duckdb
 
-    from pipeline.database.store import RteSection, build_database
+    from pipeline.database.store import build_database
+    from pipeline.metrics.section import DevkitSection
 
     out = tmp_path / "trials"
     run_trials(sequences[:1], out, settings(iterations=12, pruning=PRUNING), seed=5,
@@ -103,7 +104,7 @@ def test_the_rows_a_pruned_trial_earned_reach_the_results_database(
                              **{f"e{i}": np.zeros(len(frames), np.float32) for i in range(10)}}),
                    environment)
     db = tmp_path / "r.duckdb"
-    build_database(db, sequences[0].parent, {"trials": out}, RteSection(length_m=5.0),
+    build_database(db, sequences[0].parent, {"trials": out}, 5.0, DevkitSection(),
                    environment=environment)
     con = duckdb.connect(str(db), read_only=True)
     try:

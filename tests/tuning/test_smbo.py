@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from conftest import Interrupt, interrupt_after, settings
+from helpers.tuning_settings import Interrupt, interrupt_after, settings
 
 from pipeline.metrics.rte import mean_rte_pct
 from pipeline.sequence import SequenceReader
@@ -53,7 +53,8 @@ def test_parallel_runs_with_one_seed_are_identical(
     sequences: list[Path], pool: Executor, tmp_path: Path
 ) -> None:
     """Two trials in flight finish in varying order; the proposals do not depend on it."""
-    s = settings(algorithm="tuning_adapters:sleepy", workers=2, iterations=12, startup_trials=3)
+    s = settings(algorithm="helpers.tuning_adapters:sleepy", workers=2, iterations=12,
+                 startup_trials=3)
     for i in range(3):
         run_trials(sequences[:1], tmp_path / f"p{i}", s, seed=5, progress=False, executor=pool)
     a, b, c = (table(tmp_path / f"p{i}", "sleepy", "seq_a") for i in range(3))
@@ -81,7 +82,7 @@ def test_failing_adapters_give_failed_trials(
     sequences: list[Path], pool: Executor, tmp_path: Path, mode: str, message: str
 ) -> None:
     s = settings(
-        algorithm="tuning_adapters:failing",
+        algorithm="helpers.tuning_adapters:failing",
         adapter_options={"mode": mode, "threshold": 0.0},
         iterations=8,
         penalty_pct=77.0,
@@ -103,7 +104,7 @@ def test_hanging_adapter_is_killed_at_the_time_limit(
     sequences: list[Path], pool: Executor, tmp_path: Path
 ) -> None:
     s = settings(
-        algorithm="tuning_adapters:failing",
+        algorithm="helpers.tuning_adapters:failing",
         adapter_options={"mode": "hang", "threshold": 0.0},
         iterations=3,
         time_limit_s=5.0,  # the trial that does not hang ends well within it under load too
@@ -171,7 +172,7 @@ def test_dask_local_cluster_gives_the_same_number_of_valid_trials(
     sequences: list[Path], pool: Executor, tmp_path: Path
 ) -> None:
     s = settings(
-        algorithm="tuning_adapters:failing",
+        algorithm="helpers.tuning_adapters:failing",
         adapter_options={"mode": "raise", "threshold": 0.3},
         iterations=6,
         workers=2,

@@ -10,7 +10,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
-from conftest import settings
+from helpers.tuning_settings import settings
 
 from pipeline.errors import ConfigError
 from pipeline.odometry import get_adapter
@@ -91,7 +91,7 @@ def test_a_widened_space_is_searched_run_and_stored(sequences: list[Path], pool:
 
 
 def get_adapter_space_gain() -> object:
-    from tuning_adapters import SPACE
+    from helpers.tuning_adapters import SPACE
 
     return SPACE["gain"]
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -14,13 +13,11 @@ from pipeline.tuning.job import trajectory_path
 from pipeline.tuning.table import trials_path
 from stages.cli import main
 
-sys.path.insert(0, str(Path(__file__).parents[1] / "odometry"))
-
 
 def params_file(tmp_path: Path, **trials: object) -> Path:
     p = tmp_path / "params.yaml"
     section = dict(
-        algorithm="tuning_adapters:drift",
+        algorithm="helpers.tuning_adapters:drift",
         iterations=3,
         time_limit_s=20.0,
         startup_trials=2,
@@ -107,7 +104,7 @@ def test_missing_split_is_one_line(sequences: list[Path], tmp_path: Path) -> Non
 
 
 def test_ndt_trials_on_a_ray_cast_sequence(tmp_path: Path) -> None:
-    from odometry_data import write_synthetic_sequence
+    from helpers.odometry_data import write_synthetic_sequence
 
     seq = write_synthetic_sequence(
         tmp_path / "yard.mcap", n_frames=12, step_m=0.8, azimuth_steps=450
@@ -149,7 +146,7 @@ def test_first_try_without_params_file_and_json_summary(
     monkeypatch.chdir(tmp_path)
     out = tmp_path / "out"
     args = ["trials", str(sequences[0]), "--out", str(out), "--algorithm",
-            "tuning_adapters:drift", "--iterations", "2"]
+            "helpers.tuning_adapters:drift", "--iterations", "2"]
     res = CliRunner().invoke(main, [*args, "--json"])
     assert res.exit_code == 0, res.output
     assert res.stderr == ""

@@ -7,10 +7,10 @@ import shutil
 from concurrent.futures import Executor
 from pathlib import Path
 
+import helpers.tuning_adapters as tuning_adapters
 import pytest
-import tuning_adapters
 from click.testing import CliRunner
-from conftest import settings
+from helpers.tuning_settings import settings
 
 from pipeline.errors import ConfigError
 from pipeline.io_utils import exclusive_folder
@@ -24,7 +24,7 @@ def test_a_second_trials_run_on_the_same_folder_fails_in_one_line(
     out = tmp_path / "out"
     params = tmp_path / "params.yaml"
     params.write_text(json.dumps({"base": {"seed": 1, "length_m": 5.0}, "trials": {
-        "algorithm": "tuning_adapters:drift", "iterations": 2, "time_limit_s": None}}))
+        "algorithm": "helpers.tuning_adapters:drift", "iterations": 2, "time_limit_s": None}}))
     with exclusive_folder(out):  # a trials run holding the folder (flock: per open file)
         res = CliRunner().invoke(main, ["trials", str(sequences[0]), "--out", str(out),
                                         "--params", str(params)])
@@ -46,8 +46,8 @@ def test_a_second_trials_run_on_the_same_folder_fails_in_one_line(
     (dict(time_limit_s=None), "time_limit_s null, stored 20.0"),
     (dict(startup_trials=5), "startup_trials 5, stored 3"),
     (dict(workers=2), "told_lag 3, stored 1"),
-    (dict(algorithm="tuning_adapters:failing", adapter_options={"mode": "raise"}),
-     "adapter \"tuning_adapters:failing\", stored \"tuning_adapters:drift\""),
+    (dict(algorithm="helpers.tuning_adapters:failing", adapter_options={"mode": "raise"}),
+     "adapter \"helpers.tuning_adapters:failing\", stored \"helpers.tuning_adapters:drift\""),
 ])
 def test_a_resume_of_another_study_is_refused_naming_what_differs(
         sequences: list[Path], pool: Executor, tmp_path: Path, change: dict[str, object],

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from tuning_adapters import SPACE
+from helpers.tuning_adapters import SPACE
 
 from pipeline.odometry.base import ParameterSpace, ParamSpec
 from pipeline.tuning.space import from_hyperopt_vals, to_hyperopt, to_hyperopt_vals

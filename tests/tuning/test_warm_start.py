@@ -11,8 +11,8 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
-from conftest import settings
-from tuning_adapters import SPACE
+from helpers.tuning_adapters import SPACE
+from helpers.tuning_settings import settings
 
 from pipeline.errors import ConfigError
 from pipeline.tuning.job import TrialResult
@@ -66,7 +66,7 @@ def test_the_joint_study_tries_the_predicted_sets_first(
 def test_warm_start_options(sequences: list[Path], tmp_path: Path) -> None:
     params = tmp_path / "params.yaml"
     params.write_text(json.dumps({"base": {"seed": 1, "length_m": 5.0},
-                                  "trials": {"algorithm": "tuning_adapters:drift"},
+                                  "trials": {"algorithm": "helpers.tuning_adapters:drift"},
                                   "fixed": {"warm_start": 4}}))
     run = ["trials", *map(str, sequences), "--out", str(tmp_path / "o"), "--params", str(params)]
     res = CliRunner().invoke(main, [*run, "--warm-start", str(tmp_path)])
@@ -86,7 +86,7 @@ def test_the_joint_study_has_its_own_pruner(sequences: list[Path], tmp_path: Pat
     params = tmp_path / "params.yaml"
     params.write_text(json.dumps({
         "base": {"seed": 1, "length_m": 5.0},
-        "trials": {"algorithm": "tuning_adapters:drift", "iterations": 12, "workers": 1,
+        "trials": {"algorithm": "helpers.tuning_adapters:drift", "iterations": 12, "workers": 1,
                    "startup_trials": 3, "pruning": {"percentile": None}},
         "fixed": {"pruning": {"percentile": 10.0, "checkpoints": 5, "warmup": 0.2,
                               "min_trials": 3}}}))

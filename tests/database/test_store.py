@@ -13,7 +13,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
-from evaluation_data import cli_fails, gt_path, write_sequence, write_study
+from helpers.evaluation_data import cli_fails, gt_path, write_sequence, write_study
 
 from pipeline.metrics.kitti import kitti_errors
 from pipeline.metrics.rte import per_frame_rte
@@ -60,7 +60,7 @@ def make_world(root: Path) -> World:
     write_study(root / "trials", "ndt", {"cave_0": stamped["cave_0"]}, 2, ["resolution_m"], seed=3)
     params = root / "params.yaml"
     params.write_text(f"base:\n  length_m: {LENGTH_M}\n"
-                      f"rte:\n  kitti_lengths_m: {list(KITTI_LENGTHS)}\n")
+                      f"devkit:\n  lengths_m: {list(KITTI_LENGTHS)}\n")
     return World(root, params, gts, estimates)
 
 

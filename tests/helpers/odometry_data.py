@@ -129,7 +129,7 @@ def write_kitti_sequence(path: Path, kitti_root: Path, seq: str = "04", n_frames
     return path
 
 
-SCRIPTS = Path(__file__).resolve().parent / "scripts"
+SCRIPTS = Path(__file__).resolve().parents[1] / "odometry" / "scripts"
 
 
 def command_options(fmt: str = "kitti") -> dict[str, Any]:

@@ -12,7 +12,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
-from evaluation_data import cli_fails
+from helpers.evaluation_data import cli_fails
 
 from stages.cli import main
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from evaluation_data import cli_fails, drifting
+from helpers.evaluation_data import cli_fails, drifting
 
 from pipeline.metrics.kitti import LENGTHS_M, kitti_errors, kitti_sequence_error
 from pipeline.posefile import read_kitti_poses, write_kitti_poses

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from evaluation_data import drifting, gt_path
+from helpers.evaluation_data import drifting, gt_path
 
 from pipeline.errors import InputError
 from pipeline.metrics.rte import mean_rte_pct, per_frame_rte

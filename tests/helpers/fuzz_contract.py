@@ -23,10 +23,13 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
+import numpy as np
 from hypothesis import HealthCheck, event, settings
 from hypothesis import strategies as st
+from numpy.typing import NDArray
 
 from pipeline.errors import AdaptuneError
+from pipeline.stamps import MAX_STAMP_S
 
 T = TypeVar("T")
 HANG_S = 20.0
@@ -151,3 +154,17 @@ def mutate(data: bytes) -> st.SearchStrategy[bytes]:
         return bytes(buf)
 
     return draw()
+
+
+def is_pose(T: NDArray[np.float64], tol: float = 2e-2) -> bool:
+    """(..., 4, 4) finite rigid transforms."""
+    R = T[..., :3, :3]
+    eye = np.broadcast_to(np.eye(3), R.shape)
+    return bool(np.isfinite(T).all() and np.allclose(T[..., 3, :], [0, 0, 0, 1])
+                and np.allclose(np.swapaxes(R, -1, -2) @ R, eye, atol=tol)
+                and (np.linalg.det(R) > 0).all())
+
+
+def valid_stamps(stamps_ns: NDArray[np.int64]) -> bool:
+    return bool(stamps_ns.dtype == np.int64 and np.all(np.diff(stamps_ns) > 0)
+                and (stamps_ns >= 0).all() and (stamps_ns < MAX_STAMP_S * 10**9).all())

@@ -1,5 +1,5 @@
 """Small real adapters for the tuner tests (registered nowhere; the tuner loads them as
-``tuning_adapters:<factory>``), and the sequence writer they run on.
+``helpers.tuning_adapters:<factory>``), and the sequence writer they run on.
 
 ``drift``: dead reckoning over the ground-truth motion with a parameter-controlled error: each
 frame-to-frame translation is scaled by ``1 + 0.1 (bias - 0.2) + 0.05 ln(gain)`` and the heading
