@@ -4,7 +4,7 @@ PY := $(VENV)/bin/python
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test fuzz lint deps bench repro kitti clean
+.PHONY: setup test fuzz lint deps bench repro docs kitti clean
 
 setup: $(STAMP)
 
@@ -45,6 +45,11 @@ bench: setup
 # dvc runs the stages' `adaptune ...` commands: the venv's bin must be on PATH
 repro: setup
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro
+
+# the docs pages that quote metrics/*.json (docs/results/toy.md, the README's result), rendered
+# from the committed metrics, dvc.lock and docs/results/runs.yaml; a test checks they are current
+docs: setup
+	$(BIN)/adaptune docs
 
 # The paper's KITTI protocol (Table II): train 00-05, test 06-10, L = 100 m, the devkit metric.
 #   make kitti KITTI_ROOT=/data/kitti/dataset         real KITTI (a KITTI odometry root), or

@@ -1,5 +1,5 @@
 """What the full KITTI protocol costs (issue 15 item 3), from the per-frame cost of every
-in-process adapter on simulated KITTI (README: "What the full KITTI protocol costs").
+in-process adapter on simulated KITTI (docs/kitti.md, "What the full protocol costs").
 
 Scans: simulated KITTI (``pipeline.sim.kitti_dataset``, HDL-64E, ~125k points a scan), the
 first FRAMES frames of one sequence per environment: 07 urban, 00 residential, 04 rural,

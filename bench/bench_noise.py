@@ -9,9 +9,9 @@ of one setting on one world the fraction whose ratio exceeds 1.05, the issue's w
 target: how often a selector exactly as good as a fixed setting would miss that target by
 chance.
 
-Default: dev worlds 0 and 3 (HDL-32E, HDL-64E), 4 replicas (a few minutes). The README's
-figures: ``NOISE_WORLDS=8 NOISE_ALGORITHMS=ndt,gicp python bench/run.py noise`` (about an hour
-on 2 cores; the worlds are simulated here, in a temporary folder).
+Default: dev worlds 0 and 3 (HDL-32E, HDL-64E), 4 replicas (a few minutes). The figures of
+docs/results/noise-floor.md: ``NOISE_WORLDS=8 NOISE_ALGORITHMS=ndt,gicp python bench/run.py
+noise`` (about an hour on 2 cores; the worlds are simulated here, in a temporary folder).
 """
 
 from __future__ import annotations

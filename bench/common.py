@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 TOY_FIXED_NDT = {"resolution": 2.0202443098570972, "keyframe_interval": 7.758915470730103}
-"""NDT's joint-study parameters of the toy reproduction (README, "Result of make repro")."""
+"""NDT's joint-study parameters of the toy reproduction (docs/results/toy.md)."""
 
 
 @dataclass

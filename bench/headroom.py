@@ -1,4 +1,4 @@
-"""How much can any NDT selector gain on the dev worlds? (issue 12; README, "The noise floor")
+"""How much can any NDT selector gain on the dev worlds? (issue 12; docs/results/noise-floor.md)
 
 Not a `make bench` module (about 80 minutes on 2 cores): ``.venv/bin/python bench/headroom.py
 [--cache DIR]``. On the 8 worlds of the generalization suite's **dev** root it

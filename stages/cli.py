@@ -72,6 +72,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "stages.simulate:simulate_kitti_set",
         "Simulate KITTI along its ground-truth trajectories (dvc stage).",
     ),
+    "docs": ("stages.docs:docs", "Render the docs pages that quote the committed metrics."),
     "plot-world": (
         "stages.simulate:plot_world",
         "Top-down PNG of a world, its trajectory and one scan.",

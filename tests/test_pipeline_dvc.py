@@ -1,12 +1,12 @@
 """The whole pipeline through DVC itself, on a tiny params file, in a temporary git repository.
 
 Every stage of dvc.yaml runs (`dvc repro`), every output exists and follows its schema, and a
-second `dvc repro` does nothing. Then the README's variation lines run as DVC experiments on the
-same project (`dvc exp run -S ...`), and `dvc exp show`, `dvc exp diff` and `dvc metrics diff`
-compare them: the metrics and plot data are committed to git (``cache: false``), as DVC's
-example-get-started does. The generalize stage runs in the first `dvc repro` alone (its test
-here); the command adapter's repro and the experiments stop at the evaluate stage, whose
-metrics they compare, to keep the suite short.
+second `dvc repro` does nothing. Then the variation lines of docs/usage.md run as DVC
+experiments on the same project (`dvc exp run -S ...`), and `dvc exp show`, `dvc exp diff` and
+`dvc metrics diff` compare them: the metrics and plot data are committed to git
+(``cache: false``), as DVC's example-get-started does. The generalize stage runs in the first
+`dvc repro` alone (its test here); the command adapter's repro and the experiments stop at the
+evaluate stage, whose metrics they compare, to keep the suite short.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ pytestmark = pytest.mark.slow
 
 TINY_L_M = 4.0
 TCP_LINE = "trials.dask=tcp://SCHEDULER:8786,trials.workers=8"
-"""The README's line for trials on a Dask cluster (its own section)."""
+"""docs/usage.md's line for trials on a Dask cluster (its own section)."""
 
 
 def tiny_params() -> dict[str, Any]:
@@ -295,9 +295,16 @@ def test_metrics_and_plot_data_are_committed(repro: tuple[Path, str]) -> None:
 PAPER_SELECTOR = "surrogate.k=5,select.window=1"
 
 
-def readme_variations() -> dict[str, list[str]]:
-    """The README's `dvc exp run` lines (in every ``sh`` block), keyed by what they set."""
-    blocks = [b.split("```", 1)[0] for b in (REPO / "README.md").read_text().split("```sh")[1:]]
+DOCUMENTED = ("README.md", "docs/usage.md")
+"""The pages whose `dvc exp run` lines are run here (docs/usage.md, "The pipeline under DVC",
+is their home; a line added to the README would be run too)."""
+
+
+def documented_variations() -> dict[str, list[str]]:
+    """The `dvc exp run` lines (in every ``sh`` block) of the DOCUMENTED pages, keyed by what
+    they set."""
+    blocks = [b.split("```", 1)[0] for page in DOCUMENTED
+              for b in (REPO / page).read_text().split("```sh")[1:]]
     lines = {}
     for line in "\n".join(blocks).replace("\\\n", " ").splitlines():
         if not line.startswith("dvc exp run "):
@@ -340,17 +347,17 @@ def exp_metrics(root: Path) -> dict[str, dict[str, Any]]:
             for name, data in exp_shown(root).items()}
 
 
-def test_readme_variations_are_the_ones_tested() -> None:
-    assert set(readme_variations()) == {"trials.algorithm=gicp", "trials.algorithm=kiss_icp",
+def test_documented_variations_are_the_ones_tested() -> None:
+    assert set(documented_variations()) == {"trials.algorithm=gicp", "trials.algorithm=kiss_icp",
                                         "trials.dask=local", "kitti", TCP_LINE, PAPER_SELECTOR}
 
 
 def test_gicp_on_dask_experiment(repro: tuple[Path, str]) -> None:
-    """The README's gicp, Dask and paper-selector lines as one experiment (to keep the suite
+    """The documented gicp, Dask and paper-selector lines as one experiment (to keep the suite
     short), in a temporary copy: `dvc exp show` sees its metrics and params, the workspace stays
     as committed."""
     root, _ = repro
-    lines = readme_variations()
+    lines = documented_variations()
     exp_run(root, "gicp-dask", *lines["trials.algorithm=gicp"], *lines["trials.dask=local"],
             *lines[PAPER_SELECTOR])
     shown = exp_shown(root)["gicp-dask"]
@@ -365,7 +372,7 @@ def test_gicp_on_dask_experiment(repro: tuple[Path, str]) -> None:
 def test_kitti_and_kiss_icp_experiment_with_a_new_length(repro: tuple[Path, str],
                                                          kitti_root: Path,
                                                          tmp_path: Path) -> None:
-    """The README's KITTI line (the kitti_mini slices, L shrunk to fit their 10 frames) with its
+    """The documented KITTI line (the kitti_mini slices, L shrunk to fit their 10 frames) with its
     kiss_icp line and its Dask-cluster line (a scheduler and a worker on 127.0.0.1), the
     default descriptor width and a widened search range, in the workspace: ingest runs, every
     stage up to the evaluate stage reads the new L, and `dvc metrics diff main` and `dvc exp
@@ -377,7 +384,7 @@ def test_kitti_and_kiss_icp_experiment_with_a_new_length(repro: tuple[Path, str]
 
     root, _ = repro
     new_l = TINY_L_M + 1
-    lines = readme_variations()
+    lines = documented_variations()
     args = tiny(lines["kitti"], **{
         "base.length_m": str(new_l), "ingest.kitti_root": str(kitti_root),
         "ingest.train": '["01","06"]', "ingest.validation": '["04"]'})

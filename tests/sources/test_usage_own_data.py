@@ -1,9 +1,9 @@
-"""The README's "Your own data" commands, run exactly as written (issue 14): the shell block is
-read from README.md and every `adaptune` line in it runs, in order, in a folder holding what
-the lines name, made from the real KITTI 04 scans: scans/ (PCD files), poses.txt (KITTI's
+"""The "Your own data" commands of docs/usage.md, run exactly as written (issue 14): the shell
+block is read from the page and every `adaptune` line in it runs, in order, in a folder holding
+what the lines name, made from the real KITTI 04 scans: scans/ (PCD files), poses.txt (KITTI's
 camera-frame poses) and calib.txt, a ROS 1 bag run.bag (/points, Odometry on /odom), a ROS 2
 bag run_ros2/ (PoseStamped on /ground_truth; sqlite3, then again with mcap storage); the KITTI
-root's path is the one word replaced. If the README changes, this test runs the new lines."""
+root's path is the one word replaced. If the page changes, this test runs the new lines."""
 
 from __future__ import annotations
 
@@ -20,13 +20,13 @@ from helpers.source_inputs import KittiFrames, load_kitti, write_bag, write_pcd
 from pipeline.sequence import SequenceReader
 from stages.cli import main
 
-README = Path(__file__).resolve().parents[2] / "README.md"
-README_ROOT = "/data/kitti/dataset"
+USAGE = Path(__file__).resolve().parents[2] / "docs" / "usage.md"
+USAGE_ROOT = "/data/kitti/dataset"
 
 
-def readme_commands() -> list[list[str]]:
+def usage_commands() -> list[list[str]]:
     """The argument lists of the `adaptune` lines of the "Your own data" shell block."""
-    section = README.read_text().split("### Your own data", 1)[1]
+    section = USAGE.read_text().split("\n## Your own data\n", 1)[1]
     block = section.split("```sh\n", 1)[1].split("```", 1)[0]
     return [shlex.split(line, comments=True)[1:] for line in block.splitlines()
             if line.startswith("adaptune ")]
@@ -40,7 +40,7 @@ def frames(kitti_root: Path) -> KittiFrames:
 
 
 def inputs(folder: Path, kf: KittiFrames, kitti_root: Path, ros2_storage: str) -> None:
-    """What the README's lines name, in ``folder``."""
+    """What the page's lines name, in ``folder``."""
     scans = folder / "scans"
     scans.mkdir()
     for k, pts in enumerate(kf.points):  # plain string order would put full7 last
@@ -59,10 +59,10 @@ def check_sequence(path: Path, kf: KittiFrames, points: list[np.ndarray]) -> Non
             np.testing.assert_array_equal(r[k].points_lidar, points[k])
 
 
-def test_the_readme_commands_run_as_written(frames: KittiFrames, kitti_root: Path,
+def test_the_usage_commands_run_as_written(frames: KittiFrames, kitti_root: Path,
                                             tmp_path: Path, monkeypatch: pytest.MonkeyPatch
                                             ) -> None:
-    commands = readme_commands()
+    commands = usage_commands()
     kinds = [c[1] if c[0] in ("ingest", "metric") else c[0] for c in commands]
     assert kinds == ["folder", "rosbag", "rosbag", "kitti", "run", "rte"], commands
     assert commands[1][2].endswith(".bag") and commands[2][2].endswith("/")  # ROS 1, ROS 2
@@ -70,7 +70,7 @@ def test_the_readme_commands_run_as_written(frames: KittiFrames, kitti_root: Pat
     inputs(tmp_path, frames, kitti_root, "sqlite3")
     full = load_kitti(kitti_root, "04", 10).points
     for args in commands:
-        args = [str(kitti_root) if a == README_ROOT else a for a in args]
+        args = [str(kitti_root) if a == USAGE_ROOT else a for a in args]
         result = CliRunner().invoke(main, args)
         assert result.exit_code == 0, (args, result.output)
         if args[0] == "ingest":
