@@ -1,5 +1,5 @@
 """ROS 2 CDR codecs of the sequence MCAP: mcap_ros2 (what pipeline/ros2_cdr.py uses) against
-the hand-written struct codec it replaced (bench/cdr_reference.py), in the same run.
+the hand-written struct codec it replaced (bench/reference/cdr_reference.py), in the same run.
 
 Real KITTI scans of sequence 04: a 57,000-point cloud (the first points of a scan) and a full
 scan (~123k points), encoded as sensor_msgs/msg/PointCloud2 and decoded back. Both codecs
@@ -8,9 +8,9 @@ must produce byte-identical messages (checked before timing).
 
 from __future__ import annotations
 
-import cdr_reference as hand
 import numpy as np
 from common import Row, best_of, data_root
+from reference import cdr_reference as hand
 
 STAMP_NS = 1_317_000_000_123_456_789
 

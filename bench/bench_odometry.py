@@ -80,12 +80,12 @@ def run() -> list[Row]:
 def _ndt_against_reference(tmp: Path, n_frames: int = 300, n_sets: int = 8) -> list[Row]:
     """Frames/s of ``ndt`` over a simulated cave and street with ``n_sets`` random parameter
     sets (as a study's trials draw them; CPU time of one process), compiled
-    (pipeline/odometry/ndt_kernel.py) against the numpy reference (bench/ndt_reference.py)
+    (pipeline/odometry/ndt_kernel.py) against the numpy reference (bench/reference/ndt_reference.py)
     in the same run, and the largest difference of their positions."""
     from functools import partial
 
     import numpy as np
-    from ndt_reference import ReferenceNdtOdometry
+    from reference.ndt_reference import ReferenceNdtOdometry
 
     from pipeline.odometry import get_adapter
     from pipeline.odometry.base import Schedule, run_streaming

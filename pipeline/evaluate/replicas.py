@@ -3,7 +3,7 @@
 An odometry whose failures are abrupt (NDT losing its map in a cave, a keyframe taken a
 frame earlier) is chaotic in its parameters: on the generalization suite's dev worlds, NDT's
 RTE on one world changes with a coefficient of variation of about 0.3 when its two parameters
-change by at most 0.5 % (README, "The noise floor"). One run per setting then cannot say
+change by at most 0.5 % (docs/results/noise-floor.md). One run per setting then cannot say
 whether adaptive beat min(baseline, fixed) on a world or drew a luckier run.
 
 With ``replicas`` R > 0 the ``evaluate`` code (the evaluate and generalize stages) runs every

@@ -1,5 +1,5 @@
 """Simulated KITTI: a world along a real KITTI ground-truth trajectory whose environment
-changes along the route the way KITTI's does (README, "Simulated KITTI").
+changes along the route the way KITTI's does (docs/kitti.md, "Simulated KITTI").
 
 Environments (the label of every frame):
 - ``urban``: a canyon of near-continuous facades 12-26 m high, 8.5-11 m from the car, blocks

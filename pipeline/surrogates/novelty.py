@@ -67,7 +67,7 @@ def choose_fallback(
     fixed parameters when they beat the defaults on every training sequence, else the defaults.
     The defaults are the out-of-distribution prior (hand-tuned for no environment in particular);
     they are dropped only when every environment seen shows them worse. Chosen on training data
-    and dev composites, not on the validation sequence (README, "novelty fallback").
+    and dev composites, not on the validation sequence (docs/results/novelty-guard.md).
     ``per_scan``: both; the runtime gives each unfamiliar scan the one of the two the surrogate
     predicts better there (pipeline.runtime, step 3). Returns the fixed parameters, as the
     runtime needs them; the record's ``chosen`` is ``per_scan``.

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))  # common.py
 
 from common import TOY_FIXED_NDT, Row
 
@@ -105,3 +106,9 @@ def run() -> list[Row]:
                         f"{TARGET_WORST}", 100.0 * chance_above(per_world), "%", "",
                         "reported (issue 12's worst-world target)"))
     return rows
+
+
+if __name__ == "__main__":
+    from common import format_table
+
+    print(format_table(run()))

@@ -1,0 +1,2 @@
+"""Frozen reference implementations the performance figures compare against in the same run
+(the hand-written CDR codec, the numpy NDT before issue 16). Not used by the pipeline."""
