@@ -32,10 +32,9 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import shlex
 import shutil
-import subprocess
+import signal
 import sys
 import tempfile
 from collections.abc import Iterable
@@ -46,7 +45,7 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from pipeline.config import Section
-from pipeline.errors import ConfigError, OdometryError, TrialTimeout
+from pipeline.errors import ConfigError, InfrastructureError, OdometryError, TrialTimeout
 from pipeline.geometry import pose_from_xyz_quat
 from pipeline.odometry.base import Adapter, ParameterSpace, ParamSpec, Schedule
 from pipeline.odometry.common import F64, parse_options
@@ -192,50 +191,31 @@ def write_inputs(work: Path, schedule: Schedule, stamps_ns: np.ndarray) -> dict[
 def run_process(argv: list[str], cwd: str | None, time_limit_s: float | None,
                 workdir: Path | None = None) -> None:
     """Run ``argv`` under the guard (its own process group; killed, and ``workdir`` removed,
-    when this call ends early or this process dies); TrialTimeout past the limit, else
-    OdometryError for a non-zero exit status."""
-    from pipeline.lifetime import GUARD_CANNOT_RUN, guard_argv
+    when this call ends early or this process dies); TrialTimeout past the limit,
+    InfrastructureError when the guard is killed from outside (the tool's group goes too),
+    else OdometryError for a non-zero exit status."""
+    from pipeline.lifetime import GUARD_CANNOT_RUN, run_guarded
 
-    lifeline, keep = os.pipe()  # the guard cleans up when `keep` closes
     try:
-        proc = subprocess.Popen(guard_argv(lifeline, str(workdir or ""), argv), cwd=cwd,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                stdin=subprocess.DEVNULL, pass_fds=(lifeline,),
-                                start_new_session=True)
+        done = run_guarded(argv, cwd, time_limit_s, str(workdir or ""))
     except (FileNotFoundError, NotADirectoryError, PermissionError) as exc:
-        os.close(keep)
         raise ConfigError(f"command: cannot run {argv[0]!r} in {cwd or '.'} "
                           f"({exc.strerror})") from None
-    finally:
-        os.close(lifeline)
-    try:
-        _, err = proc.communicate(timeout=time_limit_s)
-    except subprocess.TimeoutExpired:
-        _cancel(proc, keep)
+    except TimeoutError:
         raise TrialTimeout(f"command: {argv[0]} outlived its time limit of {time_limit_s:g} s; "
                            "killed") from None
-    except BaseException:  # Ctrl-C, SIGTERM (SystemExit): the tool goes too
-        _cancel(proc, keep)
-        raise
-    os.close(keep)
-    if proc.returncode == GUARD_CANNOT_RUN and err.startswith(b"adaptune guard: "):
+    err = done.stderr
+    if done.guard_signal:
+        raise InfrastructureError(f"command: the guard of {Path(argv[0]).name} was killed by "
+                                  f"{signal.Signals(done.guard_signal).name}; its process group "
+                                  "was killed with it")
+    if done.status == GUARD_CANNOT_RUN and err.startswith(b"adaptune guard: "):
         raise ConfigError(f"command: {err.decode(errors='replace').strip()[16:]}")
-    if proc.returncode != 0:
+    if done.status != 0:
         lines = err.decode(errors="replace").strip().splitlines()
         last = lines[-1] if lines else "no stderr"
         raise OdometryError(f"command: {Path(argv[0]).name} exited with status "
-                            f"{proc.returncode}: {last}")
-
-
-def _cancel(proc: subprocess.Popen[bytes], keep: int) -> None:
-    """Close the guard's lifeline (it kills the tool's group and removes the work directory),
-    then wait for the guard (SIGKILL if it does not end within 10 s)."""
-    os.close(keep)
-    try:
-        proc.communicate(timeout=10.0)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.communicate()
+                            f"{done.status}: {last}")
 
 
 def read_poses(path: Path, fmt: str, stamps_ns: np.ndarray, tolerance_s: float) -> F64:
