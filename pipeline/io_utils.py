@@ -47,16 +47,29 @@ def output_path(final: str | os.PathLike[str]) -> Path:
     return path
 
 
+def output_folder(folder: str | os.PathLike[str], *, of: Path | None = None) -> Path:
+    """``folder``, created with its parents when missing: the one place an output folder is
+    made. OutputError naming the file in the way, or the reason (a read-only file system, no
+    permission); with ``of`` (a file to write there) the error names that file."""
+    if not os.fspath(folder).strip():
+        raise OutputError("the output folder path is empty")
+    path = Path(folder)
+    what = f"{of}: cannot create its folder" if of is not None else (
+        f"{path}: cannot create the output folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        blocker = next((p for p in [path, *path.parents] if p.exists() and not p.is_dir()),
+                       path)
+        raise OutputError(f"{what}, {blocker} is a file") from None
+    except OSError as exc:
+        raise OutputError(f"{what} ({exc.strerror})") from None
+    return path
+
+
 def _make_parent(path: Path) -> None:
     """Create the folder of ``path``; OutputError naming the file in the way, or the reason."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except (FileExistsError, NotADirectoryError):
-        blocker = next((p for p in [path.parent, *path.parent.parents] if p.is_file()), None)
-        raise OutputError(f"{path}: cannot create its folder, {blocker or path.parent} "
-                          "is a file") from None
-    except OSError as exc:
-        raise OutputError(f"{path}: cannot create its folder ({exc.strerror})") from None
+    output_folder(path.parent, of=path)
 
 
 def input_file(path: str | os.PathLike[str], kind: str, hint: str = "") -> Path:
@@ -227,8 +240,7 @@ def exclusive_folder(folder: str | os.PathLike[str], what: str = "another proces
 
     from pipeline.errors import ConfigError
 
-    path = Path(folder)
-    path.mkdir(parents=True, exist_ok=True)
+    path = output_folder(folder)
     fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
     try:
         try:

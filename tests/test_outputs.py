@@ -207,3 +207,42 @@ def test_no_command_writes_over_its_input(tmp_path: Path, args: list[str], victi
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "the output is also an input" in lines[0], result.stderr
     assert paths[victim].read_bytes() == before
+
+
+FOLDER_COMMANDS = {
+    "ingest-set": ["ingest-set", "--out", "{out}"],
+    "simulate-set": ["simulate-set", "--out", "{out}"],
+    "simulate-kitti-set": ["simulate-kitti-set", "--out", "{out}"],
+    "trials": ["trials", "{seq}", "-a", "ndt", "--iterations", "1", "--length-m", "0.5",
+               "--out", "{out}"],
+    "run -a command (its work folder)": [
+        "run", "-a", "command", "-o", 'command=["true"]', "-o",
+        'space=[{{"name": "x", "low": 0, "high": 1, "default": 0.5}}]', "-o", "workdir={out}",
+        "{seq}", "--out", "{tmp}/t.parquet"],
+}
+
+
+@pytest.mark.parametrize("where", ["under a file", "read-only"])
+@pytest.mark.parametrize("command", sorted(FOLDER_COMMANDS))
+def test_an_output_folder_that_cannot_be_made_is_one_line(
+        tmp_path: Path, command: str, where: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 32, case 7: `--out` under a file, or where no folder can be made (/sys), was a
+    NotADirectoryError / PermissionError traceback in the data-set stages and trials: one
+    folder creator (pipeline.io_utils.output_folder) now names the file in the way or the
+    reason, before any work is done."""
+    (tmp_path / "file").write_text("x")
+    seq = tmp_path / "s.mcap"
+    with SequenceWriter(seq, SequenceInfo(name="s")) as w:  # 3 frames, 1 m apart
+        for k in range(3):
+            T = np.eye(4)
+            T[0, 3] = k
+            w.add(10 + k, np.ones((5, 3), np.float32) * k, T)
+    out = tmp_path / "file" / "x" if where == "under a file" else Path("/sys/adaptune-x")
+    args = [a.format(out=out, seq=seq, tmp=tmp_path) for a in FOLDER_COMMANDS[command]]
+    monkeypatch.chdir(tmp_path)  # no ./params.yaml: every section at its defaults
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 1, (result.output, result.exception)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("adaptune: error: "), result.stderr
+    reason = f"{tmp_path / 'file'} is a file" if where == "under a file" else "not permitted"
+    assert reason in lines[0], lines[0]

@@ -136,12 +136,13 @@ def _logged(score: WorldScore, i: int, n: int) -> WorldScore:
 def score_world(world: SuiteWorld, inputs: SuiteInputs, out_dir: Path) -> WorldScore:
     """Simulate ``world``, run adaptive, baseline and fixed, score them (module docstring)."""
     from pipeline.adaptive import loaded_model, run_one
+    from pipeline.io_utils import output_folder
     from pipeline.report.evaluate import EvaluateSection, evaluate
     from pipeline.sim.simulate import simulate_sequence
 
     t0 = time.perf_counter()
     scratch = out_dir / "worlds"
-    scratch.mkdir(parents=True, exist_ok=True)
+    output_folder(scratch)
     path = scratch / f"{world.name}.mcap"
     try:
         simulate_sequence(world.spec, path, name=world.name)

@@ -47,6 +47,7 @@ from pydantic import Field, field_validator
 from pipeline.config import Section
 from pipeline.errors import ConfigError, InfrastructureError, OdometryError, TrialTimeout
 from pipeline.geometry import pose_from_xyz_quat
+from pipeline.io_utils import output_folder
 from pipeline.odometry.base import Adapter, ParameterSpace, ParamSpec, Schedule
 from pipeline.odometry.common import F64, parse_options
 from pipeline.sequence import Scan, SequenceInfo, SequenceWriter
@@ -136,7 +137,7 @@ class CommandAdapter:
         limit = time_limit_s if time_limit_s is not None else self.options.timeout_s
         base = self.options.workdir
         if base:
-            Path(base).mkdir(parents=True, exist_ok=True)
+            output_folder(base)
         work = Path(tempfile.mkdtemp(prefix="adaptune-cmd-", dir=base))
         try:
             sequence, stamps_ns = self._sequence(scans, work)

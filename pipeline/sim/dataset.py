@@ -11,6 +11,7 @@ from typing import Any
 from pydantic import Field, field_validator
 
 from pipeline.config import Section
+from pipeline.io_utils import output_folder
 from pipeline.sequence_index import write_index
 from pipeline.sim.route import LABELS
 from pipeline.sim.sensors import SensorName
@@ -106,7 +107,7 @@ def simulate_set(
     ``progress``: a bar per sequence (one worker only); a log line per finished sequence
     otherwise."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    output_folder(out_dir)
     specs = dataset_specs(section, base_seed)
     bars = progress and section.workers == 1
     jobs = [(spec, out_dir / f"{name}.mcap", name, bars) for name, (_, spec) in specs.items()]
