@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from stages.common import echo_output
 from stages.ingest import POSE_FORMATS
 
 
@@ -31,11 +32,11 @@ def kitti(gt_poses: Path, est_poses: Path, as_json: bool) -> None:
 
     result = evaluate_kitti_files(gt_poses, est_poses)
     if as_json:
-        click.echo(json.dumps(result, indent=1))
+        echo_output(json.dumps(result, indent=1))
         return
-    click.echo(f"t_err {result['t_err_pct']:.4f} %   r_err {result['r_err_deg_per_m']:.6f} deg/m "
-               f"({result['r_err_deg_per_m'] * 100:.4f} deg/100 m)   "
-               f"{result['segments']} segments, {result['frames']} frames")
+    echo_output(f"t_err {result['t_err_pct']:.4f} %   r_err {result['r_err_deg_per_m']:.6f} "
+                f"deg/m ({result['r_err_deg_per_m'] * 100:.4f} deg/100 m)   "
+                f"{result['segments']} segments, {result['frames']} frames")
 
 
 @metric.command()
@@ -64,14 +65,15 @@ def rte(ground_truth: Path, estimate: Path, length_m: float, scale: bool, gt_for
     r = evaluate_files(ground_truth, estimate, length_m, scale, gt_format,  # type: ignore[arg-type]
                        est_format)  # type: ignore[arg-type]
     if as_json:
-        click.echo(json.dumps(r, indent=1))
+        echo_output(json.dumps(r, indent=1))
         return
     rt, ape, rpe = r["rte"], r["ape"], r["rpe"]
     stats = "rmse {rmse:.4f}  mean {mean:.4f}  median {median:.4f}  std {std:.4f}  " \
             "min {min:.4f}  max {max:.4f} m"
-    click.echo(f"{r['frames']} frames, {r['path_m']:.1f} m of ground truth")
-    click.echo(f"RTE  L = {rt['length_m']:g} m, {rt['segments']} start frames: "
-               f"t_err {rt['t_err_pct']:.4f} %  r_err {rt['r_err_deg_per_m']:.6f} deg/m")
-    click.echo(f"APE  {ape['alignment']} Umeyama alignment (scale {ape['scale']:.4f}): "
-               + stats.format(**ape))
-    click.echo("RPE  1 frame: " + stats.format(**rpe))
+    echo_output("\n".join([
+        f"{r['frames']} frames, {r['path_m']:.1f} m of ground truth",
+        f"RTE  L = {rt['length_m']:g} m, {rt['segments']} start frames: "
+        f"t_err {rt['t_err_pct']:.4f} %  r_err {rt['r_err_deg_per_m']:.6f} deg/m",
+        f"APE  {ape['alignment']} Umeyama alignment (scale {ape['scale']:.4f}): "
+        + stats.format(**ape),
+        "RPE  1 frame: " + stats.format(**rpe)]))

@@ -15,7 +15,14 @@ from pathlib import Path
 
 import click
 
-from stages.common import FILE, algorithm_option, dir_option, json_option, params_option
+from stages.common import (
+    FILE,
+    algorithm_option,
+    dir_option,
+    echo_output,
+    json_option,
+    params_option,
+)
 
 
 @click.command()
@@ -115,4 +122,4 @@ def trials(
                        f"best objective {s.best_objective:.4g} % (trial {s.best_trial})",
                        err=True)
     if as_json:
-        click.echo(json.dumps([asdict(s) for s in studies], indent=1, default=str))
+        echo_output(json.dumps([asdict(s) for s in studies], indent=1, default=str))
