@@ -1,0 +1,76 @@
+"""The probe corpus of issue 32: one test per reproducible case of the audit, by family (each
+failed before its fix). The faults that need real processes or devices live beside their kind
+(tests/tuning/test_orphans.py, tests/test_outputs.py, tests/evaluation/test_query.py).
+
+Every refusal is one line ``adaptune: error: ...`` naming the value and the rule, exit code 1.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner, Result
+
+from pipeline.sequence import SequenceInfo, SequenceWriter
+from pipeline.trajectory import Trajectory, write_trajectory
+from stages.cli import main
+
+
+def invoke(args: list[str], input: str | None = None) -> Result:
+    return CliRunner().invoke(main, [str(a) for a in args], input=input)
+
+
+def fails(args: list[str], *needles: str) -> str:
+    """Run ``adaptune ARGS``: exit 1, one ``adaptune: error:`` line holding every needle."""
+    result = invoke(args)
+    assert result.exit_code == 1, (result.output, result.exception)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("adaptune: error: "), result.stderr
+    for needle in needles:
+        assert needle in lines[0], (needle, lines[0])
+    return lines[0]
+
+
+def straight_sequence(path: Path, frames: int = 12, step_m: float = 1.0) -> Path:
+    """``frames`` scans of 5 points, the ground truth ``step_m`` apart along a gentle curve."""
+    with SequenceWriter(path, SequenceInfo(name=path.stem)) as w:
+        for k in range(frames):
+            T = np.eye(4)
+            T[:2, 3] = k * step_m, 0.01 * k * k
+            w.add(100_000_000 * k, np.ones((5, 3), np.float32) * k, T)
+    return path
+
+
+# ------------------------------------------------------------------------------- Readers
+
+
+def trajectory_file(path: Path, sequence: Path, frames: list[int],
+                    T: np.ndarray | None = None) -> Path:
+    n = len(frames)
+    T = np.tile(np.eye(4), (n, 1, 1)) if T is None else T
+    if n:
+        T[:, 0, 3] = np.arange(n)
+    write_trajectory(path, Trajectory(np.array(frames, np.int32),
+                                      100_000_000 * np.array(frames, np.int64), T),
+                     {"sequence": str(sequence)})
+    return path
+
+
+@pytest.mark.parametrize("case, frames, scale, needle", [
+    ("no rows (case 7: IndexError)", [], 1.0, "has no poses"),
+    ("a rotation that is not one (case 6: scored 436 %)", [0, 1, 2, 3], 2.0,
+     "not a rotation matrix"),
+    ("duplicate frame numbers (case 6: exported)", [0, 1, 1, 2], 1.0,
+     "frame numbers must increase"),
+])
+def test_a_trajectory_no_run_gives_is_refused(tmp_path: Path, case: str, frames: list[int],
+                                             scale: float, needle: str) -> None:
+    seq = straight_sequence(tmp_path / "s.mcap")
+    T = np.tile(np.eye(4), (len(frames), 1, 1))
+    T[:, :3, :3] *= scale
+    traj = trajectory_file(tmp_path / "t.parquet", seq, frames, T)
+    fails(["export", traj, "--format", "kitti", "--out", tmp_path / "o.txt"], needle)
+    fails(["metric", "rte", seq, traj, "--length", "2"], needle)
+    assert not (tmp_path / "o.txt").exists()
