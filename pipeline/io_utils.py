@@ -22,7 +22,7 @@ from collections.abc import Generator, Iterable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
-from pipeline.errors import InputError, OutputError
+from pipeline.errors import AdaptuneError, InputError, OutputError
 
 T = TypeVar("T")
 log = logging.getLogger(__name__)
@@ -72,6 +72,94 @@ def _make_parent(path: Path) -> None:
     output_folder(path.parent, of=path)
 
 
+MAX_INPUT_BYTES = 64 << 20
+"""The largest parameter, pose, times, calibration or index file read: 64 MiB (KITTI's
+longest pose file is 0.5 MiB)."""
+
+
+def read_input(path: str | os.PathLike[str], kind: str, *, hint: str = "",
+               limit: int = MAX_INPUT_BYTES, error: type[AdaptuneError] = InputError,
+               follow_links: bool = True) -> bytes:
+    """The bytes of the regular file ``path`` (a ``kind``): the one bounded reader of the
+    small files adaptune reads whole (parameter, pose, times, calibration, index, manifest).
+
+    ``error`` (InputError by default) naming the file and the rule, at once and without
+    blocking: missing (with ``hint``), a FIFO, a device, a folder, more than ``limit`` bytes
+    (the limit named). Checked with stat, then opened with O_NONBLOCK and checked again on the
+    open file (a FIFO swapped in between is not waited on); ``follow_links`` False refuses a
+    symlink too (O_NOFOLLOW).
+    """
+    p = Path(path)
+    try:
+        st = os.stat(p) if follow_links else os.lstat(p)
+    except (FileNotFoundError, NotADirectoryError):
+        raise error(f"{p}: no such {kind}{hint}") from None
+    except OSError as exc:
+        raise error(f"{p}: cannot read the {kind} ({exc.strerror})") from None
+    _check_regular(p, st, kind, limit, error)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | (
+        0 if follow_links else getattr(os, "O_NOFOLLOW", 0))
+    try:
+        fd = os.open(p, flags)
+    except OSError as exc:
+        raise error(f"{p}: cannot open the {kind} ({exc.strerror})") from None
+    with os.fdopen(fd, "rb") as fh:
+        now = os.fstat(fd)
+        if (now.st_ino, now.st_dev) != (st.st_ino, st.st_dev):
+            raise error(f"{p}: changed while being opened")
+        _check_regular(p, now, kind, limit, error)
+        try:
+            data = fh.read(limit + 1)
+        except OSError as exc:
+            raise error(f"{p}: cannot read the {kind} ({exc.strerror})") from None
+    if len(data) > limit:
+        raise error(f"{p}: more than the {_bytes(limit)} a {kind} may hold")
+    return data
+
+
+def read_input_text(path: str | os.PathLike[str], kind: str, *,
+                    error: type[AdaptuneError] = InputError, strict: bool = False,
+                    hint: str = "") -> str:
+    """``read_input`` decoded as UTF-8 (a byte-order mark dropped); undecodable bytes become
+    U+FFFD, or with ``strict`` are ``error`` naming the file and the offset."""
+    data = read_input(path, kind, error=error, hint=hint)
+    try:
+        return data.decode("utf-8-sig", errors="strict" if strict else "replace")
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not UTF-8 text (byte {exc.start})") from None
+
+
+def _check_regular(path: Path, st: os.stat_result, kind: str, limit: int,
+                   error: type[AdaptuneError]) -> None:
+    import stat
+
+    if not stat.S_ISREG(st.st_mode):
+        raise error(f"{path}: is not a regular file (a {kind} must be one; this is "
+                    f"{_file_kind(st.st_mode)})")
+    if st.st_size > limit:
+        raise error(f"{path}: {st.st_size} bytes, more than the {_bytes(limit)} a {kind} may "
+                    "hold")
+
+
+def _file_kind(mode: int) -> str:
+    import stat
+
+    for test, name in ((stat.S_ISLNK, "a symlink"), (stat.S_ISFIFO, "a FIFO"),
+                       (stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a device"),
+                       (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a file"
+
+
+def _bytes(n: int) -> str:
+    """``n`` bytes in the largest binary unit that divides it: 64 MiB, 16 GiB, 100 bytes."""
+    for shift, unit in ((30, "GiB"), (20, "MiB"), (10, "KiB")):
+        if n >= 1 << shift and n % (1 << shift) == 0:
+            return f"{n >> shift} {unit}"
+    return f"{n} bytes"
+
+
 def input_file(path: str | os.PathLike[str], kind: str, hint: str = "") -> Path:
     """``path`` when it is a regular file (links followed); InputError naming it and ``kind``
     (with ``hint`` when it is missing) otherwise: a folder, FIFO or device is refused before a
@@ -80,7 +168,8 @@ def input_file(path: str | os.PathLike[str], kind: str, hint: str = "") -> Path:
     if p.is_file():
         return p
     if p.exists():
-        raise InputError(f"{p}: is not a regular file (a {kind} must be one)")
+        raise InputError(f"{p}: is not a regular file (a {kind} must be one; this is "
+                         f"{_file_kind(p.stat().st_mode)})")
     raise InputError(f"{p}: no such {kind}{hint}")
 
 

@@ -29,45 +29,12 @@ def save_npy(path: Path, arr: NDArray[Any]) -> str:
 
 def read_regular_file(path: Path, limit: int) -> bytes:
     """The bytes of ``path`` if it is a regular file (not a symlink, FIFO, device or folder) of
-    at most ``limit`` bytes; ArtifactError otherwise. Checked with lstat before opening, opened
-    without following links and without blocking, and checked again on the open file."""
-    import os
-    import stat
+    at most ``limit`` bytes; ArtifactError otherwise (``pipeline.io_utils.read_input``: checked
+    before opening, opened without following links and without blocking, checked again)."""
+    from pipeline.io_utils import read_input
 
-    try:
-        st = os.lstat(path)
-    except FileNotFoundError:
-        raise ArtifactError(f"{path}: missing (listed in manifest.json)") from None
-    except OSError as exc:
-        raise ArtifactError(f"{path}: cannot read ({exc.strerror})") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise ArtifactError(f"{path}: not a regular file ({_file_kind(st.st_mode)})")
-    if st.st_size > limit:
-        raise ArtifactError(f"{path}: {st.st_size} bytes, more than the {limit} allowed")
-    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
-    try:
-        fd = os.open(path, flags)
-    except OSError as exc:
-        raise ArtifactError(f"{path}: cannot open ({exc.strerror})") from None
-    with os.fdopen(fd, "rb") as fh:
-        now = os.fstat(fh.fileno())
-        if (now.st_ino, now.st_dev) != (st.st_ino, st.st_dev) or not stat.S_ISREG(now.st_mode):
-            raise ArtifactError(f"{path}: changed while being opened")
-        data = fh.read(limit + 1)
-    if len(data) > limit:
-        raise ArtifactError(f"{path}: more than the {limit} bytes allowed")
-    return data
-
-
-def _file_kind(mode: int) -> str:
-    import stat
-
-    for test, name in ((stat.S_ISLNK, "a symlink"), (stat.S_ISFIFO, "a FIFO"),
-                       (stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a device"),
-                       (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket")):
-        if test(mode):
-            return name
-    return "not a file"
+    return read_input(path, "model file", hint=" (listed in manifest.json)", limit=limit,
+                      error=ArtifactError, follow_links=False)
 
 
 def parse_npy(data: bytes, what: str | Path) -> NDArray[Any]:

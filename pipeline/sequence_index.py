@@ -8,6 +8,7 @@ read by every later stage through ``read_index`` (docs/design.md, "Formats").
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -88,15 +89,14 @@ def read_index(folder: str | Path, missing_ok: bool = False) -> SequenceIndex:
     """
     folder = Path(folder)
     path = folder / INDEX_NAME
+    from pipeline.io_utils import read_input_text
+
+    if missing_ok and not os.path.lexists(path):
+        return SequenceIndex(folder)
+    text = read_input_text(path, "sequence index", strict=True,
+                           hint=" (written by the simulate or ingest stage)")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        if missing_ok:
-            return SequenceIndex(folder)
-        raise InputError(f"{path}: no such sequence index (written by the simulate or ingest "
-                         "stage)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read the sequence index ({exc})") from None
+        data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON ({exc})") from None
     if not isinstance(data, dict) or not all(

@@ -25,11 +25,10 @@ def parse_params(text: str | None) -> dict[str, float]:
         return {}
     source = "--params"
     if text.startswith("@"):
+        from pipeline.io_utils import read_input_text
+
         path = Path(text[1:])
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise ConfigError(f"{path}: cannot read parameters ({exc.strerror})") from None
+        text = read_input_text(path, "parameters file", error=ConfigError, strict=True)
         source = str(path)
     try:
         data = json.loads(text)

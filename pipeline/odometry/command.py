@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import shlex
 import shutil
 import signal
@@ -47,7 +48,7 @@ from pydantic import Field, field_validator
 from pipeline.config import Section
 from pipeline.errors import ConfigError, InfrastructureError, OdometryError, TrialTimeout
 from pipeline.geometry import pose_from_xyz_quat
-from pipeline.io_utils import output_folder
+from pipeline.io_utils import output_folder, read_input, read_input_text
 from pipeline.odometry.base import Adapter, ParameterSpace, ParamSpec, Schedule
 from pipeline.odometry.common import F64, parse_options
 from pipeline.sequence import Scan, SequenceInfo, SequenceWriter
@@ -99,10 +100,9 @@ def load_space(spec: list[dict[str, Any]] | str) -> ParameterSpace:
     items: object = spec
     if isinstance(spec, str):
         path = Path(spec)
+        text = read_input_text(path, "parameter space file", error=ConfigError, strict=True)
         try:
-            data = yaml.safe_load(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ConfigError(f"{path}: no such parameter space file") from None
+            data = yaml.safe_load(text)
         except yaml.YAMLError as exc:
             raise ConfigError(f"{path}: not valid YAML/JSON ({exc})") from None
         what = str(path)
@@ -221,10 +221,10 @@ def run_process(argv: list[str], cwd: str | None, time_limit_s: float | None,
 
 def read_poses(path: Path, fmt: str, stamps_ns: np.ndarray, tolerance_s: float) -> F64:
     """(N, 4, 4) T_world_lidar for the N frames at ``stamps_ns`` from a KITTI or TUM file."""
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise OdometryError(f"command: wrote no trajectory ({path.name} missing)")
     try:
-        text = path.read_bytes().decode("utf-8")
+        text = read_input(path, "trajectory", error=OdometryError).decode("utf-8")
     except UnicodeDecodeError as exc:
         raise OdometryError(f"command: {path.name} is not UTF-8 text (byte "
                             f"0x{exc.object[exc.start]:02x} at offset {exc.start})") from None

@@ -27,7 +27,7 @@ from pipeline.geometry import (
     inv_se3,
     refuse_non_rotations,
 )
-from pipeline.io_utils import input_file
+from pipeline.io_utils import read_input_text
 
 log = logging.getLogger(__name__)
 
@@ -41,8 +41,8 @@ Z_MOTION_SHARE = 0.7
 
 def read_kitti_calib(path: str | Path) -> NDArray[np.float64]:
     """(4, 4) Tr (velodyne -> camera 0) from a KITTI odometry calib.txt."""
-    path = input_file(path, "calibration file")
-    for line in path.read_text(encoding="utf-8-sig", errors="replace").splitlines():
+    path = Path(path)
+    for line in read_input_text(path, "calibration file").splitlines():
         key, _, rest = line.partition(":")
         if key.strip() in ("Tr", "Tr_velo_to_cam"):
             try:
@@ -71,7 +71,7 @@ def read_extrinsic(value: str | Path) -> NDArray[np.float64]:
         if not is_file:
             raise InputError(f"--extrinsic {text[:80]!r} is neither 12 or 16 numbers nor a "
                              "file")
-        content = path.read_text(encoding="utf-8-sig", errors="replace")
+        content = read_input_text(path, "extrinsic file")
         if re.search(r"^\s*(Tr|Tr_velo_to_cam)\s*:", content, re.MULTILINE):
             return read_kitti_calib(path)
         text, source = content, str(path)

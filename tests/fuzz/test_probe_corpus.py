@@ -74,3 +74,50 @@ def test_a_trajectory_no_run_gives_is_refused(tmp_path: Path, case: str, frames:
     fails(["export", traj, "--format", "kitti", "--out", tmp_path / "o.txt"], needle)
     fails(["metric", "rte", seq, traj, "--length", "2"], needle)
     assert not (tmp_path / "o.txt").exists()
+
+
+@pytest.mark.timeout(60, method="signal")
+def test_a_kitti_pose_file_that_is_a_fifo_is_an_error(tmp_path: Path) -> None:
+    """Case 5: ROOT/poses/NN.txt a FIFO gave "ground truth: no" and exit 0 (a missing pose
+    file is optional; one that is there but no regular file is not)."""
+    import os
+
+    from test_fuzz_cli import kitti_layout
+
+    paths = kitti_layout(tmp_path / "kitti")
+    paths["poses"].unlink()
+    os.mkfifo(paths["poses"])
+    out = tmp_path / "00.mcap"
+    fails(["ingest", "kitti", tmp_path / "kitti", "00", "--out", out], str(paths["poses"]),
+          "is not a regular file", "a FIFO")
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------------ Params and CLI
+
+
+@pytest.mark.timeout(60, method="signal")
+@pytest.mark.parametrize("command", [
+    ["run", "-a", "ndt", "--params", "@{p}", "{seq}", "--out", "{tmp}/t.parquet"],
+    ["params", "ndt", "--params", "{p}"],
+    ["trials", "{seq}", "--out", "{tmp}/out", "--params", "{p}"],
+], ids=["run", "params", "trials"])
+@pytest.mark.parametrize("kind", ["FIFO", "/dev/zero", "65 MiB"])
+def test_a_params_file_is_a_bounded_regular_file(tmp_path: Path, command: list[str],
+                                                kind: str) -> None:
+    """Cases 4 and 5: `--params FIFO` hung run, params and trials; `run --params @/dev/zero`
+    grew to 23 GB. One bounded reader (pipeline.io_utils.read_input): regular files of at most
+    64 MiB, refused at once."""
+    import os
+
+    seq = straight_sequence(tmp_path / "s.mcap")
+    p = tmp_path / "p.yaml"
+    if kind == "FIFO":
+        os.mkfifo(p)
+    elif kind == "/dev/zero":
+        p = Path("/dev/zero")
+    else:
+        with open(p, "wb") as fh:  # sparse: no 65 MiB written
+            fh.truncate(65 << 20)
+    needle = "64 MiB" if kind == "65 MiB" else "is not a regular file"
+    fails([a.format(p=p, seq=seq, tmp=tmp_path) for a in command], str(p), needle)
