@@ -22,7 +22,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ArtifactError
-from pipeline.npy_files import MAX_ARRAY_BYTES, parse_npy, read_regular_file, save_npy
+from pipeline.npy_files import (
+    MAX_ARRAY_BYTES,
+    npy_declaration,
+    parse_npy,
+    read_npy_file,
+    read_regular_file,
+    save_npy,
+)
 
 if TYPE_CHECKING:
     from pipeline.descriptors import Descriptor
@@ -91,6 +98,7 @@ def write_artifact(
     }
     with atomic_dir(out) as tmp:
         files = {name: save_npy(tmp / name, arr) for name, arr in arrays.items()}
+        shapes = {name: npy_declaration(arr) for name, arr in arrays.items()}
         manifest = {
             "schema_version": SCHEMA_VERSION,
             "kind": ARTIFACT_KIND,
@@ -116,6 +124,7 @@ def write_artifact(
             "training": {**fitted.summary, "env_sequences": fitted.env_sequences},
             "cross_validation": fitted.cv,
             "files": files,
+            "arrays": shapes,
             "provenance": provenance(repo, info.inputs),
         }
         validate_manifest(manifest)
@@ -179,14 +188,21 @@ def read_manifest(path: Path) -> dict[str, Any]:
 
 def read_arrays(path: Path, manifest: Mapping[str, Any],
                 specs: Mapping[str, ArraySpec]) -> Arrays:
-    """Every file the manifest lists, read safely, checksums verified, parsed, checked against
-    ``specs`` (each spec'd file must be listed) and finite. ArtifactError otherwise."""
+    """Every file the manifest lists, read safely (its header and size checked against the
+    shape and dtype the manifest declares before its array is read), checksums verified,
+    parsed, checked against ``specs`` (each spec'd file must be listed) and finite.
+    ArtifactError otherwise."""
     files = manifest.get("files")
     if not isinstance(files, dict):
         raise ArtifactError(f"{path}/manifest.json: no file list")
     missing = [f for f in specs if f not in files]
     if missing:
         raise ArtifactError(f"{path}/manifest.json: does not list {missing[0]}")
+    declared = manifest.get("arrays")
+    if not isinstance(declared, dict):
+        raise ArtifactError(f"{path}/manifest.json: no array shapes ('arrays': an artifact "
+                            "written before they were recorded; rebuild it with `adaptune "
+                            "surrogate`)")
     arrays: Arrays = {}
     for name, digest in files.items():
         if (not isinstance(name, str) or Path(name).name != name or name in (".", "..")
@@ -194,7 +210,7 @@ def read_arrays(path: Path, manifest: Mapping[str, Any],
             raise ArtifactError(f"{path}/manifest.json: file name {name!r} is not a plain "
                                 ".npy name")
         fpath = path / name
-        data = read_regular_file(fpath, MAX_ARRAY_BYTES)
+        data = read_npy_file(fpath, declared.get(name), MAX_ARRAY_BYTES)
         if hashlib.sha256(data).hexdigest() != digest:
             raise ArtifactError(f"{fpath}: sha256 mismatch (file altered or damaged)")
         arrays[name] = parse_npy(data, fpath)

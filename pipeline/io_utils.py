@@ -77,18 +77,12 @@ MAX_INPUT_BYTES = 64 << 20
 longest pose file is 0.5 MiB)."""
 
 
-def read_input(path: str | os.PathLike[str], kind: str, *, hint: str = "",
+@contextlib.contextmanager
+def open_input(path: str | os.PathLike[str], kind: str, *, hint: str = "",
                limit: int = MAX_INPUT_BYTES, error: type[AdaptuneError] = InputError,
-               follow_links: bool = True) -> bytes:
-    """The bytes of the regular file ``path`` (a ``kind``): the one bounded reader of the
-    small files adaptune reads whole (parameter, pose, times, calibration, index, manifest).
-
-    ``error`` (InputError by default) naming the file and the rule, at once and without
-    blocking: missing (with ``hint``), a FIFO, a device, a folder, more than ``limit`` bytes
-    (the limit named). Checked with stat, then opened with O_NONBLOCK and checked again on the
-    open file (a FIFO swapped in between is not waited on); ``follow_links`` False refuses a
-    symlink too (O_NOFOLLOW).
-    """
+               follow_links: bool = True) -> Iterator[tuple[Any, int]]:
+    """``(binary file, size)`` of the regular file ``path`` (a ``kind``), open for the block:
+    the checks of ``read_input`` done before any byte is read."""
     p = Path(path)
     try:
         st = os.stat(p) if follow_links else os.lstat(p)
@@ -109,11 +103,28 @@ def read_input(path: str | os.PathLike[str], kind: str, *, hint: str = "",
             raise error(f"{p}: changed while being opened")
         _check_regular(p, now, kind, limit, error)
         try:
-            data = fh.read(limit + 1)
+            yield fh, now.st_size
         except OSError as exc:
             raise error(f"{p}: cannot read the {kind} ({exc.strerror})") from None
+
+
+def read_input(path: str | os.PathLike[str], kind: str, *, hint: str = "",
+               limit: int = MAX_INPUT_BYTES, error: type[AdaptuneError] = InputError,
+               follow_links: bool = True) -> bytes:
+    """The bytes of the regular file ``path`` (a ``kind``): the one bounded reader of the
+    small files adaptune reads whole (parameter, pose, times, calibration, index, manifest).
+
+    ``error`` (InputError by default) naming the file and the rule, at once and without
+    blocking: missing (with ``hint``), a FIFO, a device, a folder, more than ``limit`` bytes
+    (the limit named). Checked with stat, then opened with O_NONBLOCK and checked again on the
+    open file (a FIFO swapped in between is not waited on); ``follow_links`` False refuses a
+    symlink too (O_NOFOLLOW).
+    """
+    with open_input(path, kind, hint=hint, limit=limit, error=error,
+                    follow_links=follow_links) as (fh, _):
+        data: bytes = fh.read(limit + 1)
     if len(data) > limit:
-        raise error(f"{p}: more than the {_bytes(limit)} a {kind} may hold")
+        raise error(f"{path}: more than the {_bytes(limit)} a {kind} may hold")
     return data
 
 
