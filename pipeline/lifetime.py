@@ -83,13 +83,22 @@ def become_pool_worker(parent_pid: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP in the main process: unwinds as Ctrl-C's KeyboardInterrupt does;
+    ``signum`` says which."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
 def exit_on_termination() -> None:
-    """In the main process: SIGTERM and SIGHUP raise SystemExit(128 + signal) in the main
-    thread, so that ``finally`` blocks and context managers end children and remove
-    temporary files (Python's default is to die on the spot)."""
+    """In the main process: SIGTERM and SIGHUP raise Terminated (a KeyboardInterrupt) in the
+    main thread, so that ``finally`` blocks and context managers end children and remove
+    temporary files (Python's default is to die on the spot), as Ctrl-C does."""
 
     def terminate(signum: int, frame: object) -> None:
-        raise SystemExit(128 + signum)
+        raise Terminated(signum)
 
     if threading.current_thread() is not threading.main_thread():
         return  # signal handlers belong to the main thread (e.g. a CLI test runner's thread)
