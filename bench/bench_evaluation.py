@@ -7,7 +7,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from common import Row, best_of, data_root
+from common import Row, best_of, data_root, size
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "evaluation"))
 
@@ -40,7 +40,7 @@ def kitti_rows() -> list[Row]:
     ]
 
 
-def rte_frames_rows(trials: int = 256, frames: int = 300) -> list[Row]:
+def rte_frames_rows(trials: int = size(256, 4), frames: int = size(300, 60)) -> list[Row]:
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         gt = gt_path(frames, step_m=0.5, stop=None, seed=1)

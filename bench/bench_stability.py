@@ -16,7 +16,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from common import Row
+from common import Row, size, smoke
 
 REPO = Path(__file__).resolve().parents[1]
 NUDGE = 1e-12
@@ -55,7 +55,7 @@ def toy_inputs() -> tuple[object, np.ndarray, Path | None, str]:
     from pipeline.sequence import SequenceReader
 
     seq = REPO / "data" / "sequences" / "composite_0.mcap"
-    if (REPO / "model" / "manifest.json").is_file() and seq.is_file():
+    if (REPO / "model" / "manifest.json").is_file() and seq.is_file() and not smoke():
         model = load_model(REPO / "model")
         with SequenceReader(seq) as reader:
             step = round(model.selection["period_s"] * 10)  # 10 Hz: a selection every step
@@ -80,7 +80,8 @@ def synthetic_inputs() -> tuple[object, np.ndarray]:
     descs = np.stack([NdtHistogram().describe(s) for s in scans])
     space = get_adapter("ndt").space.to_json()
     rows, pca = synthetic_rows(descs, len(space))
-    fitted = fit_surrogate(rows, space, SurrogateSection(n_sobol=1024, cv_max_frames=2))
+    fitted = fit_surrogate(rows, space, SurrogateSection(n_sobol=size(1024, 64),
+                                                         cv_max_frames=2))
     selection = {"period_s": 1.0, "hysteresis": 0.02, "min_scan_points": 1000,
                  "subset_rows": 4096, "refine_iters": 4}
     with tempfile.TemporaryDirectory() as tmp:
@@ -117,7 +118,7 @@ def run() -> list[Row]:
                                          nudged(model.pca_components, rng))),
         "descriptors": selections(model, nudged(descs.astype(np.float64), rng)),
     }
-    shuffled = [selections(model, descs, shuffle=s) for s in range(3)]
+    shuffled = [selections(model, descs, shuffle=s) for s in range(size(3, 1))]
     n = len(ref)
     rows = [Row(f"selections changed by a {NUDGE:g} relative change of the {k} ({what}, "
                 f"{n} selections)", 100 * float(np.any(v != ref, axis=1).mean()), "%",

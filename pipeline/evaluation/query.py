@@ -146,8 +146,7 @@ def open_sandbox(db_path: Path, tables: Mapping[str, str | Path]) -> duckdb.Duck
 
     try:
         con = duckdb.connect(str(db_path), read_only=True, config={
-            "autoinstall_known_extensions": False, "autoload_known_extensions": False,
-            "temp_directory": ""})
+            "autoinstall_known_extensions": False, "autoload_known_extensions": False})
     except duckdb.Error as exc:
         raise InputError(f"{db_path}: not a readable DuckDB database "
                          f"({_first_line(exc)})") from None
@@ -159,6 +158,7 @@ def open_sandbox(db_path: Path, tables: Mapping[str, str | Path]) -> duckdb.Duck
                 raise ConfigError(f"--table {name}={path}: the name must be a new SQL identifier "
                                   f"(not one of the database's tables or views)")
             con.register(name, _parquet_dataset(Path(path)))
+        con.execute("SET temp_directory = ''")  # before the next line, which allows it
         con.execute("SET enable_external_access = false")
         con.execute("SET lock_configuration = true")
     except BaseException:
