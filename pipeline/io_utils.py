@@ -22,7 +22,7 @@ from collections.abc import Generator, Iterable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
-from pipeline.errors import AdaptuneError, InputError, OutputError
+from pipeline.errors import AdaptuneError, ConfigError, InputError, OutputError
 
 T = TypeVar("T")
 log = logging.getLogger(__name__)
@@ -182,6 +182,22 @@ def input_file(path: str | os.PathLike[str], kind: str, hint: str = "") -> Path:
         raise InputError(f"{p}: is not a regular file (a {kind} must be one; this is "
                          f"{_file_kind(p.stat().st_mode)})")
     raise InputError(f"{p}: no such {kind}{hint}")
+
+
+PLAIN_NAME_RULE = ("a plain file name: not empty, no '/', '\\' or control characters, "
+                   "not starting with '.'")
+"""What a name that becomes a file in an output folder must be (``check_plain_name``)."""
+
+
+def check_plain_name(name: object, what: str, error: type[Exception] = ConfigError) -> str:
+    """``name`` when it is a plain file name (``PLAIN_NAME_RULE``): the one path guard for
+    names that become files or folders under an output folder (sequence names, split
+    entries); ``error`` naming ``what`` and the rule otherwise (a name like ``../../x`` or
+    ``a/b`` would write outside the folder, or record such a path)."""
+    if (not isinstance(name, str) or not name or name.startswith(".")
+            or any(c in name for c in "/\\") or any(ord(c) < 32 or ord(c) == 127 for c in name)):
+        raise error(f"{what} must be {PLAIN_NAME_RULE}, got {name!r}")
+    return name
 
 
 def refuse_input_as_output(out: str | os.PathLike[str],

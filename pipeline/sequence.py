@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from pipeline.errors import InputError, SchemaError
 from pipeline.geometry import MAX_POSITION_M, refuse_non_rotations
-from pipeline.io_utils import atomic_path, input_file
+from pipeline.io_utils import atomic_path, check_plain_name, input_file
 from pipeline.ros2_cdr import (
     POINTCLOUD2,
     POSE_STAMPED,
@@ -160,6 +160,7 @@ class SequenceWriter:
     """Write a sequence MCAP atomically: use as a context manager, ``add`` frames in order."""
 
     def __init__(self, path: str | Path, info: SequenceInfo, chunk_size: int = 4 << 20) -> None:
+        check_plain_name(info.name, "the sequence name")  # later stages name files after it
         self.path = Path(path)
         self.info = info
         self.chunk_size = chunk_size

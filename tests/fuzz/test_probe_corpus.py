@@ -121,3 +121,44 @@ def test_a_params_file_is_a_bounded_regular_file(tmp_path: Path, command: list[s
             fh.truncate(65 << 20)
     needle = "64 MiB" if kind == "65 MiB" else "is not a regular file"
     fails([a.format(p=p, seq=seq, tmp=tmp_path) for a in command], str(p), needle)
+
+
+def files_under(root: Path) -> set[Path]:
+    return {p for p in root.rglob("*") if p.is_file()}
+
+
+def test_names_that_would_leave_the_output_folder_are_refused(tmp_path: Path) -> None:
+    """Case 3: `ingest: {train: ["../../kr/sequences/04"]}` wrote next to the KITTI root and
+    index.json recorded the `..` path; `ingest --name` and `simulate --name` took `..` and `/`.
+    One path guard (pipeline.io_utils.check_plain_name) for every name that becomes a file."""
+    from test_fuzz_cli import kitti_layout
+
+    kitti_layout(tmp_path / "kr")
+    before = files_under(tmp_path)
+    params = tmp_path / "p.yaml"
+    params.write_text(f'ingest: {{kitti_root: "{tmp_path / "kr"}", '
+                      'train: ["../../kr/sequences/00"]}\n')
+    out = tmp_path / "a" / "b" / "out"
+    fails(["ingest-set", "--params", params, "--out", out], "train entry",
+          "plain file name", "../../kr/sequences/00")
+    assert files_under(tmp_path) == before | {params}, "a file was written"
+    fails(["ingest", "kitti", tmp_path / "kr", "00", "--name", "../x", "--out",
+           tmp_path / "x.mcap"], "sequence name", "'../x'")
+    fails(["simulate", "--frames", "3", "--name", "a/b", "--out", tmp_path / "y.mcap"],
+          "sequence name", "'a/b'")
+    seqs = tmp_path / "seqs"
+    straight_sequence(seqs / "s.mcap")
+    (seqs / "index.json").write_text('{"train": ["../seqs/s"]}')
+    fails(["trials", "--sequences", seqs, "--out", tmp_path / "t", "-a", "ndt"],
+          "index.json", "'../seqs/s'")
+    assert files_under(tmp_path) == before | {params, seqs / "s.mcap", seqs / "index.json"}
+
+
+def test_a_split_without_its_source_is_refused(tmp_path: Path) -> None:
+    """Case 6: `ingest: {kitti_root: null, train: ["04"]}` wrote an index with no file behind
+    it."""
+    params = tmp_path / "p.yaml"
+    params.write_text('ingest: {kitti_root: null, train: ["04"]}\n')
+    fails(["ingest-set", "--params", params, "--out", tmp_path / "out"], "kitti_root",
+          "no file would be behind the index")
+    assert not (tmp_path / "out" / "index.json").exists()
