@@ -35,7 +35,7 @@ def seconds_to_ns(t_s: NDArray[np.float64], what: str) -> NDArray[np.int64]:
     bad = ~np.isfinite(t_s) | (t_s < 0) | (t_s >= MAX_STAMP_S)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        raise InputError(f"{what}: stamp {k} is {t_s[k]!r} s ({RANGE_RULE}, finite)")
+        raise InputError(f"{what}: stamp {k} is {float(t_s[k])!r} s ({RANGE_RULE}, finite)")
     return np.round(t_s * 1e9).astype(np.int64)
 
 

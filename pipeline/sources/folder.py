@@ -38,7 +38,7 @@ from pipeline.sources.ordering import frame_numbers, name_stamps_ns, natural_ord
 from pipeline.sources.pointtime import relative_times_s
 from pipeline.sources.poses import check_count, lidar_ground_truth
 from pipeline.sources.scanfiles import SCAN_SUFFIXES, read_scan, scan_files
-from pipeline.stamps import read_times
+from pipeline.stamps import read_times, seconds_to_ns
 
 
 class FolderSource:
@@ -95,7 +95,9 @@ class FolderSource:
         if pf is not None and pf.stamps_ns is not None:
             check_count(pf, n, str(self.folder))
             return pf.stamps_ns, f"pose file {pf.path.name}"
-        return np.round(np.arange(n) * (1e9 / rate_hz)).astype(np.int64), f"{rate_hz:g} Hz"
+        with np.errstate(over="ignore"):  # a rate near 0: infinite, refused just below
+            t_s = np.arange(n) / rate_hz
+        return seconds_to_ns(t_s, f"--rate {rate_hz:g} Hz"), f"{rate_hz:g} Hz"
 
     def sequence_info(self) -> SequenceInfo:
         return SequenceInfo(name=self.seq_name, sensor=self.sensor,

@@ -42,7 +42,7 @@ Z_MOTION_SHARE = 0.7
 def read_kitti_calib(path: str | Path) -> NDArray[np.float64]:
     """(4, 4) Tr (velodyne -> camera 0) from a KITTI odometry calib.txt."""
     path = Path(path)
-    for line in read_input_text(path, "calibration file").splitlines():
+    for k, line in enumerate(read_input_text(path, "calibration file").splitlines(), 1):
         key, _, rest = line.partition(":")
         if key.strip() in ("Tr", "Tr_velo_to_cam"):
             try:
@@ -53,6 +53,7 @@ def read_kitti_calib(path: str | Path) -> NDArray[np.float64]:
                 raise InputError(f"{path}: Tr must be 12 finite numbers, got {rest.strip()[:60]!r}")
             Tr = np.eye(4)
             Tr[:3, :] = np.reshape(vals, (3, 4))
+            refuse_non_rotations(Tr[None, :3, :3], f"{path}: Tr", [k])
             return Tr
     raise InputError(f"{path}: no 'Tr' (velodyne -> camera) line in the calibration file")
 
