@@ -98,8 +98,10 @@ def trials(
         "trials",
         {**section.model_dump(), **{k: v for k, v in overrides.items() if v is not None}},
     )
-    if seed is None:
-        seed = load_section(params_path, "base", BaseSection).seed
+    base = load_section(params_path, "base", BaseSection)
+    if seed is not None:  # --seed follows base.seed's rule
+        base = validate_section(BaseSection, "base", {**base.model_dump(), "seed": seed})
+    seed = base.seed
     if bool(sequence_paths) == (sequence_dir is not None):
         raise ConfigError("give either SEQ.mcap paths or --sequences DIR, not both or neither")
     paths = (

@@ -95,8 +95,19 @@ class TrialsSection(Section):
     @field_validator("dask")
     @classmethod
     def _dask_address(cls, v: str | None) -> str | None:
-        if v is not None and v != "local" and "://" not in v:
-            raise ValueError("dask must be 'local' or a scheduler address like tcp://host:8786")
+        if v is None or v == "local":
+            return v
+        from urllib.parse import urlsplit
+
+        parts = urlsplit(v)
+        try:
+            port = parts.port
+        except ValueError:  # not a number, or out of range
+            port = None
+        if not parts.scheme or not parts.hostname or port is None or port < 1 or (
+                parts.path not in ("", "/")):
+            raise ValueError("dask must be 'local' or a scheduler address scheme://host:port "
+                             f"(a port in 1-65535), like tcp://host:8786, got {v!r}")
         return v
 
 

@@ -93,6 +93,83 @@ def test_a_kitti_pose_file_that_is_a_fifo_is_an_error(tmp_path: Path) -> None:
     assert not out.exists()
 
 
+def test_a_point_channel_that_declares_another_type_is_refused(tmp_path: Path) -> None:
+    """Case 6: an MCAP whose /lidar/points channel declares std_msgs/String was read as
+    PointCloud2 (its bytes were one)."""
+    from mcap.writer import Writer
+    from test_fuzz_mcap import cloud_cdr
+
+    from pipeline.sequence import META_FRAMES, META_SEQUENCE, POINTS_TOPIC
+
+    layout = {"fields": [("x", 0, 7, 1), ("y", 4, 7, 1), ("z", 8, 7, 1), ("intensity", 12, 7, 1)],
+              "height": 1, "width": 1, "point_step": 16, "row_step": 16, "big": False,
+              "data": np.ones(4, "<f4").tobytes()}
+    path = tmp_path / "s.mcap"
+    with open(path, "wb") as fh:
+        w = Writer(fh)
+        w.start(profile="ros2", library="probe")
+        schema = w.register_schema("std_msgs/String", "ros2msg", b"string data")
+        channel = w.register_channel(POINTS_TOPIC, "cdr", schema)
+        w.add_message(channel, log_time=0, publish_time=0, data=cloud_cdr(0, layout))
+        w.add_metadata(META_SEQUENCE, SequenceInfo("s", frame_count=1).to_record())
+        w.add_metadata(META_FRAMES, {"stamps_ns": "0"})
+        w.finish()
+    fails(["info", path], "channel /lidar/points declares std_msgs/String",
+          "sensor_msgs/msg/PointCloud2")
+
+
+def test_info_checks_the_chunk_crcs(tmp_path: Path) -> None:
+    """Case 6: `info` accepted a chunk with a bad CRC (it read the scans without checking)."""
+    from mcap.reader import make_reader
+
+    path = tmp_path / "s.mcap"
+    with SequenceWriter(path, SequenceInfo(name="s")) as w:  # no ground truth: only scans
+        for k in range(3):
+            w.add(10 + k, np.full((5, 3), k, np.float32))
+    with open(path, "rb") as fh:
+        first = make_reader(fh).get_summary().chunk_indexes[0].chunk_start_offset
+    data = bytearray(path.read_bytes())
+    assert data[first] == 0x06  # a Chunk record: opcode, length, start, end, size, crc
+    data[first + 33] ^= 0xFF
+    path.write_bytes(bytes(data))
+    fails(["info", path], "crc validation failed")
+
+
+def test_a_bad_calibration_is_named_as_such(tmp_path: Path) -> None:
+    """Case 9: a calib.txt Tr that is no rotation was reported as "ground truth pose 0" of
+    the first .bin."""
+    from test_fuzz_cli import kitti_layout
+
+    paths = kitti_layout(tmp_path / "kitti")
+    paths["calib.txt"].write_text("P0: 1 0 0 0 0 1 0 0 0 0 1 0\nTr: 2 0 0 0 0 2 0 0 0 0 2 0\n")
+    fails(["ingest", "kitti", tmp_path / "kitti", "00", "--out", tmp_path / "s.mcap"],
+          f"{paths['calib.txt']}: Tr line 2", "not a rotation matrix")
+
+
+def test_a_scan_rate_near_zero_is_one_line(tmp_path: Path) -> None:
+    """Case 9: `ingest folder --rate 1e-12` printed a numpy warning, then a stamp error."""
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    for k in range(3):
+        np.full((10, 4), k, "<f4").tofile(folder / f"{k}.bin")
+    fails(["ingest", "folder", folder, "--rate", "1e-12", "--out", tmp_path / "s.mcap"],
+          "--rate 1e-12 Hz", "stamp 1 is 1000000000000.0 s")
+
+
+def test_bad_schedule_values_name_the_schedule(tmp_path: Path) -> None:
+    """Case 9: a schedule's value out of range was reported against the sequence."""
+    from pipeline.odometry.base import Schedule
+
+    seq = straight_sequence(tmp_path / "s.mcap", frames=4)
+    sched = tmp_path / "sched.parquet"
+    Schedule(np.arange(4, dtype=np.int32), {"resolution": np.full(4, -5.0),
+                                            "keyframe_interval": np.ones(4)},
+             100_000_000 * np.arange(4, dtype=np.int64)).write(sched)
+    line = fails(["run", "-a", "ndt", "--schedule", sched, seq, "--out", tmp_path / "t.parquet"],
+                 "resolution must be in [1.0, 10.0], got -5.0 at frame 0")
+    assert line.startswith(f"adaptune: error: {sched}: ") and f"(for {seq})" in line, line
+
+
 # ------------------------------------------------------------------------ Params and CLI
 
 
@@ -162,3 +239,37 @@ def test_a_split_without_its_source_is_refused(tmp_path: Path) -> None:
     fails(["ingest-set", "--params", params, "--out", tmp_path / "out"], "kitti_root",
           "no file would be behind the index")
     assert not (tmp_path / "out" / "index.json").exists()
+
+
+def test_a_surrogate_k_beyond_the_rows_is_refused_when_fitting(kitti_root: Path) -> None:
+    """Case 6: `surrogate.k: 1000000` wrote an artifact that `select` then refused; the fit
+    refuses it with the loader's rule (pipeline.surrogates.knn.check_k)."""
+    from test_surrogate import synthetic_rows
+
+    from pipeline.errors import ConfigError
+    from pipeline.odometry import get_adapter
+    from pipeline.surrogates.fit import SurrogateSection, fit_surrogate
+
+    rows, _ = synthetic_rows(kitti_root, 4)
+    space = get_adapter("ndt").space.to_json()
+    with pytest.raises(ConfigError, match=r"surrogate\.k must be an integer in \[1, "
+                       rf"{len(rows.y)}\] \(the training rows\), got 1000000"):
+        fit_surrogate(rows, space, SurrogateSection(k=1_000_000, n_sobol=16, cv_max_frames=2))
+
+
+def test_a_negative_trials_seed_is_refused() -> None:
+    """Case 6: `trials --seed -1` was accepted (base.seed's rule, >= 0, applies to --seed)."""
+    fails(["trials", "x.mcap", "--out", "o", "--seed", "-1"], "base.seed", "-1")
+
+
+def test_simulate_frames_are_capped() -> None:
+    """Case 4: `simulate --frames 1000000000` had no bound (MAX_FRAMES, named)."""
+    fails(["simulate", "--frames", "1000000000", "--out", "x.mcap"], "[2, 100000]",
+          "MAX_FRAMES", "1000000000")
+
+
+@pytest.mark.parametrize("address", ["tcp://", "tcp://host", "tcp://host:port", "tcp://host:0"])
+def test_a_dask_address_without_a_port_is_one_line(address: str) -> None:
+    """Case 7: `--dask tcp://` was distributed's ValueError traceback ("missing port")."""
+    fails(["trials", "x.mcap", "--out", "o", "--dask", address], "trials.dask",
+          "scheme://host:port", repr(address))
