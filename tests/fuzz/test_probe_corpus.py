@@ -170,6 +170,28 @@ def test_bad_schedule_values_name_the_schedule(tmp_path: Path) -> None:
     assert line.startswith(f"adaptune: error: {sched}: ") and f"(for {seq})" in line, line
 
 
+def test_which_pose_lines_scans_take_is_said(tmp_path: Path,
+                                             caplog: pytest.LogCaptureFixture) -> None:
+    """Case 6: scans 1.pcd..9.pcd with a 10-line KITTI pose file took lines 2..10 (row n for
+    scan n, numbered from 0 as KITTI's), one frame off from a folder numbered from 1, with no
+    warning; `info` did not say which lines. Now a warning at ingest and the lines in the
+    sequence's metadata, which `info` shows."""
+    import json
+
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    for k in range(1, 10):
+        np.full((10, 4), k, "<f4").tofile(folder / f"{k}.bin")
+    poses = tmp_path / "poses.txt"
+    poses.write_text("".join(f"1 0 0 {0.86 * k} 0 1 0 0 0 0 1 0\n" for k in range(10)))
+    out = tmp_path / "s.mcap"
+    done = invoke(["ingest", "folder", folder, "--poses", poses, "--out", out])
+    assert done.exit_code == 0, done.output
+    assert "lines 2-10 of 10 used" in caplog.text, caplog.text  # a warning
+    info = invoke(["info", "--json", out])
+    assert json.loads(info.stdout)["details"]["pose_lines"] == "2-10 of 10"
+
+
 # ------------------------------------------------------------------------ Params and CLI
 
 
