@@ -16,10 +16,33 @@ import click
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-FILE = click.Path(dir_okay=False, path_type=Path)
-"""A file path (a folder is refused by click)."""
-DIR = click.Path(file_okay=False, path_type=Path)
-"""A folder path (a file is refused by click)."""
+class NoDashPath(click.Path):
+    """A click.Path that refuses ``-``: only ``adaptune query`` reads stdin or writes stdout
+    for it (its SQL and its --out); anywhere else ``-`` would silently be a file of that name
+    (``export --out -`` wrote one, ``metric rte SEQ -`` scored a stale one)."""
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        if value in ("-", b"-"):
+            refuse_dash(param.get_error_hint(ctx) if param is not None and ctx is not None
+                        else "a path")  # e.g. '--out' or 'ESTIMATE'
+        return super().convert(value, param, ctx)
+
+
+def refuse_dash(where: str) -> None:
+    """ConfigError: ``-`` given for ``where``, a file path that is not stdin or stdout."""
+    from pipeline.errors import ConfigError
+
+    raise ConfigError(f"{where}: '-' (stdin, stdout) is not read or written here (only by "
+                      "`adaptune query`); give a file path (./- for a file named -)")
+
+
+FILE = NoDashPath(dir_okay=False, path_type=Path)
+"""A file path (a folder is refused by click, ``-`` by NoDashPath)."""
+DIR = NoDashPath(file_okay=False, path_type=Path)
+"""A folder path (a file is refused by click, ``-`` by NoDashPath)."""
+PATH = NoDashPath(path_type=Path)
+"""A file or folder path (``-`` refused)."""
 
 
 def file_option(flag: str, dest: str | None = None, *, help: str, required: bool = True,

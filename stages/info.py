@@ -7,11 +7,11 @@ from pathlib import Path
 
 import click
 
-from stages.common import echo_output
+from stages.common import FILE, echo_output
 
 
 @click.command("info")
-@click.argument("path", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("path", type=FILE)
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 def info(path: Path, as_json: bool) -> None:
     """Frames, duration, ground-truth path length, points per scan, sensor, labels, schema."""

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from stages.common import echo_output
+from stages.common import FILE, echo_output
 from stages.ingest import POSE_FORMATS
 
 
@@ -18,8 +18,8 @@ def metric() -> None:
 
 
 @metric.command()
-@click.argument("gt_poses", type=click.Path(dir_okay=False, path_type=Path))
-@click.argument("est_poses", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("gt_poses", type=FILE)
+@click.argument("est_poses", type=FILE)
 @click.option("--json", "as_json", is_flag=True,
               help="Print JSON (t_err_pct, r_err_deg_per_m, segments, per_length).")
 def kitti(gt_poses: Path, est_poses: Path, as_json: bool) -> None:
@@ -40,8 +40,8 @@ def kitti(gt_poses: Path, est_poses: Path, as_json: bool) -> None:
 
 
 @metric.command()
-@click.argument("ground_truth", type=click.Path(dir_okay=False, path_type=Path))
-@click.argument("estimate", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("ground_truth", type=FILE)
+@click.argument("estimate", type=FILE)
 @click.option("--length", "length_m", type=float, required=True,
               help="L [m]: the sub-trajectory length of the RTE (any length; KITTI's 100-800 m "
               "are `metric kitti`).")

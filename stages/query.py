@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from stages.common import file_option, read_text_argument, write_output
+from stages.common import file_option, read_text_argument, refuse_dash, write_output
 
 FORMATS = ["table", "csv", "json", "parquet"]
 QUERY_TIME_LIMIT_S = 60.0
@@ -41,6 +41,8 @@ def _tables(pairs: tuple[str, ...]) -> dict[str, Path]:
         name, sep, path = pair.partition("=")
         if not sep or not name or not path:
             raise ConfigError(f"--table must be NAME=FILE.parquet, got {pair!r}")
+        if path == "-":
+            refuse_dash(f"--table {pair}")
         tables[name] = Path(path)
     return tables
 

@@ -295,3 +295,25 @@ def test_a_dask_address_without_a_port_is_one_line(address: str) -> None:
     """Case 7: `--dask tcp://` was distributed's ValueError traceback ("missing port")."""
     fails(["trials", "x.mcap", "--out", "o", "--dask", address], "trials.dask",
           "scheme://host:port", repr(address))
+
+
+@pytest.mark.parametrize("args", [
+    ["export", "{traj}", "--format", "kitti", "--out", "-"],
+    ["metric", "rte", "{seq}", "-", "--length", "2"],
+    ["info", "-"],
+    ["run", "-a", "ndt", "--params", "@-", "{seq}", "--out", "{tmp}/t.parquet"],
+    ["ingest", "folder", "{tmp}", "--poses", "-", "--out", "{tmp}/x.mcap"],
+], ids=["export --out -", "metric rte SEQ -", "info -", "run --params @-", "--poses -"])
+def test_a_dash_is_no_file_name(tmp_path: Path, args: list[str],
+                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """Case 6: `export --out -` wrote a file named `-`, `metric rte seq -` scored a stale file
+    of that name. Only `query` reads stdin / writes stdout for `-`; elsewhere it is refused
+    (a file named - is ./-)."""
+    seq = straight_sequence(tmp_path / "s.mcap")
+    traj = trajectory_file(tmp_path / "t0.parquet", seq, [0, 1, 2])
+    monkeypatch.chdir(tmp_path)
+    Path("-").write_text("1 0 0 0 0 1 0 0 0 0 1 0\n" * 12)  # the stale file
+    before = Path("-").read_bytes()
+    fails([a.format(seq=seq, traj=traj, tmp=tmp_path) for a in args], "'-' (stdin, stdout)",
+          "./- for a file named -")
+    assert Path("-").read_bytes() == before
