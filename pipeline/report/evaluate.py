@@ -29,7 +29,7 @@ from pydantic import Field, field_validator
 from pipeline.config import Section
 from pipeline.errors import InputError, OdometryError
 from pipeline.evaluation.kitti import LENGTHS_M, KittiSegments
-from pipeline.evaluation.rte import per_frame_rte
+from pipeline.evaluation.rte import check_scorable, per_frame_rte
 from pipeline.odometry.base import Schedule
 from pipeline.sequence import SequenceInfo, SequenceReader
 from pipeline.trajectory import Trajectory, read_trajectory, write_trajectory
@@ -227,6 +227,8 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
     """
     from pipeline.executor import map_in_processes
 
+    for path in sequences:  # one too short would drop out of its split's figures unseen
+        check_scorable(_ground_truth(path)[0], settings.length_m, str(path))
     adapter = study_adapter(algorithm, adapter_options, fixed_dir)
     result = Evaluation(algorithm, settings.length_m, adapter.space.validate(fixed_params),
                         adapter.space.defaults(), settings.kitti_lengths_m)

@@ -34,7 +34,7 @@ from typing import Any
 from pydantic import Field, field_validator
 
 from pipeline.config import Section
-from pipeline.errors import ConfigError, InfrastructureError, InputError
+from pipeline.errors import ConfigError, InfrastructureError
 from pipeline.executor import open_executor
 from pipeline.io_utils import exclusive_folder
 from pipeline.odometry.base import Adapter, Params, with_space
@@ -215,14 +215,10 @@ def make_studies(sequence_paths: Sequence[str | Path], joint: bool) -> list[Stud
 
 def check_scorable(path: str | Path, length_m: float) -> None:
     """InputError unless the sequence has ground truth longer than ``length_m`` (RTE needs it)."""
-    from pipeline.geometry import path_distances
+    from pipeline.evaluation.rte import check_scorable as check_ground_truth
     from pipeline.tuning.job import load_ground_truth
 
-    gt = load_ground_truth(path)
-    total_m = float(path_distances(gt)[-1]) if len(gt) else 0.0
-    if not total_m > length_m:
-        raise InputError(f"{path}: ground truth runs {total_m:.1f} m, not longer than "
-                         f"length_m={length_m}: no RTE segment to score")
+    check_ground_truth(load_ground_truth(path), length_m, str(path))
 
 
 def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path,

@@ -290,6 +290,21 @@ def test_simulate_frames_are_capped() -> None:
           "MAX_FRAMES", "1000000000")
 
 
+def test_a_sequence_shorter_than_the_rte_length_is_refused_by_evaluate(tmp_path: Path) -> None:
+    """Case 6: a validation sequence shorter than L dropped out of its split: the headline came
+    from the others while the report row named all of them, and its plot read "nan %"."""
+    from pipeline.errors import InputError
+    from pipeline.report.evaluate import EvaluateSection, evaluate
+
+    long = straight_sequence(tmp_path / "long.mcap", frames=40)  # 39 m
+    short = straight_sequence(tmp_path / "short.mcap", frames=12)  # 11 m
+    with pytest.raises(InputError, match=r"short\.mcap: ground truth runs 11\.\d m, not longer "
+                       r"than length_m=25\.0: no RTE segment to score"):
+        evaluate([long, short], "ndt", {}, tmp_path / "adaptive", tmp_path / "out",
+                 EvaluateSection(length_m=25.0))
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("address", ["tcp://", "tcp://host", "tcp://host:port", "tcp://host:0"])
 def test_a_dask_address_without_a_port_is_one_line(address: str) -> None:
     """Case 7: `--dask tcp://` was distributed's ValueError traceback ("missing port")."""
