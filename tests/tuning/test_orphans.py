@@ -109,6 +109,15 @@ def cli(*args: str) -> subprocess.Popen[bytes]:
                             preexec_fn=_default_ctrl_c)
 
 
+def run_command(sequence: Path, dirs: tuple[Path, Path], out: Path) -> subprocess.Popen[bytes]:
+    """``adaptune run -a command`` with the stubborn tool over ``sequence``."""
+    record_dir, work_root = dirs
+    opts = command_options(record_dir, work_root)
+    return cli("run", "-a", "command", "-o", f"command={json.dumps(opts['command'])}",
+               "-o", f"space={json.dumps(SPACE)}", "-o", f"workdir={work_root}",
+               str(sequence), "--out", str(out))
+
+
 def _default_ctrl_c() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
@@ -142,10 +151,7 @@ def test_killing_adaptune_trials_ends_every_process_it_started(
 def test_killing_adaptune_run_ends_the_tool_and_removes_its_work_directory(
         sequences: list[Path], dirs: tuple[Path, Path], tmp_path: Path, sig: int) -> None:
     record_dir, work_root = dirs
-    opts = command_options(record_dir, work_root)
-    main = cli("run", "-a", "command", "-o", f"command={json.dumps(opts['command'])}",
-               "-o", f"space={json.dumps(SPACE)}", "-o", f"workdir={work_root}",
-               str(sequences[0]), "--out", str(tmp_path / "t.parquet"))
+    main = run_command(sequences[0], dirs, tmp_path / "t.parquet")
     try:
         tool = running_tool(record_dir, main)
         below = descendants(main.pid)
@@ -174,10 +180,7 @@ def test_a_killed_guard_takes_the_tools_group_along_and_run_ends(
     child's end of the stderr pipe, deaf to SIGTERM. Now the parent watches the guard, kills
     the tool's group itself and ends in one line."""
     record_dir, work_root = dirs
-    opts = command_options(record_dir, work_root)
-    main = cli("run", "-a", "command", "-o", f"command={json.dumps(opts['command'])}",
-               "-o", f"space={json.dumps(SPACE)}", "-o", f"workdir={work_root}",
-               str(sequences[0]), "--out", str(tmp_path / "t.parquet"))
+    main = run_command(sequences[0], dirs, tmp_path / "t.parquet")
     try:
         tool = running_tool(record_dir, main)
         below = descendants(main.pid)
