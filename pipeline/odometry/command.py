@@ -11,13 +11,15 @@ placeholders substituted: ``{sequence}``, ``{params}``, ``{schedule}`` (CSV), ``
 ``{out}`` (the trajectory file the command must write), ``{workdir}``, ``{python}`` (this
 interpreter). The command gets ``time_limit_s`` (``run_sequence``'s, else the ``timeout_s``
 option); past it its whole process group is killed and TrialTimeout raised. A non-zero exit
-status is an OdometryError carrying the last line of its stderr.
+status is an OdometryError carrying the last line of its stderr; its stdout is not read
+(/dev/null).
 
 The command runs under the guard of ``pipeline.lifetime`` in a process group of its own: when
 the run ends early for any reason (time limit, Ctrl-C, SIGTERM, or this process killed, even by
 SIGKILL, as the tuner does at a trial's hard time limit) the whole group is killed and the work
-directory removed (unless ``keep_workdir``). A command that detaches from its process group
-(``setsid``) is on its own.
+directory removed (unless ``keep_workdir``); when the guard itself is killed, this process
+kills the group (``pipeline.lifetime.run_guarded``) and the run is an InfrastructureError. A
+command that detaches from its process group (``setsid``) is on its own.
 
 The trajectory (T_world_lidar) is read back in ``format``:
 - ``kitti``: 12 numbers a line (row-major 3x4), one line per frame in order: N lines for N frames;
