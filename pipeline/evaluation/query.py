@@ -101,9 +101,12 @@ def run_query(db_path: str | Path, sql: str,
 class _Stopper:
     """While a statement runs (``with``): interrupt it past ``time_limit_s`` (``timed_out``),
     or when SIGINT, SIGTERM or SIGHUP arrive (main thread only; an ignored signal stays
-    ignored), whose handler then runs once the statement has stopped."""
+    ignored), whose handler then runs once the statement has stopped. Once asked to stop it
+    interrupts the connection every ``REPEAT_S`` until the block ends: an interrupt that comes
+    before DuckDB has started executing (while it binds) would be lost."""
 
     SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+    REPEAT_S = 0.05
 
     def __init__(self, con: duckdb.DuckDBPyConnection, time_limit_s: float) -> None:
         self.con = con
@@ -111,14 +114,28 @@ class _Stopper:
         self.received: int | None = None
         self.timer = threading.Timer(time_limit_s, self._time_out)
         self.previous: dict[int, Any] = {}
+        self.done = threading.Event()
+        self.stopping: threading.Thread | None = None
 
     def _time_out(self) -> None:
         self.timed_out = True
-        self.con.interrupt()
+        self._stop()
 
     def _on_signal(self, signum: int, frame: object) -> None:
         self.received = self.received or signum
-        self.con.interrupt()
+        self._stop()
+
+    def _stop(self) -> None:
+        if self.stopping is None:
+            self.stopping = threading.Thread(target=self._interrupt_until_done, daemon=True,
+                                             name="query-stop")
+            self.stopping.start()
+
+    def _interrupt_until_done(self) -> None:
+        while True:
+            self.con.interrupt()
+            if self.done.wait(self.REPEAT_S):
+                return
 
     def __enter__(self) -> _Stopper:
         if threading.current_thread() is threading.main_thread():
@@ -132,6 +149,9 @@ class _Stopper:
 
     def __exit__(self, *exc: object) -> None:
         self.timer.cancel()
+        self.done.set()
+        if self.stopping is not None:
+            self.stopping.join()
         for sig, handler in self.previous.items():
             signal.signal(sig, handler)
         if self.received is not None:  # its own handler now (Ctrl-C: KeyboardInterrupt)

@@ -174,10 +174,10 @@ def test_an_interrupted_query_is_one_line_and_exit_130(db: Path, sig: int) -> No
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 60
-        while not _has_open(proc.pid, db):  # the database is open: the query is next
+        while not _has_open(proc.pid, db):  # the database is open: the query is next (a
+            # signal before DuckDB executes must stop it too)
             assert proc.poll() is None and time.monotonic() < deadline, "no query started"
             time.sleep(0.05)
-        time.sleep(0.3)
         proc.send_signal(sig)
         code = proc.wait(30)
     finally:
