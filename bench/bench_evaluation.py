@@ -7,14 +7,15 @@ import sys
 import tempfile
 from pathlib import Path
 
-from common import Row, best_of, data_root
+from common import Row, best_of, data_root, size
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "evaluation"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # helpers
 
-from evaluation_data import drifting, gt_path, write_sequence, write_study
+from helpers.evaluation_data import drifting, gt_path, write_sequence, write_study
 
-from pipeline.database.store import RteSection, build_database
+from pipeline.database.store import build_database
 from pipeline.metrics.kitti import kitti_sequence_error
+from pipeline.metrics.section import DevkitSection
 from pipeline.posefile import read_kitti_poses
 
 
@@ -40,7 +41,7 @@ def kitti_rows() -> list[Row]:
     ]
 
 
-def rte_frames_rows(trials: int = 256, frames: int = 300) -> list[Row]:
+def rte_frames_rows(trials: int = size(256, 4), frames: int = size(300, 60)) -> list[Row]:
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         gt = gt_path(frames, step_m=0.5, stop=None, seed=1)
@@ -48,7 +49,8 @@ def rte_frames_rows(trials: int = 256, frames: int = 300) -> list[Row]:
         # write_study leaves trial 1 failed (no trajectory): one more trial gives `trials` runs
         write_study(root / "trials", "gicp", {"seq_0": (stamps, gt)}, trials + 1, ["kf_m"])
         summary = build_database(root / "adaptune.duckdb", root / "seq",
-                                 {"trials": root / "trials"}, RteSection(length_m=25.0))
+                                 {"trials": root / "trials"}, 25.0,
+                                 DevkitSection.model_validate({}))
         t = summary.timings_s
         total = sum(t.values())
         n_traj = summary.trajectories

@@ -21,7 +21,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from common import Row, best_of, data_root
+from common import Row, best_of, data_root, size
 
 from pipeline.descriptors.ndt_histogram import describe
 from pipeline.selection import SelectionSettings
@@ -30,16 +30,17 @@ from pipeline.selection import SelectionSettings
 def kitti_scans() -> list[np.ndarray]:
     root = data_root() / "kitti_mini" / "dataset" / "sequences"
     return [
-        np.fromfile(p, np.float32).reshape(-1, 4) for p in sorted(root.glob("*/velodyne/*.bin"))
+        np.fromfile(p, np.float32).reshape(-1, 4)
+        for p in sorted(root.glob("*/velodyne/*.bin"))[:size(None, 4)]
     ]
 
 
 def synthetic_rows(
     descs: np.ndarray,
     n_params: int,
-    n_seq: int = 8,
-    n_frames: int = 300,
-    n_trials: int = 256,
+    n_seq: int = size(8, 3),
+    n_frames: int = size(300, 8),
+    n_trials: int = size(256, 8),
     seed: int = 0,
 ):
     """TrainingRows of n_seq x n_frames x n_trials with environments mixed from real descriptors."""
@@ -97,7 +98,8 @@ def run() -> list[Row]:
     descs = np.stack([describe(s) for s in scans])
     space = get_adapter("gicp").space.to_json()
     rows, pca = synthetic_rows(descs, len(space))
-    fitted = fit_surrogate(rows, space, SurrogateSection(n_sobol=1024, cv_max_frames=2))
+    fitted = fit_surrogate(rows, space, SurrogateSection(n_sobol=size(1024, 64),
+                                                         cv_max_frames=2))
     selection = SelectionSettings()  # the default selector (params select)
     with tempfile.TemporaryDirectory() as tmp:
         write_artifact(Path(tmp) / "model", fitted, pca,

@@ -1,6 +1,6 @@
 """Frames/s of every in-process odometry adapter (one core, baseline parameters).
 
-- HDL-32E: 40 frames ray-cast with open3d (tests/odometry/odometry_data.py: 32 beams x 1800
+- HDL-32E: 40 frames ray-cast with open3d (tests/helpers/odometry_data.py: 32 beams x 1800
   azimuth steps, ~56k points a scan, a walled yard with boxes, 0.8 m a frame).
 - KITTI: kitti_mini sequence 04 frames 0-9 (real HDL-64E, ~124k points a scan).
 Scans are decoded beforehand: the figure is the bare odometry (``adapter.run``). The last rows
@@ -18,14 +18,14 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "tests" / "odometry"))
+sys.path.insert(0, str(HERE.parent / "tests"))  # helpers
 
-from common import Row, best_of, data_root  # noqa: E402
+from common import Row, best_of, data_root, size  # noqa: E402
 
 ADAPTERS = ("ndt", "gicp", "kiss_icp")
 
 
-def _fps(adapter, scans, repeat: int = 2) -> float:
+def _fps(adapter, scans, repeat: int = size(2, 1)) -> float:
     from pipeline.odometry.base import Schedule
 
     sched = Schedule.constant(adapter.space.defaults(), len(scans))
@@ -48,17 +48,19 @@ def _overhead_pct(adapter, path: Path, scans) -> float:
 
 
 def run() -> list[Row]:
-    from odometry_data import write_kitti_sequence, write_synthetic_sequence
+    from helpers.odometry_data import write_kitti_sequence, write_synthetic_sequence
 
     from pipeline.odometry import get_adapter
     from pipeline.sequence import SequenceReader
 
     rows: list[Row] = []
     with tempfile.TemporaryDirectory() as tmp:
-        seqs = {"HDL-32E sim": write_synthetic_sequence(Path(tmp) / "yard.mcap", n_frames=40)}
+        seqs = {"HDL-32E sim": write_synthetic_sequence(Path(tmp) / "yard.mcap",
+                                                          n_frames=size(40, 3))}
         kitti = data_root() / "kitti_mini" / "dataset"
         if kitti.is_dir():
-            seqs["KITTI 04"] = write_kitti_sequence(Path(tmp) / "kitti04.mcap", kitti, "04", 10)
+            seqs["KITTI 04"] = write_kitti_sequence(Path(tmp) / "kitti04.mcap", kitti, "04",
+                                                      size(10, 2))
         for label, path in seqs.items():
             with SequenceReader(path) as reader:
                 scans = list(reader)
@@ -77,7 +79,8 @@ def run() -> list[Row]:
     return rows
 
 
-def _ndt_against_reference(tmp: Path, n_frames: int = 300, n_sets: int = 8) -> list[Row]:
+def _ndt_against_reference(tmp: Path, n_frames: int = size(300, 5),
+                           n_sets: int = size(8, 1)) -> list[Row]:
     """Frames/s of ``ndt`` over a simulated cave and street with ``n_sets`` random parameter
     sets (as a study's trials draw them; CPU time of one process), compiled
     (pipeline/odometry/ndt_kernel.py) against the numpy reference (bench/reference/ndt_reference.py)
@@ -97,7 +100,7 @@ def _ndt_against_reference(tmp: Path, n_frames: int = 300, n_sets: int = 8) -> l
             for r, k in rng.uniform([1.0, 0.0], [10.0, 10.0], (n_sets, 2))]
     cpu = {"compiled": 0.0, "reference": 0.0}
     frames, worst_m = 0, 0.0
-    for label in ("cave", "street"):
+    for label in size(("cave", "street"), ("street",)):
         path = simulate_sequence(SimSpec(label, 3, n_frames), tmp / f"{label}.mcap").path
         with SequenceReader(path) as reader:
             scans = list(reader)
@@ -124,7 +127,7 @@ def _ndt_against_reference(tmp: Path, n_frames: int = 300, n_sets: int = 8) -> l
                 "", "<= 1e-9 m")]
 
 
-def _street_overhead(tmp: Path, n_frames: int = 300) -> Row:
+def _street_overhead(tmp: Path, n_frames: int = size(300, 5)) -> Row:
     """run_sequence overhead on a simulated street of ``n_frames`` HDL-32E frames."""
     from pipeline.odometry import get_adapter
     from pipeline.sequence import SequenceReader

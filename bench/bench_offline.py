@@ -20,13 +20,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-from common import Row, best_of
+from common import Row, best_of, size
 
-FRAMES = 350
-ITERATIONS = 48
-JOINT_ITERATIONS = 48
+FRAMES = size(350, 8)
+ITERATIONS = size(48, 3)
+JOINT_ITERATIONS = size(48, 2)
 WORKERS = 2
-LENGTH_M = 25.0
+LENGTH_M = size(25.0, 2.0)
 WITHOUT, WITH = "without savings", "with savings"
 
 
@@ -35,8 +35,8 @@ def run() -> list[Row]:
     from pipeline.sim.simulate import SimSpec, simulate_sequence
 
     with tempfile.TemporaryDirectory() as tmp:
-        seqs = [simulate_sequence(SimSpec(world, 1, FRAMES), Path(tmp) / f"{world}_0.mcap").path
-                for world in ("cave", "street")]
+        seqs = [simulate_sequence(SimSpec(world, 1, FRAMES), Path(tmp) / f"{world}_{i}.mcap").path
+                for i, world in enumerate(size(("cave", "street"), ("street", "street")))]
         bare_fps = bare_odometry_fps(seqs)
         limit = WORKERS * min(bare_fps)
         rows = [Row(f"ndt bare odometry, {FRAMES} HDL-32E frames (cave, street)",
@@ -79,7 +79,7 @@ def stages(seqs: list[Path], out: Path, savings: bool, pool: object) -> dict[str
     trials = load_section(defaults, "trials", TrialsSection)
     fixed = load_section(defaults, "fixed", FixedSection)
     settings = TrialsSection(algorithm="ndt", iterations=ITERATIONS, workers=WORKERS,
-                             length_m=LENGTH_M, time_limit_s=600.0,
+                             length_m=LENGTH_M, time_limit_s=size(600.0, None),
                              pruning=trials.pruning if savings else {"percentile": None})
     joint_iterations = JOINT_ITERATIONS
     if savings and fixed.iterations is not None:  # the defaults' share of the trials'

@@ -16,18 +16,21 @@ import os
 import time
 
 import numpy as np
-from common import Row, best_of
+from common import Row, best_of, size
 
 SWEEP = {
     "ndt": [
-        dict(keyframe_interval=kf, resolution=r) for kf in (0.0, 1.0, 2.0, 10.0) for r in (2.0, 4.0)
+        dict(keyframe_interval=kf, resolution=r)
+        for kf in size((0.0, 1.0, 2.0, 10.0), (1.0, 10.0)) for r in size((2.0, 4.0), (2.0,))
     ],
     "gicp": [
         dict(keyframe_interval=kf, max_correspondence_distance=d)
-        for kf in (1.0, 2.0, 10.0)
-        for d in (1.0, 4.0)
+        for kf in size((1.0, 2.0, 10.0), (1.0, 10.0))
+        for d in size((1.0, 4.0), (1.0,))
     ],
 }
+LENGTH_M = size(25.0, 2.0)
+"""The RTE's sub-trajectory length [m]."""
 
 
 def run() -> list[Row]:
@@ -40,8 +43,8 @@ def speed_rows() -> list[Row]:
     from pipeline.sim.simulate import SimSpec, iter_scans, make_world
 
     rows = []
-    for world in ("cave", "street"):
-        spec = SimSpec(world, 1, 40)
+    for world in size(("cave", "street"), ("street",)):
+        spec = SimSpec(world, 1, size(40, 3))
         w = make_world(spec)
         caster = Raycaster(w.vertices, w.triangles, spec.sensor_model())
         caster.scan(w.poses.T_world_lidar[0], np.random.default_rng(0))  # builds the BVH
@@ -52,7 +55,7 @@ def speed_rows() -> list[Row]:
             repeat=5,
             number=10,
         )
-        scans = list(iter_scans(w, spec.sensor_model(), 1, range(20, 22)))
+        scans = list(iter_scans(w, spec.sensor_model(), 1, size(range(20, 22), range(0, 2))))
         steps = []
         for algo in ("ndt", "gicp"):
             ad = get_adapter(algo)
@@ -88,9 +91,9 @@ def sweep_rows() -> list[Row]:
     from pipeline.sim.simulate import SimSpec, iter_scans, make_world
 
     seeds = [int(s) for s in os.environ.get("ADAPTUNE_BENCH_SIM_SEEDS", "1").split(",")]
-    frames = int(os.environ.get("ADAPTUNE_BENCH_SIM_FRAMES", "300"))
+    frames = int(os.environ.get("ADAPTUNE_BENCH_SIM_FRAMES", size("300", "20")))
     rows: list[Row] = []
-    for world in ("cave", "street"):
+    for world in size(("cave", "street"), ("street",)):
         for seed in seeds:
             spec = SimSpec(world, seed, frames)
             w = make_world(spec)
@@ -104,7 +107,7 @@ def sweep_rows() -> list[Row]:
                     t0 = time.perf_counter()
                     traj = ad.run(scans, Schedule.constant(ad.space.validate(params), len(scans)))
                     ms = 1000 * (time.perf_counter() - t0) / len(scans)
-                    results.append((params, mean_rte_pct(gt, traj.T_world_lidar, 25.0), ms))
+                    results.append((params, mean_rte_pct(gt, traj.T_world_lidar, LENGTH_M), ms))
                 rows += _rows(world, seed, algo, length, results)
     return rows
 

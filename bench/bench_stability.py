@@ -16,7 +16,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from common import Row
+from common import Row, size, smoke
 
 REPO = Path(__file__).resolve().parents[1]
 NUDGE = 1e-12
@@ -56,7 +56,7 @@ def toy_inputs() -> tuple[object, np.ndarray, Path | None, str]:
     from pipeline.sequence import SequenceReader
 
     seq = REPO / "data" / "sequences" / "composite_0.mcap"
-    if (REPO / "model" / "manifest.json").is_file() and seq.is_file():
+    if (REPO / "model" / "manifest.json").is_file() and seq.is_file() and not smoke():
         model = load_model(REPO / "model")
         with SequenceReader(seq) as reader:
             step = round(SelectionSettings().period_s * 10)  # 10 Hz: a selection every step
@@ -82,7 +82,8 @@ def synthetic_inputs() -> tuple[object, np.ndarray]:
     descs = np.stack([NdtHistogram().describe(s) for s in scans])
     space = get_adapter("ndt").space.to_json()
     rows, pca = synthetic_rows(descs, len(space))
-    fitted = fit_surrogate(rows, space, SurrogateSection(n_sobol=1024, cv_max_frames=2))
+    fitted = fit_surrogate(rows, space, SurrogateSection(n_sobol=size(1024, 64),
+                                                         cv_max_frames=2))
     with tempfile.TemporaryDirectory() as tmp:
         write_artifact(Path(tmp) / "model", fitted, pca,
                        ArtifactInfo("ndt", space, NdtHistogram(),
@@ -118,7 +119,7 @@ def run() -> list[Row]:
                                          nudged(model.pca_components, rng))),
         "descriptors": selections(model, nudged(descs.astype(np.float64), rng)),
     }
-    shuffled = [selections(model, descs, shuffle=s) for s in range(3)]
+    shuffled = [selections(model, descs, shuffle=s) for s in range(size(3, 1))]
     n = len(ref)
     rows = [Row(f"selections changed by a {NUDGE:g} relative change of the {k} ({what}, "
                 f"{n} selections)", 100 * float(np.any(v != ref, axis=1).mean()), "%",

@@ -20,7 +20,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench_model import kitti_scans, synthetic_rows
-from common import Row, best_of
+from common import Row, best_of, size, smoke
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -82,7 +82,7 @@ def run() -> list[Row]:
 
     out = []
     db = Path(os.environ.get("ADAPTUNE_RESULTS_DB", REPO / "results" / "adaptune.duckdb"))
-    if db.is_file():
+    if db.is_file() and not smoke():
         base = load_section(REPO / "params.yaml", "surrogate", SurrogateSection)
         algo, space, rows = read_training_rows(db, None, lambda a: get_adapter(a).space)
         out += compare(rows, space, base, f"{algo}, {len(rows.y) // 1000}k real rows "
@@ -90,7 +90,7 @@ def run() -> list[Row]:
     descs = np.stack([describe(s) for s in kitti_scans()])
     space = get_adapter("gicp").space.to_json()
     rows, _ = synthetic_rows(descs, len(space))
-    base = SurrogateSection(n_sobol=1024, cv_max_frames=20)
+    base = SurrogateSection(n_sobol=size(1024, 64), cv_max_frames=size(20, 2))
     out += compare(rows, space, base, f"{len(rows.y) // 1000}k synthetic rows")
     return out
 

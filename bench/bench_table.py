@@ -11,9 +11,9 @@ from __future__ import annotations
 import io
 
 import numpy as np
-from common import Row, best_of
+from common import Row, best_of, size
 
-ROWS = 10_000
+ROWS = size(10_000, 200)
 
 
 def _table(n: int):  # type: ignore[no-untyped-def]

@@ -17,9 +17,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from common import Row, best_of
+from common import Row, best_of, size
 
-N_FRAMES = 300
+N_FRAMES = size(300, 8)
+LENGTH_M = size(25.0, 2.0)
+ITERATIONS = size(8, 2)
 
 
 def run() -> list[Row]:
@@ -54,7 +56,7 @@ def run() -> list[Row]:
                 seed=0,
                 params=params,
                 out_dir=str(Path(tmp) / "one"),
-                length_m=25.0,
+                length_m=LENGTH_M,
                 penalty_pct=100.0,
                 jump_limit_m=5.0,
                 time_limit_s=limit,
@@ -67,7 +69,8 @@ def run() -> list[Row]:
         rates = {}
         for workers in (1, 2):
             settings = TrialsSection(
-                algorithm="ndt", iterations=8, workers=workers, length_m=25.0, time_limit_s=600.0
+                algorithm="ndt", iterations=ITERATIONS, workers=workers, length_m=LENGTH_M,
+                time_limit_s=size(600.0, None),
             )
             with open_executor(workers) as ex:
                 ex.submit(time.sleep, 0).result()
@@ -75,7 +78,7 @@ def run() -> list[Row]:
                 run_trials(
                     [seq], Path(tmp) / f"w{workers}", settings, seed=0, progress=False, executor=ex
                 )
-                rates[workers] = 8 / (time.perf_counter() - t0)
+                rates[workers] = ITERATIONS / (time.perf_counter() - t0)
 
     fps = N_FRAMES / bare_s
     return [

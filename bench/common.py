@@ -8,6 +8,23 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
+
+T = TypeVar("T")
+SMOKE_ENV = "ADAPTUNE_BENCH_SMOKE"
+"""Set to 1 by the smoke test (tests/test_bench_smoke.py): every module on tiny inputs and
+every timing once, to show that each figure is produced; no figure of a smoke run means
+anything."""
+
+
+def smoke() -> bool:
+    """True in a smoke run (``SMOKE_ENV``)."""
+    return os.environ.get(SMOKE_ENV) == "1"
+
+
+def size(full: T, tiny: T) -> T:
+    """``full`` (a count, a length, a grid), or ``tiny`` in a smoke run."""
+    return tiny if smoke() else full
 
 TOY_FIXED_NDT = {"resolution": 2.0202443098570972, "keyframe_interval": 7.758915470730103}
 """NDT's joint-study parameters of the toy reproduction (docs/results/toy.md)."""
@@ -25,7 +42,10 @@ class Row:
 
 
 def best_of(fn: Callable[[], object], repeat: int = 5, number: int = 1) -> float:
-    """Best wall time [s] of ``number`` calls, over ``repeat`` rounds, divided by ``number``."""
+    """Best wall time [s] of ``number`` calls, over ``repeat`` rounds, divided by ``number``
+    (one call in a smoke run)."""
+    if smoke():
+        repeat = number = 1
     best = float("inf")
     for _ in range(repeat):
         t0 = time.perf_counter()

@@ -19,6 +19,7 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -26,17 +27,17 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))  # common.py
 
-from common import TOY_FIXED_NDT, Row
+from common import TOY_FIXED_NDT, Row, size
 
 from pipeline.generalization.summary import TARGET_WORST, cv, pair_ratios
 
 TOY_FIXED = {"ndt": TOY_FIXED_NDT}
-LENGTH_M = 25.0
+LENGTH_M = size(25.0, 2.0)
 
 
 def _worlds() -> list[int]:
     n = os.environ.get("NOISE_WORLDS")
-    return list(range(int(n))) if n else [0, 3]
+    return list(range(int(n))) if n else size([0, 3], [0])
 
 
 def _algorithms() -> list[str]:
@@ -76,14 +77,15 @@ def run() -> list[Row]:
     from pipeline.sequence import SequenceReader
     from pipeline.sim.simulate import simulate_sequence
 
-    replicas = int(os.environ.get("NOISE_REPLICAS", "4"))
+    replicas = int(os.environ.get("NOISE_REPLICAS", size("4", "1")))
     section = GeneralizeSection(suite="dev")
     runs: dict[str, list[list[float]]] = {a: [] for a in _algorithms()}
     with tempfile.TemporaryDirectory() as tmp:
         for i in _worlds():
             world = world_of(section, "dev", i)
             path = Path(tmp) / f"{world.name}.mcap"
-            simulate_sequence(world.spec, path, name=world.name)
+            spec = size(world.spec, replace(world.spec, frames=10, segments=("street",)))
+            simulate_sequence(spec, path, name=world.name)
             with SequenceReader(path) as reader:
                 gt = reader.require_ground_truth("to score against")
             for algorithm in runs:

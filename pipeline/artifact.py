@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ArtifactError
-from pipeline.npy_files import MAX_ARRAY_BYTES, parse_npy, read_regular_file
+from pipeline.npy_files import MAX_ARRAY_BYTES, parse_npy, read_npy_file, read_regular_file
 
 Arrays = dict[str, NDArray[Any]]
 
@@ -95,14 +95,21 @@ def read_manifest(path: Path) -> dict[str, Any]:
 
 def read_arrays(path: Path, manifest: Mapping[str, Any],
                 specs: Mapping[str, ArraySpec]) -> Arrays:
-    """Every file the manifest lists, read safely, checksums verified, parsed, checked against
-    ``specs`` (each spec'd file must be listed) and finite. ArtifactError otherwise."""
+    """Every file the manifest lists, read safely (its header and size checked against the
+    shape and dtype the manifest declares before its array is read), checksums verified,
+    parsed, checked against ``specs`` (each spec'd file must be listed) and finite.
+    ArtifactError otherwise."""
     files = manifest.get("files")
     if not isinstance(files, dict):
         raise ArtifactError(f"{path}/manifest.json: no file list")
     missing = [f for f in specs if f not in files]
     if missing:
         raise ArtifactError(f"{path}/manifest.json: does not list {missing[0]}")
+    declared = manifest.get("arrays")
+    if not isinstance(declared, dict):
+        raise ArtifactError(f"{path}/manifest.json: no array shapes ('arrays': an artifact "
+                            "written before they were recorded; rebuild it with `adaptune "
+                            "surrogate`)")
     arrays: Arrays = {}
     for name, digest in files.items():
         if (not isinstance(name, str) or Path(name).name != name or name in (".", "..")
@@ -110,7 +117,7 @@ def read_arrays(path: Path, manifest: Mapping[str, Any],
             raise ArtifactError(f"{path}/manifest.json: file name {name!r} is not a plain "
                                 ".npy name")
         fpath = path / name
-        data = read_regular_file(fpath, MAX_ARRAY_BYTES)
+        data = read_npy_file(fpath, declared.get(name), MAX_ARRAY_BYTES)
         if hashlib.sha256(data).hexdigest() != digest:
             raise ArtifactError(f"{fpath}: sha256 mismatch (file altered or damaged)")
         arrays[name] = parse_npy(data, fpath)

@@ -131,19 +131,17 @@ def validate_section(model: type[S], section: str, data: dict[str, Any] | None) 
 
 def read_params(path: str | Path | None) -> dict[str, Any]:
     """The whole params.yaml as a dict ({} for None: every section at its defaults);
-    ConfigError when missing or not a mapping."""
+    ConfigError when missing, not a regular file of at most 64 MiB (a FIFO or /dev/zero is
+    refused at once), not UTF-8 YAML or not a mapping."""
     if path is None:
         return {}
+    from pipeline.io_utils import read_input_text
+
     path = Path(path)
+    text = read_input_text(path, "params file", error=ConfigError, strict=True)
     try:
         loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: 10x faster
-        data = yaml.load(path.read_text(encoding="utf-8"), Loader=loader)
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such params file") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start})") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the params file ({exc.strerror})") from None
+        data = yaml.load(text, Loader=loader)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: not valid YAML ({exc})") from None
     if not isinstance(data, dict):

@@ -71,7 +71,8 @@ def _points_per_scan(path: Path, frames: int) -> np.ndarray:
 
     counts: list[int] = []
     with open(path, "rb") as fh, mcap_errors(path):
-        for _, _, msg in make_reader(fh).iter_messages(topics=[POINTS_TOPIC]):
+        for _, _, msg in make_reader(fh, validate_crcs=True).iter_messages(
+                topics=[POINTS_TOPIC]):
             m = decode_pointcloud2(msg.data, f"{path} frame {len(counts)}")
             counts.append(m.width * m.height)
     if len(counts) != frames or not counts:

@@ -22,7 +22,7 @@ from collections.abc import Generator, Iterable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
-from pipeline.errors import InputError, OutputError
+from pipeline.errors import AdaptuneError, ConfigError, InputError, OutputError
 
 T = TypeVar("T")
 log = logging.getLogger(__name__)
@@ -47,16 +47,128 @@ def output_path(final: str | os.PathLike[str]) -> Path:
     return path
 
 
+def output_folder(folder: str | os.PathLike[str], *, of: Path | None = None) -> Path:
+    """``folder``, created with its parents when missing: the one place an output folder is
+    made. OutputError naming the file in the way, or the reason (a read-only file system, no
+    permission); with ``of`` (a file to write there) the error names that file."""
+    if not os.fspath(folder).strip():
+        raise OutputError("the output folder path is empty")
+    path = Path(folder)
+    what = f"{of}: cannot create its folder" if of is not None else (
+        f"{path}: cannot create the output folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        blocker = next((p for p in [path, *path.parents] if p.exists() and not p.is_dir()),
+                       path)
+        raise OutputError(f"{what}, {blocker} is a file") from None
+    except OSError as exc:
+        raise OutputError(f"{what} ({exc.strerror})") from None
+    return path
+
+
 def _make_parent(path: Path) -> None:
     """Create the folder of ``path``; OutputError naming the file in the way, or the reason."""
+    output_folder(path.parent, of=path)
+
+
+MAX_INPUT_BYTES = 64 << 20
+"""The largest parameter, pose, times, calibration or index file read: 64 MiB (KITTI's
+longest pose file is 0.5 MiB)."""
+
+
+@contextlib.contextmanager
+def open_input(path: str | os.PathLike[str], kind: str, *, hint: str = "",
+               limit: int = MAX_INPUT_BYTES, error: type[AdaptuneError] = InputError,
+               follow_links: bool = True) -> Iterator[tuple[Any, int]]:
+    """``(binary file, size)`` of the regular file ``path`` (a ``kind``), open for the block:
+    the checks of ``read_input`` done before any byte is read."""
+    p = Path(path)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except (FileExistsError, NotADirectoryError):
-        blocker = next((p for p in [path.parent, *path.parent.parents] if p.is_file()), None)
-        raise OutputError(f"{path}: cannot create its folder, {blocker or path.parent} "
-                          "is a file") from None
+        st = os.stat(p) if follow_links else os.lstat(p)
+    except (FileNotFoundError, NotADirectoryError):
+        raise error(f"{p}: no such {kind}{hint}") from None
     except OSError as exc:
-        raise OutputError(f"{path}: cannot create its folder ({exc.strerror})") from None
+        raise error(f"{p}: cannot read the {kind} ({exc.strerror})") from None
+    _check_regular(p, st, kind, limit, error)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | (
+        0 if follow_links else getattr(os, "O_NOFOLLOW", 0))
+    try:
+        fd = os.open(p, flags)
+    except OSError as exc:
+        raise error(f"{p}: cannot open the {kind} ({exc.strerror})") from None
+    with os.fdopen(fd, "rb") as fh:
+        now = os.fstat(fd)
+        if (now.st_ino, now.st_dev) != (st.st_ino, st.st_dev):
+            raise error(f"{p}: changed while being opened")
+        _check_regular(p, now, kind, limit, error)
+        try:
+            yield fh, now.st_size
+        except OSError as exc:
+            raise error(f"{p}: cannot read the {kind} ({exc.strerror})") from None
+
+
+def read_input(path: str | os.PathLike[str], kind: str, *, hint: str = "",
+               limit: int = MAX_INPUT_BYTES, error: type[AdaptuneError] = InputError,
+               follow_links: bool = True) -> bytes:
+    """The bytes of the regular file ``path`` (a ``kind``): the one bounded reader of the
+    small files adaptune reads whole (parameter, pose, times, calibration, index, manifest).
+
+    ``error`` (InputError by default) naming the file and the rule, at once and without
+    blocking: missing (with ``hint``), a FIFO, a device, a folder, more than ``limit`` bytes
+    (the limit named). Checked with stat, then opened with O_NONBLOCK and checked again on the
+    open file (a FIFO swapped in between is not waited on); ``follow_links`` False refuses a
+    symlink too (O_NOFOLLOW).
+    """
+    with open_input(path, kind, hint=hint, limit=limit, error=error,
+                    follow_links=follow_links) as (fh, _):
+        data: bytes = fh.read(limit + 1)
+    if len(data) > limit:
+        raise error(f"{path}: more than the {_bytes(limit)} a {kind} may hold")
+    return data
+
+
+def read_input_text(path: str | os.PathLike[str], kind: str, *,
+                    error: type[AdaptuneError] = InputError, strict: bool = False,
+                    hint: str = "") -> str:
+    """``read_input`` decoded as UTF-8 (a byte-order mark dropped); undecodable bytes become
+    U+FFFD, or with ``strict`` are ``error`` naming the file and the offset."""
+    data = read_input(path, kind, error=error, hint=hint)
+    try:
+        return data.decode("utf-8-sig", errors="strict" if strict else "replace")
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not UTF-8 text (byte {exc.start})") from None
+
+
+def _check_regular(path: Path, st: os.stat_result, kind: str, limit: int,
+                   error: type[AdaptuneError]) -> None:
+    import stat
+
+    if not stat.S_ISREG(st.st_mode):
+        raise error(f"{path}: is not a regular file (a {kind} must be one; this is "
+                    f"{_file_kind(st.st_mode)})")
+    if st.st_size > limit:
+        raise error(f"{path}: {st.st_size} bytes, more than the {_bytes(limit)} a {kind} may "
+                    "hold")
+
+
+def _file_kind(mode: int) -> str:
+    import stat
+
+    for test, name in ((stat.S_ISLNK, "a symlink"), (stat.S_ISFIFO, "a FIFO"),
+                       (stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a device"),
+                       (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a file"
+
+
+def _bytes(n: int) -> str:
+    """``n`` bytes in the largest binary unit that divides it: 64 MiB, 16 GiB, 100 bytes."""
+    for shift, unit in ((30, "GiB"), (20, "MiB"), (10, "KiB")):
+        if n >= 1 << shift and n % (1 << shift) == 0:
+            return f"{n >> shift} {unit}"
+    return f"{n} bytes"
 
 
 def input_file(path: str | os.PathLike[str], kind: str, hint: str = "") -> Path:
@@ -67,8 +179,25 @@ def input_file(path: str | os.PathLike[str], kind: str, hint: str = "") -> Path:
     if p.is_file():
         return p
     if p.exists():
-        raise InputError(f"{p}: is not a regular file (a {kind} must be one)")
+        raise InputError(f"{p}: is not a regular file (a {kind} must be one; this is "
+                         f"{_file_kind(p.stat().st_mode)})")
     raise InputError(f"{p}: no such {kind}{hint}")
+
+
+PLAIN_NAME_RULE = ("a plain file name: not empty, no '/', '\\' or control characters, "
+                   "not starting with '.'")
+"""What a name that becomes a file in an output folder must be (``check_plain_name``)."""
+
+
+def check_plain_name(name: object, what: str, error: type[Exception] = ConfigError) -> str:
+    """``name`` when it is a plain file name (``PLAIN_NAME_RULE``): the one path guard for
+    names that become files or folders under an output folder (sequence names, split
+    entries); ``error`` naming ``what`` and the rule otherwise (a name like ``../../x`` or
+    ``a/b`` would write outside the folder, or record such a path)."""
+    if (not isinstance(name, str) or not name or name.startswith(".")
+            or any(c in name for c in "/\\") or any(ord(c) < 32 or ord(c) == 127 for c in name)):
+        raise error(f"{what} must be {PLAIN_NAME_RULE}, got {name!r}")
+    return name
 
 
 def refuse_input_as_output(out: str | os.PathLike[str],
@@ -227,8 +356,7 @@ def exclusive_folder(folder: str | os.PathLike[str], what: str = "another proces
 
     from pipeline.errors import ConfigError
 
-    path = Path(folder)
-    path.mkdir(parents=True, exist_ok=True)
+    path = output_folder(folder)
     fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
     try:
         try:

@@ -8,6 +8,7 @@ benchmark, from the calibrations the benchmark publishes (``KITTI_TR``).
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -15,7 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
-from pipeline.io_utils import input_file
+from pipeline.geometry import refuse_non_rotations
+from pipeline.io_utils import read_input_text
 
 F64 = NDArray[np.float64]
 
@@ -47,9 +49,10 @@ def _as4x4(numbers: F64) -> F64:
 
 
 def read_kitti_calib(path: str | Path) -> F64:
-    """(4, 4) Tr (velodyne -> camera 0) from a KITTI odometry calib.txt."""
-    path = input_file(path, "calibration file")
-    for line in path.read_text(encoding="utf-8-sig", errors="replace").splitlines():
+    """(4, 4) Tr (velodyne -> camera 0) from a KITTI odometry calib.txt; InputError naming the
+    file and its line when Tr is not 12 finite numbers of a rigid transform."""
+    path = Path(path)
+    for k, line in enumerate(read_input_text(path, "calibration file").splitlines(), 1):
         key, _, rest = line.partition(":")
         if key.strip() in ("Tr", "Tr_velo_to_cam"):
             try:
@@ -58,7 +61,9 @@ def read_kitti_calib(path: str | Path) -> F64:
                 vals = []
             if len(vals) != 12 or not np.isfinite(vals).all():
                 raise InputError(f"{path}: Tr must be 12 finite numbers, got {rest.strip()[:60]!r}")
-            return _as4x4(np.asarray(vals, np.float64))
+            Tr = _as4x4(np.asarray(vals, np.float64))
+            refuse_non_rotations(Tr[None, :3, :3], f"{path}: Tr", [k])
+            return Tr
     raise InputError(f"{path}: no 'Tr' (velodyne -> camera) line in the calibration file")
 
 
@@ -72,7 +77,7 @@ def calib_for_pose_file(path: Path) -> F64:
     has a Tr line, else the benchmark's for a file named ``00.txt`` .. ``10.txt``; InputError
     when neither is there."""
     calib = path.parent / "calib.txt"
-    if calib.is_file() and has_kitti_calib(calib.read_text(errors="replace")):
+    if os.path.lexists(calib) and has_kitti_calib(read_input_text(calib, "calibration file")):
         return read_kitti_calib(calib)
     m = re.fullmatch(r"(\d\d)\.txt", path.name)
     if m and int(m.group(1)) in KITTI_TR:

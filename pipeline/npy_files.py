@@ -29,56 +29,65 @@ def save_npy(path: Path, arr: NDArray[Any]) -> str:
 
 def read_regular_file(path: Path, limit: int) -> bytes:
     """The bytes of ``path`` if it is a regular file (not a symlink, FIFO, device or folder) of
-    at most ``limit`` bytes; ArtifactError otherwise. Checked with lstat before opening, opened
-    without following links and without blocking, and checked again on the open file."""
-    import os
-    import stat
+    at most ``limit`` bytes; ArtifactError otherwise (``pipeline.io_utils.read_input``: checked
+    before opening, opened without following links and without blocking, checked again)."""
+    from pipeline.io_utils import read_input
 
-    try:
-        st = os.lstat(path)
-    except FileNotFoundError:
-        raise ArtifactError(f"{path}: missing (listed in manifest.json)") from None
-    except OSError as exc:
-        raise ArtifactError(f"{path}: cannot read ({exc.strerror})") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise ArtifactError(f"{path}: not a regular file ({_file_kind(st.st_mode)})")
-    if st.st_size > limit:
-        raise ArtifactError(f"{path}: {st.st_size} bytes, more than the {limit} allowed")
-    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
-    try:
-        fd = os.open(path, flags)
-    except OSError as exc:
-        raise ArtifactError(f"{path}: cannot open ({exc.strerror})") from None
-    with os.fdopen(fd, "rb") as fh:
-        now = os.fstat(fh.fileno())
-        if (now.st_ino, now.st_dev) != (st.st_ino, st.st_dev) or not stat.S_ISREG(now.st_mode):
-            raise ArtifactError(f"{path}: changed while being opened")
-        data = fh.read(limit + 1)
-    if len(data) > limit:
-        raise ArtifactError(f"{path}: more than the {limit} bytes allowed")
+    return read_input(path, "model file", hint=" (listed in manifest.json)", limit=limit,
+                      error=ArtifactError, follow_links=False)
+
+
+NPY_HEADER_MAX = 10 + (1 << 16)
+"""Bytes that hold any .npy preamble and header numpy writes (format 1.0: a 2-byte length)."""
+
+
+def npy_declaration(arr: NDArray[Any]) -> dict[str, Any]:
+    """What a manifest records of an array it lists: ``{"shape": [...], "dtype": "<f8"}``."""
+    return {"shape": [int(n) for n in arr.shape], "dtype": np.ascontiguousarray(arr).dtype.str}
+
+
+def read_npy_file(path: Path, declared: Any, limit: int) -> bytes:
+    """The bytes of the .npy file ``path`` once its header gives the shape and dtype the
+    manifest ``declared`` ({"shape", "dtype"}) and its size is exactly that header's plus the
+    array's bytes; all checked before the array's bytes are read (a file of gigabytes the
+    manifest does not account for is refused at its size). ArtifactError otherwise."""
+    import io
+
+    from pipeline.io_utils import open_input
+
+    if not (isinstance(declared, dict) and isinstance(declared.get("shape"), list)
+            and all(isinstance(n, int) and not isinstance(n, bool) and n >= 0
+                    for n in declared["shape"]) and isinstance(declared.get("dtype"), str)):
+        raise ArtifactError(f"{path}: manifest.json declares no shape and dtype for it, got "
+                            f"{declared!r}")
+    shape, dtype = tuple(declared["shape"]), declared["dtype"]
+    with open_input(path, "model file", hint=" (listed in manifest.json)", limit=limit,
+                    error=ArtifactError, follow_links=False) as (fh, size):
+        head = fh.read(min(size, NPY_HEADER_MAX))
+        fp = io.BytesIO(head)
+        got_shape, _, got_dtype = _header(fp, path)
+        if tuple(got_shape) != shape or got_dtype.str != dtype:
+            raise ArtifactError(f"{path}: holds shape {tuple(got_shape)} {got_dtype.str}, "
+                                f"manifest.json declares {shape} {dtype}")
+        count = 1
+        for n in shape:
+            count *= n
+        expected = fp.tell() + count * got_dtype.itemsize
+        if size != expected:
+            raise ArtifactError(f"{path}: {size} bytes, its declared shape {shape} {dtype} "
+                                f"takes {expected}")
+        data = head + fh.read(expected - len(head) + 1)
+    if len(data) != expected:
+        raise ArtifactError(f"{path}: changed while being read")
     return data
 
 
-def _file_kind(mode: int) -> str:
-    import stat
-
-    for test, name in ((stat.S_ISLNK, "a symlink"), (stat.S_ISFIFO, "a FIFO"),
-                       (stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a device"),
-                       (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket")):
-        if test(mode):
-            return name
-    return "not a file"
-
-
-def parse_npy(data: bytes, what: str | Path) -> NDArray[Any]:
-    """The array of an .npy file's bytes, allow_pickle=False in spirit: bool, integer or float
-    only, and the header's shape must account for exactly the bytes that follow it (checked
-    before anything is allocated). ArtifactError otherwise."""
-    import io
+def _header(fp: Any, what: str | Path) -> tuple[tuple[int, ...], bool, np.dtype[Any]]:
+    """(shape, fortran order, dtype) of the .npy header at ``fp``; ArtifactError unless it is
+    one of plain numbers (bool, integer, float)."""
     import tokenize
 
     fmt = np.lib.format
-    fp = io.BytesIO(data)
     try:
         version = fmt.read_magic(fp)
         if version == (1, 0):
@@ -91,6 +100,17 @@ def parse_npy(data: bytes, what: str | Path) -> NDArray[Any]:
         raise ArtifactError(f"{what}: not a plain numpy array ({exc})") from None
     if dtype.hasobject or dtype.kind not in "biuf" or dtype.subdtype is not None:
         raise ArtifactError(f"{what}: dtype {dtype} is not a plain number type")
+    return tuple(int(n) for n in shape), bool(fortran), dtype
+
+
+def parse_npy(data: bytes, what: str | Path) -> NDArray[Any]:
+    """The array of an .npy file's bytes, allow_pickle=False in spirit: bool, integer or float
+    only, and the header's shape must account for exactly the bytes that follow it (checked
+    before anything is allocated). ArtifactError otherwise."""
+    import io
+
+    fp = io.BytesIO(data)
+    shape, fortran, dtype = _header(fp, what)
     count = 1
     for n in shape:
         count *= int(n)

@@ -74,11 +74,12 @@ class Pca:
     def load(cls, folder: str | Path) -> Pca:
         """Read a folder written by ``save``; InputError when files are missing or altered."""
         from pipeline.errors import ArtifactError
+        from pipeline.io_utils import read_input_text
         from pipeline.npy_files import MAX_ARRAY_BYTES, parse_npy, read_regular_file
 
         folder = Path(folder)
         try:
-            meta = json.loads((folder / "pca.json").read_text(encoding="utf-8"))
+            meta = json.loads(read_input_text(folder / "pca.json", "PCA file", strict=True))
             arr = {}
             for name in PCA_FILES:
                 data = read_regular_file(folder / name, MAX_ARRAY_BYTES)

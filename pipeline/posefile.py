@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from pipeline.errors import InputError
 from pipeline.geometry import poses_from_quaternions, refuse_non_rotations, rot_to_quat
-from pipeline.io_utils import atomic_write_text, input_file
+from pipeline.io_utils import atomic_write_text, read_input_text
 from pipeline.stamps import check_stamp_ns, decimal_seconds_to_ns, seconds_to_ns
 
 F64 = NDArray[np.float64]
@@ -58,13 +58,12 @@ class _Rows:
 
 
 def _rows(path: Path) -> _Rows:
-    input_file(path, "pose file")
+    text = read_input_text(path, "pose file")
     lines: list[int] = []
     tokens: list[list[str]] = []
     values: list[list[float]] = []
     header: list[str] = []
     commas = False
-    text = path.read_text(encoding="utf-8-sig", errors="replace")
     for k, line in enumerate(text.splitlines(), 1):
         stripped = line.strip()
         if not stripped:

@@ -132,8 +132,10 @@ def _windows(protocol: KittiProtocol, names: list[str]) -> list[list[Any]]:
 
 
 def _line_count(path: Path) -> int:
-    with path.open("rb") as f:
-        return sum(1 for line in f if line.strip())
+    from pipeline.io_utils import read_input
+
+    return sum(1 for line in read_input(path, "KITTI pose file", error=ConfigError).splitlines()
+               if line.strip())
 
 
 def _check_root(protocol: KittiProtocol, names: list[str]) -> None:

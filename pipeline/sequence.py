@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from pipeline.errors import AdaptuneError, InputError, SchemaError
 from pipeline.geometry import MAX_POSITION_M, refuse_non_rotations
-from pipeline.io_utils import atomic_path, input_file
+from pipeline.io_utils import atomic_path, check_plain_name, input_file
 from pipeline.ros2_cdr import (
     POINTCLOUD2,
     POSE_STAMPED,
@@ -56,6 +56,8 @@ WORLD_FRAME = "world"
 LIDAR_FRAME = "lidar"
 META_SEQUENCE = "adaptune.sequence"
 META_FRAMES = "adaptune.frames"
+CHANNEL_TYPES = {POINTS_TOPIC: POINTCLOUD2, GT_TOPIC: POSE_STAMPED}
+"""The message type of every channel SequenceReader decodes."""
 
 
 @dataclass(frozen=True)
@@ -160,6 +162,7 @@ class SequenceWriter:
     """Write a sequence MCAP atomically: use as a context manager, ``add`` frames in order."""
 
     def __init__(self, path: str | Path, info: SequenceInfo, chunk_size: int = 4 << 20) -> None:
+        check_plain_name(info.name, "the sequence name")  # later stages name files after it
         self.path = Path(path)
         self.info = info
         self.chunk_size = chunk_size
@@ -345,9 +348,26 @@ class SequenceReader:
             self.close()
             raise SchemaError(f"{self.path}: schema version {self.info.schema_version}, "
                               f"this adaptune reads {SCHEMA_VERSION}")
+        self._check_channels(summary)
         self.stamps_ns = self._frame_stamps(meta[META_FRAMES])
         self.topics = {ch.topic for ch in summary.channels.values()}
         self._gt: NDArray[np.float64] | bool | None = False
+
+    def _check_channels(self, summary: Any) -> None:
+        """SchemaError unless the channels this reader decodes declare what it decodes them
+        as: ``POINTS_TOPIC`` PointCloud2 and ``GT_TOPIC`` PoseStamped, both in cdr (bytes of
+        another type could decode as either by chance)."""
+        for ch in summary.channels.values():
+            expected = CHANNEL_TYPES.get(ch.topic)
+            if expected is None:
+                continue
+            schema = summary.schemas.get(ch.schema_id)
+            declared = schema.name if schema is not None else "no schema"
+            if declared != expected or ch.message_encoding != "cdr":
+                self.close()
+                raise SchemaError(f"{self.path}: channel {ch.topic} declares {declared} "
+                                  f"({ch.message_encoding}); a sequence MCAP's is {expected} "
+                                  "(cdr)")
 
     def _frame_stamps(self, record: dict[str, str]) -> NDArray[np.int64]:
         """The frame stamps [ns] of the ``adaptune.frames`` metadata, checked: integers in

@@ -8,6 +8,7 @@ read by every later stage through ``read_index`` (docs/design.md, "Formats").
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,11 +20,22 @@ INDEX_NAME = "index.json"
 def check_split(source_key: str, source: object, train: list[str],
                 validation: list[str]) -> None:
     """ValueError unless the split of a data-set section (``ingest``, ``simulate_kitti``) is
-    consistent: ``train`` names sequences when the section's source ``source_key`` is set, and
+    consistent: ``train`` names sequences when the section's source ``source_key`` is set and
+    no split names any when it is not (there would be no file behind the index), every name is
+    a plain file name (it becomes ``<name>.mcap`` in the output folder and an index entry), and
     no sequence is in both ``train`` and ``validation``."""
+    from pipeline.io_utils import check_plain_name
+
     if source is not None and not train:
         raise ValueError(f"train must name KITTI sequences when {source_key} is set, got "
                          f"({source_key}={source!r}, train={train})")
+    if source is None and (train or validation):
+        raise ValueError(f"train and validation name no sequences while {source_key} is not "
+                         f"set (no file would be behind the index), got ({source_key}=None, "
+                         f"train={train}, validation={validation})")
+    for split, names in (("train", train), ("validation", validation)):
+        for name in names:
+            check_plain_name(name, f"{split} entry", ValueError)
     both = sorted(set(train) & set(validation))
     if both:
         raise ValueError(f"sequence {both[0]!r} is in both train and validation, got "
@@ -88,15 +100,14 @@ def read_index(folder: str | Path, missing_ok: bool = False) -> SequenceIndex:
     """
     folder = Path(folder)
     path = folder / INDEX_NAME
+    from pipeline.io_utils import check_plain_name, read_input_text
+
+    if missing_ok and not os.path.lexists(path):
+        return SequenceIndex(folder)
+    text = read_input_text(path, "sequence index", strict=True,
+                           hint=" (written by the simulate or ingest stage)")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        if missing_ok:
-            return SequenceIndex(folder)
-        raise InputError(f"{path}: no such sequence index (written by the simulate or ingest "
-                         "stage)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read the sequence index ({exc})") from None
+        data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON ({exc})") from None
     if not isinstance(data, dict) or not all(
@@ -104,6 +115,9 @@ def read_index(folder: str | Path, missing_ok: bool = False) -> SequenceIndex:
         for names in data.values()
     ):
         raise InputError(f"{path}: expected {{split: [sequence name, ...]}}")
+    for split, names in data.items():
+        for name in names:  # <folder>/<name>.mcap must be in the folder
+            check_plain_name(name, f"{path}: split {split!r} entry", InputError)
     return SequenceIndex(folder, {str(k): list(v) for k, v in data.items()})
 
 

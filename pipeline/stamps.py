@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
-from pipeline.io_utils import input_file
+from pipeline.io_utils import read_input_text
 
 MAX_STAMP_S = 2**31
 """Stamps must be below 2^31 s (ROS 2 Time.sec is int32)."""
@@ -35,7 +35,7 @@ def seconds_to_ns(t_s: NDArray[np.float64], what: str) -> NDArray[np.int64]:
     bad = ~np.isfinite(t_s) | (t_s < 0) | (t_s >= MAX_STAMP_S)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        raise InputError(f"{what}: stamp {k} is {t_s[k]!r} s ({RANGE_RULE}, finite)")
+        raise InputError(f"{what}: stamp {k} is {float(t_s[k])!r} s ({RANGE_RULE}, finite)")
     return np.round(t_s * 1e9).astype(np.int64)
 
 
@@ -57,9 +57,8 @@ def read_times(path: Path, n_scans: int | None) -> NDArray[np.int64]:
     InputError names the file and line for anything else: two columns, a word, a negative or
     too large time, a count that does not match, stamps that do not increase.
     """
-    path = input_file(path, "times file")
+    text = read_input_text(path, "times file")
     stamps: list[int] = []
-    text = path.read_text(encoding="utf-8-sig", errors="replace")
     for lineno, line in enumerate(text.splitlines(), start=1):
         fields = line.split("#", 1)[0].split()
         if not fields:

@@ -73,11 +73,34 @@ def write_trajectory(
 
 
 def read_trajectory(path: str | Path) -> Trajectory:
-    """Read a trajectory Parquet file written by ``write_trajectory``."""
+    """Read a trajectory Parquet file written by ``write_trajectory``; InputError unless it
+    holds what adaptune writes (``check_poses``)."""
     path = input_file(path, "trajectory file")
     try:
         table = pq.read_table(path)
     except (pa.ArrowInvalid, OSError) as exc:
         raise InputError(f"{path}: not a readable Parquet file ({exc})") from exc
     check_schema_version(table.schema, str(path))
-    return Trajectory.from_table(table, str(path))
+    traj = Trajectory.from_table(table, str(path))
+    check_poses(traj, str(path))
+    return traj
+
+
+def check_poses(traj: Trajectory, what: str) -> None:
+    """InputError naming the first thing in ``traj`` no odometry run gives: no poses, frame
+    numbers that repeat or go back, a pose that is not finite, a rotation that is not a
+    rotation (a score or an export of such poses would be a number without a meaning)."""
+    from pipeline.geometry import refuse_non_rotations
+
+    if len(traj) == 0:
+        raise InputError(f"{what}: the trajectory has no poses")
+    back = np.flatnonzero(np.diff(traj.frames) <= 0)
+    if len(back):
+        k = int(back[0]) + 1
+        raise InputError(f"{what}: frame numbers must increase, row {k} has frame "
+                         f"{traj.frames[k]} after frame {traj.frames[k - 1]}")
+    finite = np.isfinite(traj.T_world_lidar.reshape(len(traj), -1)).all(axis=1)
+    if not finite.all():
+        raise InputError(f"{what}: the pose of frame {traj.frames[np.argmin(finite)]} is not "
+                         "finite")
+    refuse_non_rotations(traj.T_world_lidar[:, :3, :3], f"{what}: trajectory")

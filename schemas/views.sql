@@ -6,13 +6,15 @@ INSERT INTO schema_info VALUES ('views.sql', '1.0');
 -- trial's parameters (p_<name>, every algorithm's) and the target y = per-start-frame RTE [%].
 -- A pruned trial has rows for the segments that end within the frames it ran: the same rows a
 -- whole run would have given there (the odometry is causal), so they are kept.
+-- A database without environment values (rte without --environment) or without trials still
+-- gets the view, without those columns: COLUMNS() refuses a pattern that matches nothing, so
+-- e0.. and p_.. come with trial and frame, which are always there (in the joins' order).
 CREATE VIEW surrogate_rows AS
-SELECT r.algorithm, r.sequence, r.trial, r.frame,
-       COLUMNS('^e[0-9]+$'), COLUMNS('^p_'),
+SELECT r.algorithm, r.sequence, COLUMNS('^(trial|frame|e[0-9]+|p_.+)$'),
        r.t_err_pct AS y
 FROM rte_frames AS r
-JOIN trials AS t USING (study, algorithm, sequence, trial)
 JOIN environment AS e USING (sequence, frame)
+JOIN trials AS t USING (study, algorithm, sequence, trial)
 WHERE r.study = 'trials' AND t.status IN ('ok', 'pruned');
 
 -- RTE per environment label: each rte_frames row with the label of its start frame.

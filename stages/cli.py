@@ -1,6 +1,7 @@
 """The ``adaptune`` command: a click group whose sub-commands load lazily.
 
-Only this module turns an AdaptuneError into one line on stderr and exit code 1.
+Only this module turns an AdaptuneError into one line on stderr and exit code 1, and an
+interrupt (Ctrl-C, SIGTERM, SIGHUP) into one line and exit code 130.
 Sub-commands live in ``stages/<module>.py``; ``COMMANDS`` maps names to them so that
 ``adaptune --help`` never imports numpy-heavy code.
 """
@@ -13,6 +14,10 @@ import sys
 from typing import Any
 
 import click
+
+INTERRUPTED = 130
+"""The exit code of a command ended by Ctrl-C, SIGTERM or SIGHUP (128 + SIGINT, as a shell
+reports Ctrl-C); every error is exit code 1."""
 
 COMMANDS: dict[str, tuple[str, str]] = {
     # name: (module, short help)
@@ -109,6 +114,12 @@ class LazyGroup(click.Group):
         except AdaptuneError as exc:
             click.echo(f"adaptune: error: {exc}", err=True)
             ctx.exit(1)
+        except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM / SIGHUP (lifetime.Terminated)
+            import signal
+
+            name = signal.Signals(getattr(exc, "signum", signal.SIGINT)).name
+            click.echo(f"adaptune: interrupted ({name})", err=True)
+            ctx.exit(INTERRUPTED)
 
 
 def _module_exists(target: str) -> bool:

@@ -16,10 +16,33 @@ import click
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-FILE = click.Path(dir_okay=False, path_type=Path)
-"""A file path (a folder is refused by click)."""
-DIR = click.Path(file_okay=False, path_type=Path)
-"""A folder path (a file is refused by click)."""
+class NoDashPath(click.Path):
+    """A click.Path that refuses ``-``: only ``adaptune query`` reads stdin or writes stdout
+    for it (its SQL and its --out); anywhere else ``-`` would silently be a file of that name
+    (``export --out -`` wrote one, ``metric rte SEQ -`` scored a stale one)."""
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        if value in ("-", b"-"):
+            refuse_dash(param.get_error_hint(ctx) if param is not None and ctx is not None
+                        else "a path")  # e.g. '--out' or 'ESTIMATE'
+        return super().convert(value, param, ctx)
+
+
+def refuse_dash(where: str) -> None:
+    """ConfigError: ``-`` given for ``where``, a file path that is not stdin or stdout."""
+    from pipeline.errors import ConfigError
+
+    raise ConfigError(f"{where}: '-' (stdin, stdout) is not read or written here (only by "
+                      "`adaptune query`); give a file path (./- for a file named -)")
+
+
+FILE = NoDashPath(dir_okay=False, path_type=Path)
+"""A file path (a folder is refused by click, ``-`` by NoDashPath)."""
+DIR = NoDashPath(file_okay=False, path_type=Path)
+"""A folder path (a file is refused by click, ``-`` by NoDashPath)."""
+PATH = NoDashPath(path_type=Path)
+"""A file or folder path (``-`` refused)."""
 
 
 def file_option(flag: str, dest: str | None = None, *, help: str, required: bool = True,
@@ -90,10 +113,40 @@ def read_text_argument(value: str, what: str) -> str:
 
 
 def write_output(data: bytes) -> None:
-    """Write a command's data (the result, not a summary) to stdout."""
-    sys.stdout.flush()
-    sys.stdout.buffer.write(data)
-    sys.stdout.buffer.flush()
+    """Write a command's data (the result, not a summary) to stdout, flushed: the one writer of
+    stdout. OutputError (one line) when stdout takes no more: a reader that closed the pipe
+    (EPIPE), a full device (ENOSPC); stdout then goes to /dev/null, so that the interpreter's
+    last flush at exit raises nothing more."""
+    from pipeline.errors import OutputError
+
+    try:
+        sys.stdout.flush()
+        sys.stdout.buffer.write(data)
+        sys.stdout.buffer.flush()
+    except OSError as exc:
+        _stdout_to_devnull()
+        raise OutputError(f"stdout: cannot write the output ({exc.strerror or exc})") from None
+
+
+def echo_output(text: str) -> None:
+    """``text`` and a line break as a command's data on stdout (``write_output``)."""
+    write_output(f"{text}\n".encode())
+
+
+def _stdout_to_devnull() -> None:
+    """Point the stdout file descriptor (and what Python still buffers for it) at /dev/null."""
+    import io
+    import os
+
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, ValueError, io.UnsupportedOperation):  # not a real file (a test's)
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, fd)
+    finally:
+        os.close(null)
 
 
 def report(summary: dict[str, Any], line: str, as_json: bool) -> None:
@@ -101,7 +154,7 @@ def report(summary: dict[str, Any], line: str, as_json: bool) -> None:
     if as_json:
         import json
 
-        click.echo(json.dumps(summary, indent=1, default=str))
+        echo_output(json.dumps(summary, indent=1, default=str))
     else:
         click.echo(line, err=True)
 

@@ -7,9 +7,11 @@ from pathlib import Path
 
 import click
 
+from stages.common import FILE, echo_output
+
 
 @click.command("info")
-@click.argument("path", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("path", type=FILE)
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 def info(path: Path, as_json: bool) -> None:
     """Frames, duration, ground-truth path length, points per scan, sensor, labels, schema."""
@@ -17,7 +19,7 @@ def info(path: Path, as_json: bool) -> None:
 
     s = summarize_sequence(path)
     if as_json:
-        click.echo(json.dumps(s.to_dict(), indent=2))
+        echo_output(json.dumps(s.to_dict(), indent=2))
         return
     pps = s.points_per_scan
     rows = [
@@ -39,5 +41,5 @@ def info(path: Path, as_json: bool) -> None:
 
     from pipeline.text_table import format_table
 
-    click.echo(format_table(pa.table({"field": [str(k) for k, _ in rows],
+    echo_output(format_table(pa.table({"field": [str(k) for k, _ in rows],
                                       "value": [str(v) for _, v in rows]}), footer=False))

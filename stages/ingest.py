@@ -7,12 +7,12 @@ from typing import Any
 
 import click
 
-from stages.common import DIR, FILE, compose, dir_option, file_option, params_option
+from stages.common import DIR, FILE, PATH, compose, dir_option, file_option, params_option
 
 out_option = file_option("--out", help="The sequence MCAP to write (atomically).")
 name_option = click.option("--name", default=None, help="Sequence name (default: from the input).")
 poses_option = click.option(
-    "--poses", type=click.Path(path_type=Path), default=None,
+    "--poses", type=PATH, default=None,
     help="Ground-truth pose file: KITTI (12 numbers a line, line k = scan k), TUM (stamp tx ty "
     "tz qx qy qz qw), EuRoC/ASL CSV with its header, or a 4x4 matrix a pose on 4 lines "
     "(element (3,3): 1 or the stamp [s]). Stamped poses are matched by time.",
@@ -91,7 +91,7 @@ def kitti(
 
 
 @ingest.command("rosbag")
-@click.argument("bag", type=click.Path(path_type=Path))
+@click.argument("bag", type=PATH)
 @recording_options
 @source_options
 def rosbag(bag: Path, **options: Any) -> None:
@@ -106,7 +106,7 @@ def rosbag(bag: Path, **options: Any) -> None:
 @out_option
 @poses_option
 @format_option
-@click.option("--times", type=click.Path(path_type=Path), default=None,
+@click.option("--times", type=PATH, default=None,
               help="Stamps file (seconds, one a line); default: file names that are stamps, "
               "else the pose file's stamps, else frame / --rate.")
 @click.option("--rate", "rate_hz", type=float, default=10.0, show_default=True,

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import click
 
-from stages.common import DIR, FILE, algorithm_option, dir_option, params_option
+from stages.common import DIR, FILE, algorithm_option, dir_option, echo_output, params_option
 
 
 def _names(text: str | None) -> list[str] | None:
@@ -92,7 +92,7 @@ def kitti_preset(root: Path | None, simulated: Path | None, train: str | None,
     protocol = validate_section(KittiProtocol, "kitti-preset",
                                 {k: v for k, v in raw.items() if v is not None})
     for arg in set_params(kitti_protocol(protocol, read_params(params_path))):
-        click.echo(arg)
+        echo_output(arg)
 
 
 @click.command("kitti-table")

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from stages.common import FILE, echo_output
 from stages.ingest import POSE_FORMATS
 
 
@@ -17,8 +18,8 @@ def metric() -> None:
 
 
 @metric.command()
-@click.argument("gt_poses", type=click.Path(dir_okay=False, path_type=Path))
-@click.argument("est_poses", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("gt_poses", type=FILE)
+@click.argument("est_poses", type=FILE)
 @click.option("--json", "as_json", is_flag=True,
               help="Print JSON (t_err_pct, r_err_deg_per_m, segments, per_length).")
 def kitti(gt_poses: Path, est_poses: Path, as_json: bool) -> None:
@@ -31,16 +32,16 @@ def kitti(gt_poses: Path, est_poses: Path, as_json: bool) -> None:
 
     result = evaluate_kitti_files(gt_poses, est_poses)
     if as_json:
-        click.echo(json.dumps(result, indent=1))
+        echo_output(json.dumps(result, indent=1))
         return
-    click.echo(f"t_err {result['t_err_pct']:.4f} %   r_err {result['r_err_deg_per_m']:.6f} deg/m "
-               f"({result['r_err_deg_per_m'] * 100:.4f} deg/100 m)   "
-               f"{result['segments']} segments, {result['frames']} frames")
+    echo_output(f"t_err {result['t_err_pct']:.4f} %   r_err {result['r_err_deg_per_m']:.6f} "
+                f"deg/m ({result['r_err_deg_per_m'] * 100:.4f} deg/100 m)   "
+                f"{result['segments']} segments, {result['frames']} frames")
 
 
 @metric.command()
-@click.argument("ground_truth", type=click.Path(dir_okay=False, path_type=Path))
-@click.argument("estimate", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("ground_truth", type=FILE)
+@click.argument("estimate", type=FILE)
 @click.option("--length", "length_m", type=float, required=True,
               help="L [m]: the sub-trajectory length of the RTE (any length; KITTI's 100-800 m "
               "are `metric kitti`).")
@@ -64,14 +65,15 @@ def rte(ground_truth: Path, estimate: Path, length_m: float, scale: bool, gt_for
     r = evaluate_files(ground_truth, estimate, length_m, scale, gt_format,  # type: ignore[arg-type]
                        est_format)  # type: ignore[arg-type]
     if as_json:
-        click.echo(json.dumps(r, indent=1))
+        echo_output(json.dumps(r, indent=1))
         return
     rt, ape, rpe = r["rte"], r["ape"], r["rpe"]
     stats = "rmse {rmse:.4f}  mean {mean:.4f}  median {median:.4f}  std {std:.4f}  " \
             "min {min:.4f}  max {max:.4f} m"
-    click.echo(f"{r['frames']} frames, {r['path_m']:.1f} m of ground truth")
-    click.echo(f"RTE  L = {rt['length_m']:g} m, {rt['segments']} start frames: "
-               f"t_err {rt['t_err_pct']:.4f} %  r_err {rt['r_err_deg_per_m']:.6f} deg/m")
-    click.echo(f"APE  {ape['alignment']} Umeyama alignment (scale {ape['scale']:.4f}): "
-               + stats.format(**ape))
-    click.echo("RPE  1 frame: " + stats.format(**rpe))
+    echo_output("\n".join([
+        f"{r['frames']} frames, {r['path_m']:.1f} m of ground truth",
+        f"RTE  L = {rt['length_m']:g} m, {rt['segments']} start frames: "
+        f"t_err {rt['t_err_pct']:.4f} %  r_err {rt['r_err_deg_per_m']:.6f} deg/m",
+        f"APE  {ape['alignment']} Umeyama alignment (scale {ape['scale']:.4f}): "
+        + stats.format(**ape),
+        "RPE  1 frame: " + stats.format(**rpe)]))

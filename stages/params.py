@@ -11,7 +11,7 @@ from pathlib import Path
 
 import click
 
-from stages.common import FILE, json_option
+from stages.common import FILE, echo_output, json_option
 
 
 @click.command("params")
@@ -44,7 +44,7 @@ def params(algorithm: str, options: tuple[str, ...], params_path: Path | None,
         adapter = build_adapter(algorithm, given)
     specs = adapter.space.to_json()
     if as_json:
-        click.echo(json.dumps({"algorithm": adapter.name, "source": source,
+        echo_output(json.dumps({"algorithm": adapter.name, "source": source,
                                "parameters": specs}, indent=2))
         return
     import pyarrow as pa
@@ -57,5 +57,5 @@ def params(algorithm: str, options: tuple[str, ...], params_path: Path | None,
         "default": [f"{s['default']:g}" for s in specs], "kind": [str(s["kind"]) for s in specs],
         "scale": ["log" if s["log"] else "linear" for s in specs],
         "unit": [str(s["unit"]) for s in specs]})
-    click.echo(f"{adapter.name}: {len(specs)} parameters ({source} ranges)")
-    click.echo(format_table(table, footer=False))
+    echo_output(f"{adapter.name}: {len(specs)} parameters ({source} ranges)\n"
+                + format_table(table, footer=False))

@@ -7,9 +7,11 @@ from pathlib import Path
 
 import click
 
-from stages.common import file_option, read_text_argument, write_output
+from stages.common import file_option, read_text_argument, refuse_dash, write_output
 
 FORMATS = ["table", "csv", "json", "parquet"]
+QUERY_TIME_LIMIT_S = 60.0
+"""pipeline.database.query.QUERY_TIME_LIMIT_S (kept here so that --help imports nothing)."""
 
 
 EXAMPLES = """\b
@@ -26,7 +28,8 @@ Examples:
 
 \b
 The SQL cannot read or write files (COPY, EXPORT DATABASE, read_csv, ATTACH, INSTALL fail):
---table exposes a local Parquet file as a read-only view, --out writes the result.
+--table exposes a local Parquet file as a read-only view, --out writes the result. A query
+stops after --time-limit-s (60 s by default).
 """
 
 
@@ -38,6 +41,8 @@ def _tables(pairs: tuple[str, ...]) -> dict[str, Path]:
         name, sep, path = pair.partition("=")
         if not sep or not name or not path:
             raise ConfigError(f"--table must be NAME=FILE.parquet, got {pair!r}")
+        if path == "-":
+            refuse_dash(f"--table {pair}")
         tables[name] = Path(path)
     return tables
 
@@ -53,7 +58,10 @@ def _tables(pairs: tuple[str, ...]) -> dict[str, Path]:
 @click.option("--table", "table_pairs", multiple=True, metavar="NAME=FILE",
               help="Let the SQL read a local Parquet file (or folder) as the view NAME "
               "(repeatable).")
-def query(sql: str, db: Path, fmt: str, out: Path | None, table_pairs: tuple[str, ...]) -> None:
+@click.option("--time-limit-s", type=float, default=QUERY_TIME_LIMIT_S, show_default=True,
+              help="Stop the query after this many seconds.")
+def query(sql: str, db: Path, fmt: str, out: Path | None, table_pairs: tuple[str, ...],
+          time_limit_s: float) -> None:
     """Run SQL (or - to read it from stdin) on the results database, opened read-only and
     sandboxed, and print or write the result."""
     from pipeline.database.query import query_database
@@ -64,6 +72,6 @@ def query(sql: str, db: Path, fmt: str, out: Path | None, table_pairs: tuple[str
 
         raise ConfigError("--format parquet is binary: give --out FILE (or pipe stdout)")
     data = query_database(db, read_text_argument(sql, "SQL"), fmt,
-                          None if to_stdout else out, _tables(table_pairs))
+                          None if to_stdout else out, _tables(table_pairs), time_limit_s)
     if to_stdout:
         write_output(data)

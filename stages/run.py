@@ -9,9 +9,11 @@ from typing import Any
 import click
 
 from stages.common import (
+    FILE,
     algorithm_option,
     file_option,
     json_option,
+    refuse_dash,
     report,
     sequence_argument,
 )
@@ -25,11 +27,12 @@ def parse_params(text: str | None) -> dict[str, float]:
         return {}
     source = "--params"
     if text.startswith("@"):
+        from pipeline.io_utils import read_input_text
+
+        if text == "@-":
+            refuse_dash("--params @-")
         path = Path(text[1:])
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise ConfigError(f"{path}: cannot read parameters ({exc.strerror})") from None
+        text = read_input_text(path, "parameters file", error=ConfigError, strict=True)
         source = str(path)
     try:
         data = json.loads(text)
@@ -60,8 +63,8 @@ def parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
 @algorithm_option("Adapter name (ndt, gicp, kiss_icp, command).", required=True)
 @click.option("--params", "params_json", default=None,
               help="Fixed parameters as a JSON object or @file.json (missing ones: baseline).")
-@click.option("--schedule", "schedule_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="Per-frame parameter schedule (Parquet).")
+@click.option("--schedule", "schedule_path", type=FILE, default=None,
+              help="Per-frame parameter schedule (Parquet).")
 @file_option("--out", "out_path", help="Trajectory Parquet to write.")
 @click.option("--option", "-o", "options", multiple=True,
               help="Adapter option key=value (repeatable), e.g. -o source_voxel_m=0.5.")

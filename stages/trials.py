@@ -15,7 +15,14 @@ from pathlib import Path
 
 import click
 
-from stages.common import FILE, algorithm_option, dir_option, json_option, params_option
+from stages.common import (
+    FILE,
+    algorithm_option,
+    dir_option,
+    echo_output,
+    json_option,
+    params_option,
+)
 
 
 @click.command()
@@ -91,8 +98,10 @@ def trials(
         "trials",
         {**section.model_dump(), **{k: v for k, v in overrides.items() if v is not None}},
     )
-    if seed is None:
-        seed = load_section(params_path, "base", BaseSection).seed
+    base = load_section(params_path, "base", BaseSection)
+    if seed is not None:  # --seed follows base.seed's rule
+        base = validate_section(BaseSection, "base", {**base.model_dump(), "seed": seed})
+    seed = base.seed
     if bool(sequence_paths) == (sequence_dir is not None):
         raise ConfigError("give either SEQ.mcap paths or --sequences DIR, not both or neither")
     paths = (
@@ -115,4 +124,4 @@ def trials(
                        f"best objective {s.best_objective:.4g} % (trial {s.best_trial})",
                        err=True)
     if as_json:
-        click.echo(json.dumps([asdict(s) for s in studies], indent=1, default=str))
+        echo_output(json.dumps([asdict(s) for s in studies], indent=1, default=str))

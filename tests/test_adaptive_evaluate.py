@@ -87,11 +87,12 @@ def test_replica_settings_are_validated(tmp_path: Path, section: str, model: str
 
 @pytest.fixture(scope="module")
 def validation_set(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """data/sequences with one short composite validation sequence."""
+    """data/sequences with one short composite validation sequence (longer than L = 25 m:
+    evaluate refuses a sequence it cannot score)."""
     from pipeline.sim.simulate import SimSpec, simulate_sequence
 
     folder = tmp_path_factory.mktemp("sequences")
-    simulate_sequence(SimSpec("composite", 3, 40), folder / "composite_0.mcap", name="composite_0")
+    simulate_sequence(SimSpec("composite", 3, 48), folder / "composite_0.mcap", name="composite_0")
     (folder / "index.json").write_text(json.dumps({"train": [], "validation": ["composite_0"]}))
     return folder
 
@@ -202,7 +203,8 @@ def test_adaptive_and_evaluate_give_the_same_results_for_any_workers(
         assert [r.sequence for r in runs] == ["composite_0", "composite_1"]
         ev = evaluate(paths, "ndt", {"resolution": 2.0, "keyframe_interval": 6.0},
                       tmp_path / f"a{workers}", tmp_path / f"ev{workers}",
-                      EvaluateSection(workers=workers), fixed_dir=fixed)
+                      EvaluateSection(workers=workers, length_m=10.0),  # the worlds: ~21 m
+                      fixed_dir=fixed)
         m = metrics(ev, {})
         for seq in m["sequences"].values():
             seq.pop("wall_time_s")

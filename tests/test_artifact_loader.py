@@ -47,8 +47,26 @@ def sign(folder: Path, change: Callable[[dict[str, Any]], None] | None = None) -
         path = folder / name
         if path.is_file() and not path.is_symlink():
             manifest["files"][name] = hashlib.sha256(path.read_bytes()).hexdigest()
+            declare(manifest, name, path)
     manifest["manifest_sha256"] = canonical_manifest_hash(manifest)
     (folder / "manifest.json").write_text(json.dumps(manifest))
+
+
+def declare(manifest: dict[str, Any], name: str, path: Path) -> None:
+    """Declare in the manifest the shape and dtype the .npy header of ``path`` gives (nothing
+    when it has none)."""
+    fmt = np.lib.format
+    if not isinstance(manifest.get("arrays"), dict):
+        return
+    with open(path, "rb") as fh:
+        try:
+            version = fmt.read_magic(fh)
+            read = fmt.read_array_header_1_0 if version == (1, 0) else \
+                fmt.read_array_header_2_0
+            shape, _, dtype = read(fh)
+        except (ValueError, SyntaxError, TypeError):
+            return
+    manifest["arrays"][name] = {"shape": list(shape), "dtype": dtype.str}
 
 
 def refused(folder: Path, *words: str) -> str:
@@ -90,6 +108,33 @@ def test_a_huge_npy_shape_is_refused_before_reading(good: Path, tmp_path: Path) 
     res = CliRunner().invoke(main, ["select", str(bad), str(seq), "--out",
                                     str(tmp_path / "o.parquet")])
     assert res.exit_code == 1 and res.output.count("\n") == 1, res.output
+
+
+@pytest.mark.parametrize("how", ["header", "size"])
+def test_an_array_the_manifest_does_not_declare_is_refused_before_reading(
+        good: Path, tmp_path: Path, how: str) -> None:
+    """Issue 32, case 4: a 3 GB .npy (here 1 GiB, sparse) was read whole before its sha256
+    was checked. The manifest declares every array's shape and dtype; the header and the
+    file's size are checked against them first (not re-signed: the checksum would catch it,
+    but only after the read)."""
+    bad = copy(good, tmp_path / "m")
+    n = (1 << 30) // 8
+    with open(bad / "rows_t.npy", "wb") as fh:
+        header = io.BytesIO()
+        shape = (n,) if how == "header" else tuple(json.loads(
+            (good / "manifest.json").read_text())["arrays"]["rows_t.npy"]["shape"])
+        np.lib.format.write_array_header_1_0(
+            header, {"descr": "<f8", "fortran_order": False, "shape": shape})
+        fh.write(header.getvalue())
+        fh.truncate(len(header.getvalue()) + 8 * n)  # holes: no gigabyte written
+    words = ("manifest.json declares",) if how == "header" else ("bytes, its declared shape",)
+    refused(bad, "rows_t.npy", *words)
+
+
+def test_an_artifact_without_array_declarations_is_refused(good: Path, tmp_path: Path) -> None:
+    bad = copy(good, tmp_path / "m")
+    sign(bad, lambda m: m.pop("arrays"))
+    refused(bad, "no array shapes", "rebuild it")
 
 
 def set_path(manifest: dict[str, Any], dotted: str, value: Any) -> None:

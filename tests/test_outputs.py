@@ -207,3 +207,90 @@ def test_no_command_writes_over_its_input(tmp_path: Path, args: list[str], victi
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "the output is also an input" in lines[0], result.stderr
     assert paths[victim].read_bytes() == before
+
+
+FOLDER_COMMANDS = {
+    "ingest-set": ["ingest-set", "--out", "{out}"],
+    "simulate-set": ["simulate-set", "--out", "{out}"],
+    "simulate-kitti-set": ["simulate-kitti-set", "--out", "{out}"],
+    "trials": ["trials", "{seq}", "-a", "ndt", "--iterations", "1", "--length-m", "0.5",
+               "--out", "{out}"],
+    "run -a command (its work folder)": [
+        "run", "-a", "command", "-o", 'command=["true"]', "-o",
+        'space=[{{"name": "x", "low": 0, "high": 1, "default": 0.5}}]', "-o", "workdir={out}",
+        "{seq}", "--out", "{tmp}/t.parquet"],
+}
+
+
+@pytest.mark.parametrize("where", ["under a file", "read-only"])
+@pytest.mark.parametrize("command", sorted(FOLDER_COMMANDS))
+def test_an_output_folder_that_cannot_be_made_is_one_line(
+        tmp_path: Path, command: str, where: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 32, case 7: `--out` under a file, or where no folder can be made (/sys), was a
+    NotADirectoryError / PermissionError traceback in the data-set stages and trials: one
+    folder creator (pipeline.io_utils.output_folder) now names the file in the way or the
+    reason, before any work is done."""
+    (tmp_path / "file").write_text("x")
+    seq = tmp_path / "s.mcap"
+    with SequenceWriter(seq, SequenceInfo(name="s")) as w:  # 3 frames, 1 m apart
+        for k in range(3):
+            T = np.eye(4)
+            T[0, 3] = k
+            w.add(10 + k, np.ones((5, 3), np.float32) * k, T)
+    out = tmp_path / "file" / "x" if where == "under a file" else Path("/sys/adaptune-x")
+    args = [a.format(out=out, seq=seq, tmp=tmp_path) for a in FOLDER_COMMANDS[command]]
+    monkeypatch.chdir(tmp_path)  # no ./params.yaml: every section at its defaults
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 1, (result.output, result.exception)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("adaptune: error: "), result.stderr
+    reason = f"{tmp_path / 'file'} is a file" if where == "under a file" else "not permitted"
+    assert reason in lines[0], lines[0]
+
+
+def sequence_with_ground_truth(path: Path, frames: int = 6) -> Path:
+    """``frames`` scans of 5 points, the ground truth 1 m apart along x."""
+    with SequenceWriter(path, SequenceInfo(name="s")) as w:
+        for k in range(frames):
+            T = np.eye(4)
+            T[0, 3] = k
+            w.add(10 + k, np.ones((5, 3), np.float32) * k, T)
+    return path
+
+
+STDOUT_COMMANDS = {
+    "info --json": ["info", "--json", "{seq}"],
+    "query": ["query", "--db", "{db}", "SELECT * FROM t"],
+    "metric rte --json": ["metric", "rte", "{seq}", "{seq}", "--length", "2", "--json"],
+    "params --json": ["params", "ndt", "--json"],
+}
+
+
+@pytest.mark.parametrize("device", ["full", "closed pipe"])
+@pytest.mark.parametrize("command", sorted(STDOUT_COMMANDS))
+def test_a_stdout_that_takes_nothing_is_one_line(tmp_path: Path, command: str,
+                                                 device: str) -> None:
+    """Issue 32, case 7: stdout on a full device (/dev/full: ENOSPC) or a pipe whose reader has
+    gone (EPIPE) was an OSError traceback; the one stdout writer (stages.common.write_output)
+    makes it one line and exit 1."""
+    import duckdb
+
+    seq = sequence_with_ground_truth(tmp_path / "s.mcap")
+    db = tmp_path / "r.duckdb"
+    with duckdb.connect(str(db)) as con:
+        con.execute("CREATE TABLE t AS SELECT range AS x FROM range(10)")
+    args = [a.format(seq=seq, db=db) for a in STDOUT_COMMANDS[command]]
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        with open("/dev/full", "wb") as full:
+            out = full.fileno() if device == "full" else write_end
+            done = subprocess.run([sys.executable, "-m", "stages.cli", *args], stdout=out,
+                                  stderr=subprocess.PIPE, cwd=tmp_path, timeout=120,
+                                  env={**os.environ, "PYTHONPATH": str(REPO)})
+    finally:
+        os.close(write_end)
+    lines = done.stderr.decode().strip().splitlines()
+    reason = "No space left on device" if device == "full" else "Broken pipe"
+    assert done.returncode == 1 and len(lines) == 1, done.stderr.decode()
+    assert lines[0] == f"adaptune: error: stdout: cannot write the output ({reason})", lines

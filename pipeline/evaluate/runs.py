@@ -34,7 +34,7 @@ from pipeline.evaluate.result import (
 )
 from pipeline.evaluate.section import EvaluateSection
 from pipeline.metrics.kitti import KittiSegments
-from pipeline.metrics.rte import per_frame_rte
+from pipeline.metrics.rte import check_scorable, per_frame_rte
 from pipeline.metrics.section import DevkitSection
 from pipeline.odometry.base import Schedule
 from pipeline.sequence import SequenceInfo, SequenceReader
@@ -77,6 +77,8 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
     """
     from pipeline.executor import map_in_processes
 
+    for path in sequences:  # one too short would drop out of its split's figures unseen
+        check_scorable(_ground_truth(path)[0], settings.length_m, str(path))
     adapter = evaluated_adapter(algorithm, adapter_options, fixed_dir)
     result = Evaluation(algorithm, settings.length_m, adapter.space.validate(fixed_params),
                         adapter.space.defaults(), settings.devkit.lengths_m,

@@ -141,11 +141,12 @@ def score_world(world: SuiteWorld, inputs: SuiteInputs, out_dir: Path) -> WorldS
     from pipeline.adaptive import loaded_model, run_one
     from pipeline.evaluate.runs import evaluate
     from pipeline.evaluate.section import EvaluateSection
+    from pipeline.io_utils import output_folder
     from pipeline.sim.simulate import simulate_sequence
 
     t0 = time.perf_counter()
     scratch = out_dir / "worlds"
-    scratch.mkdir(parents=True, exist_ok=True)
+    output_folder(scratch)
     path = scratch / f"{world.name}.mcap"
     try:
         simulate_sequence(world.spec, path, name=world.name)

@@ -28,6 +28,15 @@ def segment_ends(dist_m: F64, length_m: float) -> NDArray[np.int64]:
     return np.where(ends < len(dist_m), ends, -1).astype(np.int64)
 
 
+def check_scorable(gt: F64, length_m: float, what: str) -> None:
+    """InputError unless the ground truth ``gt`` (N, 4, 4) runs longer than ``length_m``: an
+    RTE of that length needs at least one segment (a shorter sequence has no score at all)."""
+    total_m = float(path_distances(gt)[-1]) if len(gt) else 0.0
+    if not total_m > length_m:
+        raise InputError(f"{what}: ground truth runs {total_m:.1f} m, not longer than "
+                         f"length_m={length_m}: no RTE segment to score")
+
+
 def check_pair(gt: F64, est: F64) -> None:
     """Raise InputError unless ``gt`` and ``est`` are finite (N, 4, 4) stacks of equal N."""
     if gt.ndim != 3 or gt.shape[1:] != (4, 4) or est.ndim != 3 or est.shape[1:] != (4, 4):

@@ -14,6 +14,7 @@ the nearest stamp within 10 ms (evo's default); otherwise pose k pairs with pose
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -88,7 +89,10 @@ def umeyama(src: F64, dst: F64, scale: bool) -> tuple[F64, F64, float]:
     a, b = src - mu_s, dst - mu_d
     if len(src) < 3 or np.abs(a).max() == 0:
         return np.eye(3), mu_d - mu_s, 1.0
-    R = Rotation.align_vectors(b, a)[0].as_matrix()
+    with warnings.catch_warnings():  # collinear points: every rotation about their line is
+        # optimal, and gives the same residuals (the APE); scipy warns and picks one
+        warnings.filterwarnings("ignore", "Optimal rotation is not uniquely", UserWarning)
+        R = Rotation.align_vectors(b, a)[0].as_matrix()
     s = float(np.einsum("ij,ij->", b, a @ R.T) / np.einsum("ij,ij->", a, a)) if scale else 1.0
     return R, mu_d - s * R @ mu_s, s
 

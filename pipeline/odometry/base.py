@@ -185,11 +185,13 @@ class ParameterSpace:
 
 @dataclass
 class Schedule:
-    """Parameters per frame. ``values``: name -> (N,) float64, aligned with ``frames`` (N,)."""
+    """Parameters per frame. ``values``: name -> (N,) float64, aligned with ``frames`` (N,);
+    ``source``: the file it was read from (what its errors name), if any."""
 
     frames: NDArray[np.int32]
     values: dict[str, NDArray[np.float64]]
     stamps_ns: NDArray[np.int64] | None = None
+    source: str | None = None
 
     @classmethod
     def constant(cls, params: Mapping[str, float], n_frames: int) -> Schedule:
@@ -219,18 +221,22 @@ class Schedule:
         return max(len(self.changes()) - 1, 0)
 
     def validate(self, space: ParameterSpace, n_frames: int, what: str = "schedule") -> None:
-        """InputError unless the schedule covers frames 0..n_frames-1 with valid values."""
+        """InputError unless the schedule covers frames 0..n_frames-1 with valid values; it
+        names the schedule's file (``source``) and the sequence ``what`` it is meant for."""
+        who, of = (self.source, f" (for {what})") if self.source else (what, "")
         if len(self) != n_frames or not np.array_equal(self.frames, np.arange(n_frames)):
-            raise InputError(f"{what}: covers {len(self)} frames, the sequence has {n_frames}")
+            raise InputError(f"{who}: covers {len(self)} frames, the sequence has {n_frames}"
+                             f"{of}")
         if set(self.values) != set(space.names):
-            raise InputError(f"{what}: parameters {sorted(self.values)}, expected {space.names}")
+            raise InputError(f"{who}: parameters {sorted(self.values)}, expected "
+                             f"{space.names}{of}")
         for name, arr in self.values.items():
             spec = space[name]
             bad = ~np.isfinite(arr) | (arr < spec.low) | (arr > spec.high)
             if bad.any():
                 k = int(np.argmax(bad))
-                raise InputError(f"{what}: {name} must be in [{spec.low}, {spec.high}], "
-                                 f"got {arr[k]} at frame {k}")
+                raise InputError(f"{who}: {name} must be in [{spec.low}, {spec.high}], "
+                                 f"got {arr[k]} at frame {k}{of}")
 
     def write(self, path: str | Path) -> None:
         """Write as Parquet (schemas.arrow.schedule_schema), atomically."""
@@ -275,7 +281,7 @@ class Schedule:
         names = [c for c in table.column_names if c not in ("frame", "stamp_ns")]
         return cls(table.column("frame").to_numpy().astype(np.int32),
                    {n: table.column(n).to_numpy().astype(np.float64) for n in names},
-                   table.column("stamp_ns").to_numpy().astype(np.int64))
+                   table.column("stamp_ns").to_numpy().astype(np.int64), str(path))
 
 
 @runtime_checkable

@@ -11,13 +11,15 @@ placeholders substituted: ``{sequence}``, ``{params}``, ``{schedule}`` (CSV), ``
 ``{out}`` (the trajectory file the command must write), ``{workdir}``, ``{python}`` (this
 interpreter). The command gets ``time_limit_s`` (``run_sequence``'s, else the ``timeout_s``
 option); past it its whole process group is killed and TrialTimeout raised. A non-zero exit
-status is an OdometryError carrying the last line of its stderr.
+status is an OdometryError carrying the last line of its stderr; its stdout is not read
+(/dev/null).
 
 The command runs under the guard of ``pipeline.lifetime`` in a process group of its own: when
 the run ends early for any reason (time limit, Ctrl-C, SIGTERM, or this process killed, even by
 SIGKILL, as the tuner does at a trial's hard time limit) the whole group is killed and the work
-directory removed (unless ``keep_workdir``). A command that detaches from its process group
-(``setsid``) is on its own.
+directory removed (unless ``keep_workdir``); when the guard itself is killed, this process
+kills the group (``pipeline.lifetime.run_guarded``) and the run is an InfrastructureError. A
+command that detaches from its process group (``setsid``) is on its own.
 
 The trajectory (T_world_lidar) is read back in ``format``:
 - ``kitti``: 12 numbers a line (row-major 3x4), one line per frame in order: N lines for N frames;
@@ -35,7 +37,7 @@ import logging
 import os
 import shlex
 import shutil
-import subprocess
+import signal
 import sys
 import tempfile
 from collections.abc import Iterable
@@ -46,8 +48,9 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from pipeline.config import Section
-from pipeline.errors import ConfigError, OdometryError, TrialTimeout
+from pipeline.errors import ConfigError, InfrastructureError, OdometryError, TrialTimeout
 from pipeline.geometry import pose_from_xyz_quat
+from pipeline.io_utils import output_folder, read_input, read_input_text
 from pipeline.odometry.base import Adapter, ParameterSpace, ParamSpec, Schedule
 from pipeline.odometry.common import F64, parse_options
 from pipeline.sequence import Scan, SequenceInfo, SequenceWriter
@@ -99,10 +102,9 @@ def load_space(spec: list[dict[str, Any]] | str) -> ParameterSpace:
     items: object = spec
     if isinstance(spec, str):
         path = Path(spec)
+        text = read_input_text(path, "parameter space file", error=ConfigError, strict=True)
         try:
-            data = yaml.safe_load(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ConfigError(f"{path}: no such parameter space file") from None
+            data = yaml.safe_load(text)
         except yaml.YAMLError as exc:
             raise ConfigError(f"{path}: not valid YAML/JSON ({exc})") from None
         what = str(path)
@@ -137,7 +139,7 @@ class CommandAdapter:
         limit = time_limit_s if time_limit_s is not None else self.options.timeout_s
         base = self.options.workdir
         if base:
-            Path(base).mkdir(parents=True, exist_ok=True)
+            output_folder(base)
         work = Path(tempfile.mkdtemp(prefix="adaptune-cmd-", dir=base))
         try:
             sequence, stamps_ns = self._sequence(scans, work)
@@ -192,58 +194,39 @@ def write_inputs(work: Path, schedule: Schedule, stamps_ns: np.ndarray) -> dict[
 def run_process(argv: list[str], cwd: str | None, time_limit_s: float | None,
                 workdir: Path | None = None) -> None:
     """Run ``argv`` under the guard (its own process group; killed, and ``workdir`` removed,
-    when this call ends early or this process dies); TrialTimeout past the limit, else
-    OdometryError for a non-zero exit status."""
-    from pipeline.lifetime import GUARD_CANNOT_RUN, guard_argv
+    when this call ends early or this process dies); TrialTimeout past the limit,
+    InfrastructureError when the guard is killed from outside (the tool's group goes too),
+    else OdometryError for a non-zero exit status."""
+    from pipeline.lifetime import GUARD_CANNOT_RUN, run_guarded
 
-    lifeline, keep = os.pipe()  # the guard cleans up when `keep` closes
     try:
-        proc = subprocess.Popen(guard_argv(lifeline, str(workdir or ""), argv), cwd=cwd,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                stdin=subprocess.DEVNULL, pass_fds=(lifeline,),
-                                start_new_session=True)
+        done = run_guarded(argv, cwd, time_limit_s, str(workdir or ""))
     except (FileNotFoundError, NotADirectoryError, PermissionError) as exc:
-        os.close(keep)
         raise ConfigError(f"command: cannot run {argv[0]!r} in {cwd or '.'} "
                           f"({exc.strerror})") from None
-    finally:
-        os.close(lifeline)
-    try:
-        _, err = proc.communicate(timeout=time_limit_s)
-    except subprocess.TimeoutExpired:
-        _cancel(proc, keep)
+    except TimeoutError:
         raise TrialTimeout(f"command: {argv[0]} outlived its time limit of {time_limit_s:g} s; "
                            "killed") from None
-    except BaseException:  # Ctrl-C, SIGTERM (SystemExit): the tool goes too
-        _cancel(proc, keep)
-        raise
-    os.close(keep)
-    if proc.returncode == GUARD_CANNOT_RUN and err.startswith(b"adaptune guard: "):
+    err = done.stderr
+    if done.guard_signal:
+        raise InfrastructureError(f"command: the guard of {Path(argv[0]).name} was killed by "
+                                  f"{signal.Signals(done.guard_signal).name}; its process group "
+                                  "was killed with it")
+    if done.status == GUARD_CANNOT_RUN and err.startswith(b"adaptune guard: "):
         raise ConfigError(f"command: {err.decode(errors='replace').strip()[16:]}")
-    if proc.returncode != 0:
+    if done.status != 0:
         lines = err.decode(errors="replace").strip().splitlines()
         last = lines[-1] if lines else "no stderr"
         raise OdometryError(f"command: {Path(argv[0]).name} exited with status "
-                            f"{proc.returncode}: {last}")
-
-
-def _cancel(proc: subprocess.Popen[bytes], keep: int) -> None:
-    """Close the guard's lifeline (it kills the tool's group and removes the work directory),
-    then wait for the guard (SIGKILL if it does not end within 10 s)."""
-    os.close(keep)
-    try:
-        proc.communicate(timeout=10.0)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.communicate()
+                            f"{done.status}: {last}")
 
 
 def read_poses(path: Path, fmt: str, stamps_ns: np.ndarray, tolerance_s: float) -> F64:
     """(N, 4, 4) T_world_lidar for the N frames at ``stamps_ns`` from a KITTI or TUM file."""
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise OdometryError(f"command: wrote no trajectory ({path.name} missing)")
     try:
-        text = path.read_bytes().decode("utf-8")
+        text = read_input(path, "trajectory", error=OdometryError).decode("utf-8")
     except UnicodeDecodeError as exc:
         raise OdometryError(f"command: {path.name} is not UTF-8 text (byte "
                             f"0x{exc.object[exc.start]:02x} at offset {exc.start})") from None

@@ -140,14 +140,14 @@ def write_table2(metrics_paths: Sequence[Path], out_dir: Path,
     table.md (atomically); return the table. InputError for a file that is not one."""
     import json
 
-    from pipeline.io_utils import atomic_write_text
+    from pipeline.io_utils import atomic_write_text, read_input_text
     from pipeline.report.outputs import write_json
 
     blocks = []
     for path in metrics_paths:
         try:
-            blocks.append(json.loads(Path(path).read_text(encoding="utf-8")))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            blocks.append(json.loads(read_input_text(path, "metrics JSON", strict=True)))
+        except json.JSONDecodeError as exc:
             raise InputError(f"{path}: cannot read the metrics JSON ({exc})") from None
     if not blocks:
         raise InputError("no metrics JSON given")

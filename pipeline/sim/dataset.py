@@ -11,11 +11,12 @@ from typing import Any
 from pydantic import Field, field_validator
 
 from pipeline.config import Section
+from pipeline.io_utils import output_folder
 from pipeline.sequence_index import write_index
 from pipeline.sim.route import LABELS
 from pipeline.sim.sensors import SensorName
 from pipeline.sim.simulate import SimSpec, SimSummary, derive_seed, simulate_sequence
-from pipeline.sim.worlds import WORLDS
+from pipeline.sim.worlds import MAX_FRAMES, WORLDS
 
 log = logging.getLogger(__name__)
 PROGRESS = logging.getLogger("pipeline.progress")  # shown at any CLI verbosity (stages/cli.py)
@@ -35,9 +36,9 @@ class SimulateSection(Section):
     dropout: float = Field(0.01, ge=0.0, lt=1.0)
     motion_distortion: bool = False
     train: dict[str, int] = Field(default_factory=lambda: {"cave": 4, "street": 4})
-    train_frames: int = Field(350, ge=10)
+    train_frames: int = Field(350, ge=10, le=MAX_FRAMES)
     validation_count: int = Field(1, ge=0)
-    validation_frames: int = Field(1050, ge=30)
+    validation_frames: int = Field(1050, ge=30, le=MAX_FRAMES)
     validation_segments: list[str] = Field(default_factory=lambda: list(LABELS), min_length=1)
     workers: int = Field(2, ge=1)
 
@@ -106,7 +107,7 @@ def simulate_set(
     ``progress``: a bar per sequence (one worker only); a log line per finished sequence
     otherwise."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    output_folder(out_dir)
     specs = dataset_specs(section, base_seed)
     bars = progress and section.workers == 1
     jobs = [(spec, out_dir / f"{name}.mcap", name, bars) for name, (_, spec) in specs.items()]

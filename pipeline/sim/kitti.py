@@ -9,6 +9,8 @@ Stamps come from ``NN_times.txt`` next to the file when present, else 10 Hz.
 
 from __future__ import annotations
 
+import io
+import os
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +18,7 @@ from numpy.typing import NDArray
 
 from pipeline.errors import InputError
 from pipeline.geometry import inv_se3
-from pipeline.io_utils import input_file
+from pipeline.io_utils import read_input_text
 from pipeline.kitti_calib import calib_for_pose_file
 
 F64 = NDArray[np.float64]
@@ -24,9 +26,10 @@ F64 = NDArray[np.float64]
 
 def kitti_lidar_poses(path: str | Path, frames: int | None = None) -> tuple[F64, NDArray[np.int64]]:
     """(T_world_lidar (N, 4, 4), stamps_ns (N,)) of the first ``frames`` poses of ``path``."""
-    path = input_file(path, "KITTI trajectory file")
+    path = Path(path)
+    text = read_input_text(path, "KITTI trajectory file")
     try:
-        rows = np.loadtxt(path, dtype=np.float64, ndmin=2)
+        rows = np.loadtxt(io.StringIO(text), dtype=np.float64, ndmin=2)
     except ValueError as exc:
         raise InputError(f"{path}: not a KITTI pose file ({exc})") from None
     if rows.shape[1] != 12 or len(rows) < 2 or not np.isfinite(rows).all():
@@ -40,8 +43,9 @@ def kitti_lidar_poses(path: str | Path, frames: int | None = None) -> tuple[F64,
     P[:, :3, :4] = rows.reshape(-1, 3, 4)
     T = inv_se3(Tr) @ P @ Tr
     times = path.with_name(path.stem + "_times.txt")
-    if times.is_file():
-        t = np.loadtxt(times, dtype=np.float64, ndmin=1)[: len(rows)]
+    if os.path.lexists(times):
+        t = np.loadtxt(io.StringIO(read_input_text(times, "times file")), dtype=np.float64,
+                       ndmin=1)[: len(rows)]
         stamps = 1_000_000_000 + np.round(t * 1e9).astype(np.int64)
         if len(stamps) == len(rows) and np.all(np.diff(stamps) > 0):
             return T, stamps

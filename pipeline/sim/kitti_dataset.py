@@ -16,6 +16,7 @@ from pydantic import Field, field_validator, model_validator
 
 from pipeline.config import Section
 from pipeline.errors import InputError
+from pipeline.io_utils import output_folder
 from pipeline.sequence_index import check_split, write_index
 from pipeline.sim.dataset import simulate_all
 from pipeline.sim.kitti_world import SCHEDULES
@@ -92,7 +93,7 @@ def simulate_kitti_set(section: SimulateKittiSection, base_seed: int, out_dir: s
                        progress: bool = False) -> list[SimSummary]:
     """Simulate the configured sequences into ``out_dir`` (module docstring)."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    output_folder(out_dir)
     if section.trajectories is None:
         log.info("simulate_kitti: no trajectories configured, writing an empty data set")
     bars = progress and section.workers == 1

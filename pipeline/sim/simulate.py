@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError
 from pipeline.geometry import inv_se3
-from pipeline.io_utils import refuse_input_as_output
+from pipeline.io_utils import check_plain_name, refuse_input_as_output
 from pipeline.sequence import EnvLabel, Scan, SequenceInfo, SequenceWriter
 from pipeline.sim.raycast import Raycaster
 from pipeline.sim.sensors import SENSOR_TITLES, SensorModel, get_sensor
@@ -122,6 +122,7 @@ def simulate_sequence(
 ) -> SimSummary:
     """Simulate ``spec`` and write the sequence MCAP at ``out_path`` (atomically)."""
     refuse_input_as_output(out_path, [spec.kitti_trajectory])
+    name = check_plain_name(name or Path(out_path).stem, "the sequence name")  # before the work
     world = make_world(spec)
     source = "simulation:" + (
         "kitti-trajectory " + Path(spec.kitti_trajectory).name
@@ -129,7 +130,7 @@ def simulate_sequence(
         else spec.world
     )
     return write_world(world, spec.sensor_model(), spec.seed, out_path,
-                       name or Path(out_path).stem, source, _extra(spec, world), progress,
+                       name, source, _extra(spec, world), progress,
                        spec.motion_distortion)
 
 

@@ -124,14 +124,18 @@ def _drive(
     raise AssertionError("unreachable")  # pragma: no cover
 
 
+MAX_FRAMES = 100_000
+"""The most frames one simulated sequence may have (2.8 hours at 10 Hz)."""
+
+
 def check_world_args(
     kind: str, frames: int, segments: tuple[str, ...], kitti_trajectory: Path | None
 ) -> None:
-    """ConfigError unless the world, frame count and segments make sense."""
+    """ConfigError unless the world, frame count (2 .. MAX_FRAMES) and segments make sense."""
     if kind not in WORLDS:
         raise ConfigError(f"unknown world {kind!r} (known: {', '.join(WORLDS)})")
-    if frames < 2:
-        raise ConfigError(f"frames must be >= 2, got {frames}")
+    if not 2 <= frames <= MAX_FRAMES:
+        raise ConfigError(f"frames must be in [2, {MAX_FRAMES}] (MAX_FRAMES), got {frames}")
     bad = [s for s in segments if s not in LABELS]
     if bad or not segments:
         raise ConfigError(

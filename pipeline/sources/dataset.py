@@ -14,6 +14,7 @@ from pathlib import Path
 from pydantic import Field, model_validator
 
 from pipeline.config import Section
+from pipeline.io_utils import output_folder
 from pipeline.sequence_index import check_split, write_index
 from pipeline.sources.base import IngestReport
 from pipeline.sources.kitti import ingest_kitti
@@ -44,7 +45,7 @@ class IngestSection(Section):
 def ingest_kitti_set(section: IngestSection, out_dir: str | Path) -> list[IngestReport]:
     """Ingest the configured KITTI sequences into ``out_dir`` (module docstring)."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    output_folder(out_dir)
     reports = []
     if section.kitti_root is None:
         log.info("ingest: no kitti_root configured, writing an empty data set")

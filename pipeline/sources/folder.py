@@ -5,8 +5,9 @@ refused). Stamps, the first that applies: a times file (seconds, one a line, as 
 times.txt); file names that are stamps; a stamped pose file (TUM, EuRoC, a 4x4 block with
 stamps), one pose per scan in order; else frame k is at k / rate_hz seconds. Scans named by
 frame number (``000123.pcd``) take row 123 of a times file or of a pose file without stamps
-that is longer than the folder (a slice of a KITTI sequence needs no hand-cut files);
-otherwise row k is scan k.
+that is longer than the folder (a slice of a KITTI sequence needs no hand-cut files; numbers
+count from 0, as KITTI's: a warning says which lines were used); otherwise row k is scan k.
+The lines used are in the sequence's metadata (``pose_lines``, ``times_lines``; ``info``).
 Ground truth: a pose file of any format pipeline.posefile reads; with stamps it is
 matched by time when the scans' stamps come from elsewhere, without stamps pose k is scan k.
 ``extrinsic`` (E = T_x_lidar, e.g. KITTI's Tr) turns poses of another frame into LiDAR poses;
@@ -34,11 +35,17 @@ from pipeline.sources.base import (
     input_files,
     write_sequence,
 )
-from pipeline.sources.ordering import frame_numbers, name_stamps_ns, natural_order, rows_for_scans
+from pipeline.sources.ordering import (
+    frame_numbers,
+    lines_used,
+    name_stamps_ns,
+    natural_order,
+    rows_for_scans,
+)
 from pipeline.sources.pointtime import relative_times_s
 from pipeline.sources.poses import check_count, lidar_ground_truth
 from pipeline.sources.scanfiles import SCAN_SUFFIXES, read_scan, scan_files
-from pipeline.stamps import read_times
+from pipeline.stamps import read_times, seconds_to_ns
 
 
 class FolderSource:
@@ -70,10 +77,12 @@ class FolderSource:
             raise ConfigError(f"--rate must be a finite number > 0 Hz, got {rate_hz}")
         self.seq_name = name or self.folder.name
         self.sensor = sensor
+        self.lines: dict[str, str] = {}  # which lines of the pose / times file (metadata)
         pf = read_pose_file(poses, poses_format) if poses is not None else None
         if pf is not None and pf.stamps_ns is None:  # one pose a frame: the scans' rows
             rows = rows_for_scans(len(pf.T_world_x), len(self.files), self.numbers,
                                   str(pf.path), "poses")
+            self.lines["pose_lines"] = lines_used(rows, len(pf.T_world_x))
             pf = replace(pf, T_world_x=pf.T_world_x[rows])
         self.stamps_ns, self.stamps_from = self._stamps(pf, times, rate_hz)
         gt = lidar_ground_truth(None, pf, extrinsic, len(self.files), str(self.folder))
@@ -86,6 +95,7 @@ class FolderSource:
         if times is not None:
             every = read_times(Path(times), None)
             rows = rows_for_scans(len(every), n, self.numbers, str(times), "stamps")
+            self.lines["times_lines"] = lines_used(rows, len(every))
             return every[rows], f"times file {Path(times).name}"
         from_names = name_stamps_ns(self.files)
         if from_names is not None:
@@ -95,12 +105,15 @@ class FolderSource:
         if pf is not None and pf.stamps_ns is not None:
             check_count(pf, n, str(self.folder))
             return pf.stamps_ns, f"pose file {pf.path.name}"
-        return np.round(np.arange(n) * (1e9 / rate_hz)).astype(np.int64), f"{rate_hz:g} Hz"
+        with np.errstate(over="ignore"):  # a rate near 0: infinite, refused just below
+            t_s = np.arange(n) / rate_hz
+        return seconds_to_ns(t_s, f"--rate {rate_hz:g} Hz"), f"{rate_hz:g} Hz"
 
     def sequence_info(self) -> SequenceInfo:
         return SequenceInfo(name=self.seq_name, sensor=self.sensor,
                             source=f"folder:{self.folder}",
-                            extra={"stamps": self.stamps_from, "order": "natural (file names)"})
+                            extra={"stamps": self.stamps_from, "order": "natural (file names)",
+                                   **self.lines})
 
     def expected_frames(self) -> int:
         return len(self.files)

@@ -8,6 +8,7 @@ times.txt seconds in ns as they are (KITTI times start at 0.0).
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Iterator
 from pathlib import Path
 from typing import ClassVar
@@ -78,7 +79,7 @@ class KittiSource:
 
     def _ground_truth(self, n: int) -> NDArray[np.float64] | None:
         path = self.root / "poses" / f"{self.seq}.txt"
-        if not path.is_file():
+        if not os.path.lexists(path):  # optional; but a FIFO, a folder... is an error
             return None
         poses = read_pose_file(path, "kitti")
         check_count(poses, n, str(self.dir / "velodyne"))

@@ -13,6 +13,7 @@ digits, ns) also give each scan its stamp (``name_stamps_ns``).
 from __future__ import annotations
 
 import itertools
+import logging
 import re
 from decimal import Decimal
 from pathlib import Path
@@ -22,6 +23,8 @@ from numpy.typing import NDArray
 
 from pipeline.errors import InputError
 from pipeline.stamps import decimal_seconds_to_ns
+
+log = logging.getLogger(__name__)
 
 _NUMBER = re.compile(r"\d+")
 _SECONDS = re.compile(r"\d+\.\d+")
@@ -74,8 +77,21 @@ def rows_for_scans(rows: int, n_scans: int, numbers: NDArray[np.int64] | None, w
     if rows == n_scans:
         return np.arange(n_scans, dtype=np.int64)
     if numbers is not None and rows > int(numbers.max()):
+        log.warning("%s: %d %s for %d scans: scan n takes row n (line n + 1), numbering from "
+                    "0 as KITTI's: lines %s used", what, rows, kind, n_scans,
+                    lines_used(numbers, rows))
         return numbers
     raise InputError(f"{what}: {rows} {kind} for {n_scans} scans in {what_of(numbers)}")
+
+
+def lines_used(rows: NDArray[np.int64], total: int) -> str:
+    """Which lines (1-based, as an editor shows them) of a file of ``total`` rows ``rows``
+    are: ``"2-10 of 10"``, or ``"1, 3, 5 of 9"`` when they are not one run."""
+    first, last = int(rows.min()) + 1, int(rows.max()) + 1
+    if len(rows) == last - first + 1 and bool(np.all(np.diff(rows) == 1)):
+        return f"{first}-{last} of {total}"
+    shown = ", ".join(str(int(r) + 1) for r in rows[:6])
+    return f"{shown}{', ...' if len(rows) > 6 else ''} of {total}"
 
 
 def what_of(numbers: NDArray[np.int64] | None) -> str:

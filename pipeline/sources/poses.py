@@ -26,6 +26,7 @@ from pipeline.geometry import (
     inv_se3,
     refuse_non_rotations,
 )
+from pipeline.io_utils import read_input_text
 from pipeline.kitti_calib import has_kitti_calib, read_kitti_calib
 from pipeline.posefile import PoseFile
 
@@ -53,7 +54,7 @@ def read_extrinsic(value: str | Path) -> NDArray[np.float64]:
         if not is_file:
             raise InputError(f"--extrinsic {text[:80]!r} is neither 12 or 16 numbers nor a "
                              "file")
-        content = path.read_text(encoding="utf-8-sig", errors="replace")
+        content = read_input_text(path, "extrinsic file")
         if has_kitti_calib(content):
             return read_kitti_calib(path)
         text, source = content, str(path)

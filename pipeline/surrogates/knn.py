@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.errors import ConfigError
 from pipeline.surrogates.base import (
     Arrays,
     ArraySpec,
@@ -31,6 +32,14 @@ from pipeline.surrogates.knn_search import (
 
 if TYPE_CHECKING:
     from pipeline.surrogates.section import SurrogateSection
+
+
+def check_k(k: object, rows: int, what: str, error: type[Exception] = ValueError) -> int:
+    """``k`` when it is an integer in [1, ``rows``] (a mean of k of the rows); ``error``
+    naming ``what`` otherwise."""
+    if not isinstance(k, int) or isinstance(k, bool) or not 1 <= k <= rows:
+        raise error(f"{what} must be an integer in [1, {rows}] (the training rows), got {k!r}")
+    return k
 
 
 @dataclass
@@ -59,7 +68,9 @@ class KnnSurrogate:
 
     @classmethod
     def fit(cls, training: TrainingSet, section: SurrogateSection) -> KnnSurrogate:
-        """Nothing to fit: the rows are the model."""
+        """Nothing to fit: the rows are the model. ConfigError when ``surrogate.k`` exceeds
+        them (the artifact's loader would refuse the model)."""
+        check_k(section.k, len(training.rows_t), "surrogate.k", ConfigError)
         return cls(section.k, section.target, training.env, training.env_offsets,
                    training.rows_x, training.rows_t)
 
@@ -89,10 +100,7 @@ class KnnSurrogate:
         env = arrays["env.npy"]
         offsets = arrays["env_offsets.npy"]
         rows_x, rows_t = arrays["rows_x.npy"], arrays["rows_t.npy"]
-        k = model.get("k")
-        if not isinstance(k, int) or isinstance(k, bool) or not 1 <= k <= len(rows_t):
-            raise ValueError(f"model.k must be an integer in [1, {len(rows_t)}] (the rows), "
-                             f"got {k!r}")
+        k = check_k(model.get("k"), len(rows_t), "model.k")
         if (offsets.shape != (len(env) + 1,) or offsets[0] != 0 or offsets[-1] != len(rows_t)
                 or np.any(np.diff(offsets) < 0)):
             raise ValueError("env_offsets.npy: does not partition the rows into the frames")

@@ -22,7 +22,7 @@ from pipeline.artifact import (
     canonical_manifest_hash,
 )
 from pipeline.errors import ArtifactError
-from pipeline.npy_files import save_npy
+from pipeline.npy_files import npy_declaration, save_npy
 
 if TYPE_CHECKING:
     from pipeline.descriptors import Descriptor
@@ -65,7 +65,8 @@ def write_artifact(
     }
     with atomic_dir(out) as tmp:
         files = {name: save_npy(tmp / name, arr) for name, arr in arrays.items()}
-        manifest = manifest_of(fitted, pca, info, files, repo)
+        shapes = {name: npy_declaration(arr) for name, arr in arrays.items()}
+        manifest = manifest_of(fitted, pca, info, files, shapes, repo)
         validate_manifest(manifest)
         manifest[MANIFEST_HASH_KEY] = canonical_manifest_hash(manifest)
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2), encoding="utf-8")
@@ -73,8 +74,10 @@ def write_artifact(
 
 
 def manifest_of(fitted: FittedSurrogate, pca: Pca, info: ArtifactInfo,
-                files: Mapping[str, str], repo: str | Path | None) -> dict[str, Any]:
-    """The manifest (without its own hash) of an artifact whose arrays hash to ``files``."""
+                files: Mapping[str, str], shapes: Mapping[str, Any],
+                repo: str | Path | None) -> dict[str, Any]:
+    """The manifest (without its own hash) of an artifact whose arrays hash to ``files`` and
+    have the shapes and dtypes ``shapes`` (``npy_declaration``)."""
     from pipeline.provenance import provenance
 
     novelty: dict[str, Any] = {"distance": fitted.novelty_distance,
@@ -106,6 +109,7 @@ def manifest_of(fitted: FittedSurrogate, pca: Pca, info: ArtifactInfo,
         "training": {**fitted.summary, "env_sequences": fitted.env_sequences},
         "cross_validation": fitted.cv,
         "files": dict(files),
+        "arrays": dict(shapes),
         "provenance": provenance(repo, info.inputs),
     }
 

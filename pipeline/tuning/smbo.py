@@ -34,7 +34,7 @@ from typing import Any
 from pydantic import Field, field_validator
 
 from pipeline.config import Section
-from pipeline.errors import ConfigError, InfrastructureError, InputError
+from pipeline.errors import ConfigError, InfrastructureError
 from pipeline.executor import open_executor
 from pipeline.io_utils import exclusive_folder
 from pipeline.odometry.base import Adapter, Params, with_space
@@ -96,8 +96,19 @@ class TrialsSection(Section):
     @field_validator("dask")
     @classmethod
     def _dask_address(cls, v: str | None) -> str | None:
-        if v is not None and v != "local" and "://" not in v:
-            raise ValueError("dask must be 'local' or a scheduler address like tcp://host:8786")
+        if v is None or v == "local":
+            return v
+        from urllib.parse import urlsplit
+
+        parts = urlsplit(v)
+        try:
+            port = parts.port
+        except ValueError:  # not a number, or out of range
+            port = None
+        if not parts.scheme or not parts.hostname or port is None or port < 1 or (
+                parts.path not in ("", "/")):
+            raise ValueError("dask must be 'local' or a scheduler address scheme://host:port "
+                             f"(a port in 1-65535), like tcp://host:8786, got {v!r}")
         return v
 
 
@@ -217,15 +228,11 @@ def study_pruner(study: Study, settings: TrialsSection) -> StudyPruner:
 
 def check_scorable(path: str | Path, length_m: float) -> None:
     """InputError unless the sequence has ground truth longer than ``length_m`` (RTE needs it)."""
-    from pipeline.geometry import path_distances
+    from pipeline.metrics.rte import check_scorable as check_ground_truth
     from pipeline.sequence import read_ground_truth
     from pipeline.tuning.job import TRIALS_PURPOSE
 
-    gt = read_ground_truth(path, TRIALS_PURPOSE)
-    total_m = float(path_distances(gt)[-1]) if len(gt) else 0.0
-    if not total_m > length_m:
-        raise InputError(f"{path}: ground truth runs {total_m:.1f} m, not longer than "
-                         f"length_m={length_m}: no RTE segment to score")
+    check_ground_truth(read_ground_truth(path, TRIALS_PURPOSE), length_m, str(path))
 
 
 def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path,

@@ -5,6 +5,11 @@ from __future__ import annotations
 
 import io
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import duckdb
@@ -15,6 +20,8 @@ from click.testing import CliRunner
 from helpers.evaluation_data import cli_fails
 
 from stages.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture
@@ -125,3 +132,65 @@ def test_dash_reads_sql_from_stdin_and_writes_stdout(db: Path) -> None:
     assert pq.read_table(io.BytesIO(result.stdout_bytes)).column("trial").to_pylist() == [
         0, 1, 2, 3]
     cli_fails(["query", "--db", str(db), "-"], "stdin", "got nothing")
+
+
+LONG_SQL = "SELECT sum(a.range * b.range) FROM range(1000000) a, range(1000000) b"
+"""A cross join that runs for hours."""
+
+
+def test_sql_cannot_reach_duckdbs_temporary_folder(db: Path) -> None:
+    """Issue 32, case 2: DuckDB allowed `<db>.tmp/` (its temp_directory) with external access
+    off; when the folder existed the SQL could COPY into it (6.9 MB were written), read_csv
+    from it and glob it. Spilling is off now, and the folder is like any other."""
+    tmp = db.parent / f"{db.name}.tmp"
+    tmp.mkdir()
+    (tmp / "old.csv").write_text("a\n1\n")
+    before = _files(db.parent)
+    for sql in (f"COPY (SELECT 1) TO '{tmp}/x.csv'", f"SELECT * FROM read_csv('{tmp}/old.csv')",
+                f"SELECT * FROM glob('{tmp}/*')", f"SET temp_directory = '{tmp}'"):
+        cli_fails(["query", "--db", str(db), sql])
+    assert _files(db.parent) == before
+
+
+def test_a_query_stops_at_its_time_limit(db: Path) -> None:
+    """Issue 32, case 4: no query had a time limit (a cross join ran forever)."""
+    from pipeline.database.query import QUERY_TIME_LIMIT_S
+    from stages.query import QUERY_TIME_LIMIT_S as CLI_DEFAULT
+
+    assert CLI_DEFAULT == QUERY_TIME_LIMIT_S == 60.0
+    cli_fails(["query", "--db", str(db), "--time-limit-s", "0.5", LONG_SQL],
+              "time limit of 0.5 s", "--time-limit-s")
+    cli_fails(["query", "--db", str(db), "--time-limit-s", "0", "SELECT 1"],
+              "--time-limit-s must be", "> 0")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupted_query_is_one_line_and_exit_130(db: Path, sig: int) -> None:
+    """Issue 32, case 7: Ctrl-C or SIGTERM during a query was a traceback ('RuntimeError:
+    Query interrupted'); now one line and exit code 130."""
+    proc = subprocess.Popen([sys.executable, "-m", "stages.cli", "query", "--db", str(db),
+                             LONG_SQL], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            env={**os.environ, "PYTHONPATH": str(REPO)},
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline = time.monotonic() + 60
+        while not _has_open(proc.pid, db):  # the database is open: the query is next (a
+            # signal before DuckDB executes must stop it too)
+            assert proc.poll() is None and time.monotonic() < deadline, "no query started"
+            time.sleep(0.05)
+        proc.send_signal(sig)
+        code = proc.wait(30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    lines = proc.stderr.read().decode().strip().splitlines()  # type: ignore[union-attr]
+    assert code == 130 and lines == [f"adaptune: interrupted ({signal.Signals(sig).name})"], \
+        (code, lines)
+
+
+def _has_open(pid: int, path: Path) -> bool:
+    try:
+        return any(os.readlink(fd) == str(path) for fd in Path(f"/proc/{pid}/fd").iterdir())
+    except (FileNotFoundError, ProcessLookupError):
+        return False

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import duckdb
 import numpy as np
@@ -15,10 +16,12 @@ import pytest
 from click.testing import CliRunner
 from helpers.evaluation_data import cli_fails, gt_path, write_sequence, write_study
 
+from pipeline.errors import InputError
 from pipeline.metrics.kitti import kitti_errors
 from pipeline.metrics.rte import per_frame_rte
 from pipeline.posefile import read_kitti_poses, read_tum
 from pipeline.sequence import EnvLabel, SequenceReader
+from pipeline.surrogates.rows import read_training_rows
 from pipeline.trajectory import Trajectory, read_trajectory, write_trajectory
 from pipeline.tuning.layout import read_trials_tables, trajectory_path
 from schemas import SCHEMA_VERSION
@@ -204,6 +207,27 @@ def test_rte_stage_bad_inputs_leave_no_database(world: World, tmp_path: Path) ->
     cli_fails(args, "base.length_m", "greater than 0")
     assert not db.exists()
     assert not list(tmp_path.glob(".out.duckdb*"))
+
+
+def test_rte_without_the_optional_inputs_builds_a_database(world: World,
+                                                           tmp_path: Path) -> None:
+    """Issue 32, cases 7 and 8: without --environment (or without any study) views.sql's
+    COLUMNS('^e[0-9]+$') matched nothing: a BinderException traceback (and `make bench`
+    stopped there). The database is built, its surrogate_rows view without those columns,
+    which holds no rows (the surrogate stage says so)."""
+    db = tmp_path / "bare.duckdb"
+    result = CliRunner().invoke(main, world.args(db))
+    assert result.exit_code == 0, (result.output, result.exception)
+    with duckdb.connect(str(db), read_only=True) as con:
+        cols = [r[0] for r in con.execute("DESCRIBE surrogate_rows").fetchall()]
+    assert cols[:4] == ["algorithm", "sequence", "trial", "frame"] and cols[-1] == "y"
+    assert not [c for c in cols if c[0] == "e" and c[1:].isdigit()]
+    with pytest.raises(InputError, match="no surrogate rows"):
+        read_training_rows(db, "gicp", lambda a: SimpleNamespace(names=["max_corr_m", "kf_m"]))
+    nothing = tmp_path / "nothing.duckdb"
+    result = CliRunner().invoke(main, ["rte", "--params", str(world.params), "--sequences",
+                                       str(world.root / "seq"), "--db", str(nothing)])
+    assert result.exit_code == 0, (result.output, result.exception)
 
 
 def test_rte_stage_rejects_nan_and_short_trajectories(world: World, tmp_path: Path) -> None:

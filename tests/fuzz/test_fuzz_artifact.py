@@ -31,11 +31,15 @@ def good(tmp_path_factory: pytest.TempPathFactory, kitti_root: Path) -> Path:
 
 
 def sign(folder: Path, manifest: dict[str, Any]) -> None:
-    """Write ``manifest`` with every listed regular file's sha256 and its own hash fresh."""
+    """Write ``manifest`` with every listed regular file's sha256 (and shape) and its own hash
+    fresh."""
+    from test_artifact_loader import declare
+
     for name in list(manifest.get("files", {})):
         path = folder / name
         if path.is_file() and not path.is_symlink():
             manifest["files"][name] = hashlib.sha256(path.read_bytes()).hexdigest()
+            declare(manifest, name, path)
     manifest["manifest_sha256"] = canonical_manifest_hash(manifest)
     (folder / "manifest.json").write_text(json.dumps(manifest))
 

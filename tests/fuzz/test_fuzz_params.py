@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -186,3 +187,23 @@ def test_schedule(tmp_path: Path, table: Any, damage: st.DataObject) -> None:
             for name, values in schedule.values.items():
                 assert np.isfinite(values).all() and values.shape == (len(schedule),)
                 assert (values >= space[name].low).all() and (values <= space[name].high).all()
+
+
+NAME_CHARS = st.sampled_from([*"ab0_-. /\\\x00\n~", "..", "é"])
+
+
+@fuzz(200)
+@given(name=st.lists(NAME_CHARS, max_size=6).map("".join) | st.text(max_size=8))
+def test_names_that_pass_the_path_guard_stay_in_their_folder(tmp_path: Path, name: str) -> None:
+    """Issue 32, case 3 (the path guard, pipeline.io_utils.check_plain_name): a name it
+    accepts is one file right inside the output folder, as ``<name>.mcap`` and as a folder
+    ``<name>`` (the trials layout's sequence=<name>); any other is one ConfigError line."""
+    from pipeline.io_utils import check_plain_name
+
+    if holds(lambda: check_plain_name(name, "name")) is None:
+        return
+    folder = tmp_path / "out"
+    for leaf in (f"{name}.mcap", name):
+        path = folder / leaf
+        assert path.parent == folder and path.name == leaf, (name, path)
+        assert os.path.normpath(path) == str(path), (name, path)

@@ -66,7 +66,7 @@ def test_run_with_schedule_file(synthetic_seq: Seq, tmp_path: Path) -> None:
     (["-a", "ndt", "--params", '{"resolution": 50}'], "resolution must be in [1.0, 10.0], got 50"),
     (["-a", "ndt", "-o", "neighbors=3"], "neighbors must be 1 or 7"),
     (["-a", "ndt", "-o", "novalue"], "--option must be key=value"),
-    (["-a", "gicp", "--params", "@/nonexistent/p.json"], "cannot read parameters"),
+    (["-a", "gicp", "--params", "@/nonexistent/p.json"], "no such parameters file"),
     # values that are not numbers (issue 13, items 7 and 8)
     (["-a", "ndt", "--params", '{"resolution": "abc"}'],
      'resolution must be a number, got "abc" (str)'),

@@ -186,7 +186,7 @@ def test_cli_simulate_and_bad_input(tmp_path: Path) -> None:
         assert seq.info.labels[0].label == "open"
     for args, msg in (
         (["--world", "composite", "--segments", "cave,lava"], "segments must be"),
-        (["--frames", "1"], "frames must be >= 2"),
+        (["--frames", "1"], "frames must be in [2, 100000]"),
         (["--world", "cave", "--noise", "-1"], "range noise"),
         (["--world", "open", "--kitti-trajectory", str(tmp_path / "none.txt")], "builds a street"),
         (["--world", "street", "--kitti-trajectory", str(tmp_path / "none.txt")], "no such KITTI"),

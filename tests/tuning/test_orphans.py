@@ -109,6 +109,15 @@ def cli(*args: str) -> subprocess.Popen[bytes]:
                             preexec_fn=_default_ctrl_c)
 
 
+def run_command(sequence: Path, dirs: tuple[Path, Path], out: Path) -> subprocess.Popen[bytes]:
+    """``adaptune run -a command`` with the stubborn tool over ``sequence``."""
+    record_dir, work_root = dirs
+    opts = command_options(record_dir, work_root)
+    return cli("run", "-a", "command", "-o", f"command={json.dumps(opts['command'])}",
+               "-o", f"space={json.dumps(SPACE)}", "-o", f"workdir={work_root}",
+               str(sequence), "--out", str(out))
+
+
 def _default_ctrl_c() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
@@ -142,10 +151,7 @@ def test_killing_adaptune_trials_ends_every_process_it_started(
 def test_killing_adaptune_run_ends_the_tool_and_removes_its_work_directory(
         sequences: list[Path], dirs: tuple[Path, Path], tmp_path: Path, sig: int) -> None:
     record_dir, work_root = dirs
-    opts = command_options(record_dir, work_root)
-    main = cli("run", "-a", "command", "-o", f"command={json.dumps(opts['command'])}",
-               "-o", f"space={json.dumps(SPACE)}", "-o", f"workdir={work_root}",
-               str(sequences[0]), "--out", str(tmp_path / "t.parquet"))
+    main = run_command(sequences[0], dirs, tmp_path / "t.parquet")
     try:
         tool = running_tool(record_dir, main)
         below = descendants(main.pid)
@@ -153,8 +159,38 @@ def test_killing_adaptune_run_ends_the_tool_and_removes_its_work_directory(
         os.kill(main.pid, sig)
         code = main.wait(30)
         assert_all_gone(below, work_root)
-        if sig != signal.SIGKILL:  # ended through its own clean-up, without a traceback
-            assert code != 0 and b"Traceback" not in main.stderr.read()  # type: ignore[union-attr]
+        if sig != signal.SIGKILL:  # ended through its own clean-up, in one line, exit 130
+            lines = main.stderr.read().decode().strip().splitlines()  # type: ignore[union-attr]
+            assert code == 130, (code, lines)
+            assert lines == [f"adaptune: interrupted ({signal.Signals(sig).name})"], lines
+    finally:
+        if main.poll() is None:
+            main.kill()
+            main.wait()
+
+
+def parent_of(pid: int) -> int:
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+
+
+def test_a_killed_guard_takes_the_tools_group_along_and_run_ends(
+        sequences: list[Path], dirs: tuple[Path, Path], tmp_path: Path) -> None:
+    """The guard itself SIGKILLed (issue 32, case 1): the tool died with it but its child was
+    re-parented to init, the work folder stayed and `adaptune run` waited forever for the
+    child's end of the stderr pipe, deaf to SIGTERM. Now the parent watches the guard, kills
+    the tool's group itself and ends in one line."""
+    record_dir, work_root = dirs
+    main = run_command(sequences[0], dirs, tmp_path / "t.parquet")
+    try:
+        tool = running_tool(record_dir, main)
+        below = descendants(main.pid)
+        os.kill(parent_of(int(tool["pid"])), signal.SIGKILL)  # the guard
+        code = main.wait(30)
+        assert_all_gone(below, work_root)
+        lines = main.stderr.read().decode().strip().splitlines()  # type: ignore[union-attr]
+        assert code == 1 and len(lines) == 1, lines
+        assert "guard" in lines[0] and "SIGKILL" in lines[0], lines
+        assert not (tmp_path / "t.parquet").exists()
     finally:
         if main.poll() is None:
             main.kill()
@@ -175,8 +211,7 @@ def test_a_trial_process_killed_at_its_hard_limit_takes_the_tool_along(
     runner.start()
     try:
         tool = running_tool(record_dir)
-        guard = int(Path(f"/proc/{tool['pid']}/stat").read_text().rsplit(")", 1)[1].split()[1])
-        server = int(Path(f"/proc/{guard}/stat").read_text().rsplit(")", 1)[1].split()[1])
+        server = parent_of(parent_of(int(tool["pid"])))  # the tool's guard's parent
         below = descendants(server)
         os.kill(server, signal.SIGKILL)
         runner.join(30)
