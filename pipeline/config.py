@@ -35,12 +35,18 @@ class Section(BaseModel):
 class BaseSection(Section):
     """The shared ``base`` section: the seed; L, the RTE sub-trajectory length that the
     ``trials``, ``rte``, ``evaluate`` and ``generalize`` sections take from here
-    (``FROM_BASE``); and the sequence folder every stage after ``simulate`` / ``ingest``
-    reads (dvc.yaml ``${...}``)."""
+    (``FROM_BASE``); and the sequence folder every stage after ``simulate`` / ``ingest`` /
+    ``simulate_kitti`` reads (dvc.yaml ``${...}``): the simulated worlds, the recordings of
+    the ``data`` section, or simulated KITTI (``SEQUENCE_FOLDERS``)."""
 
     seed: int = Field(0, ge=0)
     length_m: float = Field(25.0, gt=0)
-    sequences: Literal["data/sequences", "data/kitti", "data/kitti_sim"] = "data/sequences"
+    sequences: Literal["data/sequences", "data/recordings", "data/kitti_sim"] = "data/sequences"
+
+
+SEQUENCE_FOLDERS = {"simulate": "data/sequences", "ingest": "data/recordings",
+                    "simulate_kitti": "data/kitti_sim"}
+"""The sequences folder each data stage of dvc.yaml writes (what ``base.sequences`` picks)."""
 
 
 FROM_BASE: dict[str, tuple[str, ...]] = {
@@ -81,7 +87,7 @@ class SelectSection(Section):
 SECTIONS: dict[str, str] = {
     "base": "pipeline.config:BaseSection",
     "simulate": "pipeline.sim.dataset:SimulateSection",
-    "ingest": "pipeline.sources.dataset:IngestSection",
+    "data": "pipeline.sources.dataset:DataSection",
     "simulate_kitti": "pipeline.sim.kitti_dataset:SimulateKittiSection",
     "descriptors": "pipeline.descriptors.dataset:DescriptorsSection",
     "trials": "pipeline.tuning.smbo:TrialsSection",
@@ -103,6 +109,16 @@ def section_model(name: str) -> type[Section]:
     module, attr = ref.split(":")
     model: type[Section] = getattr(importlib.import_module(module), attr)
     return model
+
+
+def section_defaults(name: str) -> Any:
+    """Section ``name`` at the code's defaults, as it is written in a params file (JSON
+    types; without the keys it takes from ``base`` or another section)."""
+    if name == "select":
+        return SelectionSettings().to_json()
+    skip = {*FROM_BASE.get(name, ()), *SHARED.get(name, ())}
+    data = section_model(name)().model_dump(mode="json")
+    return {k: v for k, v in data.items() if k not in skip}
 
 
 def format_validation_error(section: str, exc: ValidationError) -> str:

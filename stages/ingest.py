@@ -1,4 +1,5 @@
-"""``adaptune ingest {kitti,rosbag,folder,mcap}``: convert recorded scans into a sequence MCAP."""
+"""``adaptune ingest {kitti,rosbag,folder,mcap}``: convert recorded scans into a sequence MCAP;
+``adaptune ingest-set``: the recordings of the params section ``data`` (the dvc stage)."""
 
 from __future__ import annotations
 
@@ -150,14 +151,19 @@ def mcap(path: Path, **options: Any) -> None:
 
 @click.command("ingest-set")
 @params_option
-@dir_option("--out", "out_dir", help="Folder for <NN>.mcap and index.json (data/kitti).")
+@dir_option("--out", "out_dir",
+            help="Folder for <name>.mcap and index.json (data/recordings).")
 def ingest_set(params_path: Path | None, out_dir: Path) -> None:
-    """Ingest the KITTI sequences of the params section ``ingest`` (dvc stage)."""
+    """Ingest the recordings of the params section ``data`` (dvc stage); relative paths in it
+    are relative to the params file's folder."""
     from pipeline.config import load_section
-    from pipeline.sources.dataset import IngestSection, ingest_kitti_set
+    from pipeline.sequence_index import read_index
+    from pipeline.sources.dataset import DataSection, ingest_data_set
 
-    section = load_section(params_path, "ingest", IngestSection)
-    for report in ingest_kitti_set(section, out_dir):
+    section = load_section(params_path, "data", DataSection)
+    base_dir = params_path.parent if params_path is not None else Path.cwd()
+    for report in ingest_data_set(section, out_dir, base_dir):
         _done(report)
-    click.echo(f"{out_dir / 'index.json'}: {len(section.train)} train, "
-               f"{len(section.validation)} validation sequences", err=True)
+    splits = read_index(out_dir).splits
+    click.echo(f"{out_dir / 'index.json'}: "
+               f"{', '.join(f'{len(v)} {k}' for k, v in splits.items())} sequences", err=True)

@@ -80,6 +80,27 @@ class GroundTruthOptions(Section):
         """The pose and extrinsic files named (an extrinsic may be numbers instead)."""
         return tuple(v for v in (self.poses, self.extrinsic) if v is not None)
 
+    def resolved_paths(self, base_dir: Path) -> dict[str, str | None]:
+        """``poses`` and ``extrinsic`` (unless it is numbers) with relative paths made absolute
+        from ``base_dir``."""
+        extrinsic = self.extrinsic
+        if extrinsic is not None and not is_numbers(extrinsic):
+            extrinsic = resolve_path(extrinsic, base_dir)
+        return {"poses": resolve_path(self.poses, base_dir), "extrinsic": extrinsic}
+
+
+def resolve_path(value: str | None, base_dir: Path) -> str | None:
+    """``value`` as an absolute path (``~`` expanded; relative: from ``base_dir``), or None."""
+    if value is None:
+        return None
+    path = Path(value).expanduser()
+    return str(path if path.is_absolute() else base_dir / path)
+
+
+def is_numbers(text: str) -> bool:
+    """True when ``text`` is numbers (an extrinsic given inline), not a file name."""
+    return re.fullmatch(r"[\s,0-9eE.+-]+", text) is not None
+
 
 def read_extrinsic(value: str | Path) -> NDArray[np.float64]:
     """(4, 4) E = T_x_lidar from 12 or 16 numbers (row-major, space or comma separated), a file
@@ -87,7 +108,7 @@ def read_extrinsic(value: str | Path) -> NDArray[np.float64]:
     text = str(value)
     source = "--extrinsic"
     path = Path(text)
-    if not re.fullmatch(r"[\s,0-9eE.+-]+", text):
+    if not is_numbers(text):
         try:
             is_file = path.is_file()
         except OSError:  # a name too long
