@@ -43,18 +43,19 @@ def _invoke(*args: str) -> tuple[int, str]:
     return result.exit_code, result.output
 
 
-def test_ingest_set_refuses_a_root_without_train_sequences(tmp_path: Path) -> None:
-    params = _params(tmp_path, ingest={"kitti_root": str(tmp_path), "train": []})
+def test_ingest_set_refuses_a_data_set_without_train_sequences(tmp_path: Path) -> None:
+    params = _params(tmp_path, data={"sources": [
+        {"kind": "kitti", "path": str(tmp_path), "sequences": ["04"], "split": "validation"}]})
     code, out = _invoke("ingest-set", "--params", str(params), "--out", str(tmp_path / "k"))
     assert code == 1
     assert out.strip().splitlines() == [
-        f"adaptune: error: ingest: train must name KITTI sequences when kitti_root is set, got "
-        f"(kitti_root={str(tmp_path)!r}, train=[])"]
+        "adaptune: error: data.sources: no recording in split 'train' (the one tuned on), got "
+        "splits ['validation']"]
     assert not (tmp_path / "k" / "index.json").exists()
 
 
-def test_ingest_set_without_a_root_writes_an_empty_index(tmp_path: Path) -> None:
-    params = _params(tmp_path, ingest={})
+def test_ingest_set_without_sources_writes_an_empty_index(tmp_path: Path) -> None:
+    params = _params(tmp_path, data={})
     code, _ = _invoke("ingest-set", "--params", str(params), "--out", str(tmp_path / "k"))
     assert code == 0
     assert json.loads((tmp_path / "k" / "index.json").read_text()) == {
