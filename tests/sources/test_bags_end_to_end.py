@@ -122,6 +122,7 @@ def test_the_only_pose_topic_is_the_ground_truth(frames: KittiFrames, tmp_path: 
     bag = write_bag(tmp_path / "one", small, ros=2, storage="sqlite3", gt="odom")
     out = cli("ingest", "rosbag", bag, "--out", tmp_path / "one.mcap")
     assert "ground truth: yes (topic /odom (found: the only pose topic))" in out
+    assert "ingest one: 3 scans" in caplog.text and "ingest one finished" in caplog.text
     with SequenceReader(tmp_path / "one.mcap") as r:
         np.testing.assert_allclose(r.ground_truth(), small.T_world_lidar, atol=1e-6)
         assert r.info.extra["ground_truth"] == "topic /odom (found: the only pose topic)"
