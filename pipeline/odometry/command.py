@@ -203,12 +203,8 @@ def write_inputs(work: Path, schedule: Schedule, stamps_ns: np.ndarray) -> dict[
     names = list(schedule.values)
     params = work / "params.json"
     params.write_text(json.dumps(schedule.at(0), indent=1))
-    rows = ["frame,stamp_ns," + ",".join(names)]
-    for i in range(len(schedule)):
-        vals = ",".join(repr(float(schedule.values[n][i])) for n in names)
-        rows.append(f"{int(schedule.frames[i])},{int(stamps_ns[i])},{vals}")
     csv = work / "schedule.csv"
-    csv.write_text("\n".join(rows) + "\n")
+    csv.write_text(schedule.csv_text(stamps_ns))
     js = work / "schedule.json"
     js.write_text(json.dumps({"frame": schedule.frames.tolist(),
                               "stamp_ns": [int(s) for s in stamps_ns],
