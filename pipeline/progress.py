@@ -4,8 +4,9 @@ The one home of the ``pipeline.progress`` logger (the CLI keeps it at INFO whate
 verbosity, stages/cli.py). ``progress(items, total, what, unit)`` wraps the frames of an ingest,
 a simulation or an odometry run: on a terminal (stderr is a tty) a tqdm bar; without one
 (``dvc repro`` in CI, a log file) a line when the loop starts, after every tenth of ``total``
-items (every ``UNKNOWN_EVERY`` items when the total is unknown) with the pace and an ETA, and
-when it ends. A study's trials do the same in ``pipeline.tuning.progress``.
+items (every ``UNKNOWN_EVERY`` items when the total is unknown) with the pace and an ETA, at
+most one every ``min_interval_s`` (``MIN_INTERVAL_S``: a loop of seconds logs its start and
+end only), and when it ends. A study's trials do the same in ``pipeline.tuning.progress``.
 """
 
 from __future__ import annotations
@@ -21,12 +22,15 @@ PROGRESS = logging.getLogger("pipeline.progress")
 """Progress lines (INFO); the CLI keeps this logger at INFO whatever its verbosity."""
 UNKNOWN_EVERY = 100
 """A log line every this many items when the total is not known up front."""
+MIN_INTERVAL_S = 5.0
+"""No two progress lines of a loop closer than this [s] (its last line aside)."""
 
 T = TypeVar("T")
 
 
 def progress(items: Iterable[T], total: int | None, what: str, unit: str = "frame",
-             enabled: bool = True, terminal: bool | None = None) -> Iterator[T]:
+             enabled: bool = True, terminal: bool | None = None,
+             min_interval_s: float = MIN_INTERVAL_S) -> Iterator[T]:
     """``items``, passed through, with progress shown (module docstring).
 
     ``what``: what the loop does, e.g. ``ingest drive1``; ``unit``: what an item is;
@@ -41,19 +45,22 @@ def progress(items: Iterable[T], total: int | None, what: str, unit: str = "fram
         yield from tqdm(items, total=total, desc=what, unit=unit, file=sys.stderr,
                         dynamic_ncols=True, leave=False)
         return
-    yield from _logged(items, total, what, unit)
+    yield from _logged(items, total, what, unit, min_interval_s)
 
 
-def _logged(items: Iterable[T], total: int | None, what: str, unit: str) -> Iterator[T]:
+def _logged(items: Iterable[T], total: int | None, what: str, unit: str,
+            min_interval_s: float) -> Iterator[T]:
     every = max(1, math.ceil(total / 10)) if total else UNKNOWN_EVERY
     PROGRESS.info("%s: %s %ss", what, total if total is not None else "?", unit)
-    t0 = time.monotonic()
+    t0 = last = time.monotonic()
     done = 0
     for item in items:
         yield item
         done += 1
-        if done % every == 0 and done != total:
-            PROGRESS.info("%s: %s", what, _line(done, total, unit, time.monotonic() - t0))
+        now = time.monotonic()
+        if done % every == 0 and done != total and now - last >= min_interval_s:
+            PROGRESS.info("%s: %s", what, _line(done, total, unit, now - t0))
+            last = now
     PROGRESS.info("%s finished: %d %ss in %s", what, done, unit,
                   duration(time.monotonic() - t0))
 
