@@ -42,8 +42,8 @@ DVC_YAML = Path(__file__).resolve().parents[1] / "dvc.yaml"
 """adaptune's own dvc.yaml, the one home of the stages' commands, outputs and params."""
 LEFT_OUT = ("simulate", "simulate_kitti", "generalize")
 """Stages of DVC_YAML a project of recordings has no use for."""
-CODE_ROOTS = ("pipeline/", "stages/", "schemas/")
-"""Dependencies of DVC_YAML's stages that are adaptune's code."""
+CODE_PACKAGES = ("pipeline", "stages", "schemas")
+"""Dependencies of DVC_YAML's stages in these folders are adaptune's code."""
 PARAMS_SECTIONS = ("base", "data", "descriptors", "trials", "fixed", "devkit", "surrogate",
                    "select", "evaluate")
 """The sections the new project's params.yaml spells out (the others keep their defaults)."""
@@ -183,7 +183,7 @@ def project_stages(recordings: list[str]) -> tuple[dict[str, Any], list[Any]]:
         if name in LEFT_OUT:
             left_out |= {_path_of(o) for o in stage.get("outs", []) + stage.get("metrics", [])}
             continue
-        deps = [d for d in stage.get("deps", []) if not str(d).startswith(CODE_ROOTS)]
+        deps = [d for d in stage.get("deps", []) if str(d).split("/")[0] not in CODE_PACKAGES]
         if name == "ingest":
             deps = recordings
         stages[name] = {**stage, "deps": deps} if deps else {

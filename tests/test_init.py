@@ -82,7 +82,7 @@ def test_a_list_of_recordings_makes_a_project(frames: KittiFrames, kitti_root: P
     for name, stage in new["stages"].items():  # the same commands, outputs and params
         assert {k: v for k, v in stage.items() if k != "deps"} == {
             k: v for k, v in ours["stages"][name].items() if k != "deps"}
-        assert not any(str(d).startswith(("pipeline/", "stages/", "schemas/"))
+        assert not any(str(d).split("/")[0] in ("pipeline", "stages", "schemas")
                        for d in stage.get("deps", []))
     assert new["stages"]["ingest"]["deps"] == [
         "recordings/a.bag", "recordings/b", "recordings/scans",
