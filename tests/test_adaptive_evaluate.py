@@ -217,6 +217,12 @@ def test_adaptive_and_evaluate_give_the_same_results_for_any_workers(
             one, two = (pq.read_table(tmp_path / f"ev{w}" / name / f"{setting}.parquet")
                         for w in (1, 2))
             assert one.equals(two)
+    # the trajectory names its sequence relative to itself: export finds it from anywhere
+    from pipeline.export import export_trajectory
+
+    traj = tmp_path / "a1" / "composite_0" / "trajectory.parquet"
+    assert pq.read_schema(traj).metadata[b"adaptune.sequence"] == b"../../composite_0.mcap"
+    assert export_trajectory(traj, "tum", tmp_path / "a.tum") == 40
 
 
 def test_replicas_run_each_setting_with_its_perturbed_parameters(
