@@ -101,6 +101,13 @@ SECTIONS: dict[str, str] = {
 """Every params.yaml section: name -> ``module:Model``, in the order of params.yaml."""
 
 
+RENAMED: dict[str, str] = {
+    "ingest": "its KITTI data set is now a kitti source of the data section: data: {sources: "
+              "[{kind: kitti, path: ROOT, sequences: [...], split: train}, ...]}",
+}
+"""Sections that are gone, and where their settings went (said when a file still has one)."""
+
+
 def section_model(name: str) -> type[Section]:
     """The model of section ``name``; ConfigError naming an unknown section and the known."""
     ref = SECTIONS.get(name)
@@ -193,8 +200,9 @@ def check_params(params: Mapping[str, Any], where: str = "params") -> None:
     one line naming the first unknown section, or the section's own error)."""
     unknown = [name for name in params if name not in SECTIONS]
     if unknown:
+        moved = f"; {RENAMED[unknown[0]]}" if unknown[0] in RENAMED else ""
         raise ConfigError(f"{where}: unknown params section {unknown[0]!r} (known: "
-                          f"{', '.join(SECTIONS)})")
+                          f"{', '.join(SECTIONS)}){moved}")
     for name in params:
         validate_section(section_model(name), name, section_data(dict(params), name))
 

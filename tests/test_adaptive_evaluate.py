@@ -54,6 +54,13 @@ def test_ingest_set_refuses_a_data_set_without_train_sequences(tmp_path: Path) -
     assert not (tmp_path / "k" / "index.json").exists()
 
 
+def test_an_ingest_section_says_where_its_settings_went(tmp_path: Path) -> None:
+    params = _params(tmp_path, ingest={"kitti_root": str(tmp_path), "train": ["04"]})
+    code, out = _invoke("ingest-set", "--params", str(params), "--out", str(tmp_path / "k"))
+    assert code == 1 and out.count("\n") == 1
+    assert "unknown params section 'ingest'" in out and "a kitti source of the data section" in out
+
+
 def test_ingest_set_without_sources_writes_an_empty_index(tmp_path: Path) -> None:
     params = _params(tmp_path, data={})
     code, _ = _invoke("ingest-set", "--params", str(params), "--out", str(tmp_path / "k"))
