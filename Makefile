@@ -30,7 +30,7 @@ fuzz: setup
 		--hypothesis-show-statistics --durations=0
 
 lint: setup
-	$(BIN)/ruff check pipeline stages schemas tests bench experiments
+	$(BIN)/ruff check pipeline stages schemas tests bench experiments examples
 	$(BIN)/mypy pipeline stages
 	$(PY) tests/helpers/dvc_deps.py --check
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 import json
 import logging
+import os
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
@@ -112,9 +113,10 @@ def run_one(model: Any, sequence_path: Path, out_dir: Path,
     run = AdaptiveRun(sequence_path.stem, model.algorithm, frames, selector.selections,
                       schedule.n_changes, select_s, odometry_s)
     schedule.write(out_dir / "schedule.parquet")
-    write_trajectory(out_dir / "trajectory.parquet", traj,
+    write_trajectory(out_dir / "trajectory.parquet", traj,  # paths relative to the file
                      {"setting": "adaptive", "algorithm": model.algorithm,
-                      "sequence": sequence_path.stem, "model": str(model.path)})
+                      "sequence": os.path.relpath(sequence_path, out_dir),
+                      "model": os.path.relpath(model.path, out_dir)})
     atomic_write_text(out_dir / "run.json", json.dumps(run.to_json(), indent=2) + "\n")
     log.info("%s: %d frames, %d parameter changes, selection %.1f s, odometry %.1f s",
              run.sequence, frames, run.changes, select_s, odometry_s)

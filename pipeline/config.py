@@ -35,12 +35,18 @@ class Section(BaseModel):
 class BaseSection(Section):
     """The shared ``base`` section: the seed; L, the RTE sub-trajectory length that the
     ``trials``, ``rte``, ``evaluate`` and ``generalize`` sections take from here
-    (``FROM_BASE``); and the sequence folder every stage after ``simulate`` / ``ingest``
-    reads (dvc.yaml ``${...}``)."""
+    (``FROM_BASE``); and the sequence folder every stage after ``simulate`` / ``ingest`` /
+    ``simulate_kitti`` reads (dvc.yaml ``${...}``): the simulated worlds, the recordings of
+    the ``data`` section, or simulated KITTI (``SEQUENCE_FOLDERS``)."""
 
     seed: int = Field(0, ge=0)
     length_m: float = Field(25.0, gt=0)
-    sequences: Literal["data/sequences", "data/kitti", "data/kitti_sim"] = "data/sequences"
+    sequences: Literal["data/sequences", "data/recordings", "data/kitti_sim"] = "data/sequences"
+
+
+SEQUENCE_FOLDERS = {"simulate": "data/sequences", "ingest": "data/recordings",
+                    "simulate_kitti": "data/kitti_sim"}
+"""The sequences folder each data stage of dvc.yaml writes (what ``base.sequences`` picks)."""
 
 
 FROM_BASE: dict[str, tuple[str, ...]] = {
@@ -81,7 +87,7 @@ class SelectSection(Section):
 SECTIONS: dict[str, str] = {
     "base": "pipeline.config:BaseSection",
     "simulate": "pipeline.sim.dataset:SimulateSection",
-    "ingest": "pipeline.sources.dataset:IngestSection",
+    "data": "pipeline.sources.dataset:DataSection",
     "simulate_kitti": "pipeline.sim.kitti_dataset:SimulateKittiSection",
     "descriptors": "pipeline.descriptors.dataset:DescriptorsSection",
     "trials": "pipeline.tuning.smbo:TrialsSection",
@@ -95,6 +101,13 @@ SECTIONS: dict[str, str] = {
 """Every params.yaml section: name -> ``module:Model``, in the order of params.yaml."""
 
 
+RENAMED: dict[str, str] = {
+    "ingest": "its KITTI data set is now a kitti source of the data section: data: {sources: "
+              "[{kind: kitti, path: ROOT, sequences: [...], split: train}, ...]}",
+}
+"""Sections that are gone, and where their settings went (said when a file still has one)."""
+
+
 def section_model(name: str) -> type[Section]:
     """The model of section ``name``; ConfigError naming an unknown section and the known."""
     ref = SECTIONS.get(name)
@@ -103,6 +116,16 @@ def section_model(name: str) -> type[Section]:
     module, attr = ref.split(":")
     model: type[Section] = getattr(importlib.import_module(module), attr)
     return model
+
+
+def section_defaults(name: str) -> Any:
+    """Section ``name`` at the code's defaults, as it is written in a params file (JSON
+    types; without the keys it takes from ``base`` or another section)."""
+    if name == "select":
+        return SelectionSettings().to_json()
+    skip = {*FROM_BASE.get(name, ()), *SHARED.get(name, ())}
+    data = section_model(name)().model_dump(mode="json")
+    return {k: v for k, v in data.items() if k not in skip}
 
 
 def format_validation_error(section: str, exc: ValidationError) -> str:
@@ -175,8 +198,9 @@ def check_params(params: Mapping[str, Any], where: str = "params") -> None:
     one line naming the first unknown section, or the section's own error)."""
     unknown = [name for name in params if name not in SECTIONS]
     if unknown:
+        moved = f"; {RENAMED[unknown[0]]}" if unknown[0] in RENAMED else ""
         raise ConfigError(f"{where}: unknown params section {unknown[0]!r} (known: "
-                          f"{', '.join(SECTIONS)})")
+                          f"{', '.join(SECTIONS)}){moved}")
     for name in params:
         validate_section(section_model(name), name, section_data(dict(params), name))
 

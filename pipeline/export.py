@@ -117,10 +117,15 @@ def _sequence_of(traj_path: str | Path, sequence: str | Path | None) -> Path:
 
     meta = pq.read_schema(traj_path).metadata or {}
     named = meta.get(b"adaptune.sequence")
-    if named is None or not Path(named.decode()).is_file():
+    # `adaptune run` stores the sequence's absolute path; files written before it stored the
+    # path as given, relative to the working directory then: tried from here and from the
+    # trajectory's folder
+    found = [p for p in ([Path(named.decode()), Path(traj_path).parent / named.decode()]
+                         if named is not None else []) if p.is_file()]
+    if not found:
         raise ConfigError(f"{traj_path}: its sequence is unknown or gone; give --sequence "
                           f"SEQ.mcap (its ground truth anchors the export), or --anchor identity")
-    return Path(named.decode())
+    return found[0]
 
 
 def _first_ground_truth(sequence: Path, frames: NDArray[np.int32],

@@ -6,7 +6,9 @@ baseline / fixed / adaptive scored with the KITTI devkit metric on the training 
 sequences 06-10 (``evaluate.splits = [validation, train]``: the test set is the index's
 ``validation`` split and the headline), L = 100 m. Its data are the real KITTI odometry scans
 of a KITTI root (the ``ingest`` stage) or simulated KITTI: HDL-64E scans along the ground-truth
-trajectories (the ``simulate_kitti`` stage, pipeline/sim/kitti_world.py). Options size the run
+trajectories (the ``simulate_kitti`` stage, pipeline/sim/kitti_world.py). Real KITTI is two
+``kitti`` sources of the ``data`` section (train, and test as the ``validation`` split), its
+root stored absolute. Options size the run
 to a machine: a frame window of every sequence (or of single sequences, simulated KITTI), a
 stride over the sequences, the SMBO budget.
 
@@ -24,7 +26,7 @@ from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
-from pipeline.config import Section, check_params
+from pipeline.config import SEQUENCE_FOLDERS, Section, check_params
 from pipeline.errors import ConfigError
 
 KITTI_TRAIN = ("00", "01", "02", "03", "04", "05")
@@ -88,12 +90,16 @@ def kitti_protocol(protocol: KittiProtocol, params: Mapping[str, Any]) -> dict[s
     train, test = protocol.train[:: protocol.stride], protocol.test[:: protocol.stride]
     _check_root(protocol, [*train, *test])
     if protocol.source == "real":
+        window = {k: v for k, v in (("start", protocol.start), ("end", protocol.end))
+                  if v is not None}
         data: dict[str, Any] = {
-            "base.sequences": "data/kitti", "ingest.kitti_root": protocol.root,
-            "ingest.train": train, "ingest.validation": test,
-            "ingest.start": protocol.start, "ingest.end": protocol.end}
+            "base.sequences": SEQUENCE_FOLDERS["ingest"], "data.sources": [
+                {"kind": "kitti", "path": str(Path(protocol.root).resolve()),
+                 "sequences": names, "split": split, **window}
+                for names, split in ((train, "train"), (test, "validation"))]}
     else:
-        data = {"base.sequences": "data/kitti_sim", "simulate_kitti.trajectories": protocol.root,
+        data = {"base.sequences": SEQUENCE_FOLDERS["simulate_kitti"],
+                "simulate_kitti.trajectories": protocol.root,
                 "simulate_kitti.train": train, "simulate_kitti.validation": test,
                 "simulate_kitti.start": protocol.start, "simulate_kitti.end": protocol.end,
                 "simulate_kitti.windows": _windows(protocol, [*train, *test])}

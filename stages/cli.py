@@ -26,6 +26,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "Convert KITTI, ROS bags, MCAP or scan folders into a sequence MCAP.",
     ),
     "info": ("stages.info:info", "Summarise a sequence MCAP."),
+    "init": ("stages.init:init",
+             "Start a project: params.yaml and dvc.yaml for a list of recordings."),
     "simulate": ("stages.simulate:simulate", "Ray-cast a simulated world into a sequence MCAP."),
     "metric": ("stages.metric:metric",
                "Trajectory error metrics (KITTI devkit; RTE, APE, RPE of any length)."),
@@ -59,7 +61,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "ingest-set": (
         "stages.ingest:ingest_set",
-        "Ingest the KITTI data set of params.yaml (dvc stage).",
+        "Ingest the recordings of params.yaml's data section (dvc stage).",
     ),
     "simulate-set": (
         "stages.simulate:simulate_set",

@@ -1,4 +1,5 @@
-"""``adaptune ingest {kitti,rosbag,folder,mcap}``: convert recorded scans into a sequence MCAP."""
+"""``adaptune ingest {kitti,rosbag,folder,mcap}``: convert recorded scans into a sequence MCAP;
+``adaptune ingest-set``: the recordings of the params section ``data`` (the dvc stage)."""
 
 from __future__ import annotations
 
@@ -46,7 +47,8 @@ recording_options = compose(
     click.option("--topic", default=None,
                  help="PointCloud2 topic (default: the only one there is)."),
     click.option("--gt-topic", default=None,
-                 help="Ground-truth topic: PoseStamped, Odometry or TF (tf2_msgs/TFMessage)."),
+                 help="Ground-truth topic: PoseStamped, Odometry or TF (tf2_msgs/TFMessage) "
+                 "[the only PoseStamped / Odometry topic, where there is exactly one]."),
     click.option("--gt-child-frame", default=None,
                  help="With a TF --gt-topic: the child frame whose pose is the ground truth."),
     poses_option,
@@ -56,12 +58,28 @@ recording_options = compose(
 
 
 def _done(report: Any) -> None:
+    truth = "no" if not report.has_ground_truth else (
+        f"yes ({report.ground_truth_from})" if report.ground_truth_from else "yes")
     click.echo(
         f"{report.out}: {report.frames} frames, {report.points} points"
         f"{f' ({report.dropped_points} non-finite dropped)' if report.dropped_points else ''}, "
-        f"ground truth: {'yes' if report.has_ground_truth else 'no'}, {report.seconds:.1f} s",
+        f"ground truth: {truth}, {report.seconds:.1f} s",
         err=True,
     )
+
+
+GT_KEYS = ("gt_topic", "gt_child_frame", "poses", "poses_format", "extrinsic")
+"""The options that make a source's GroundTruthOptions (pipeline.sources.poses)."""
+
+
+def _with_ground_truth(options: dict[str, Any]) -> dict[str, Any]:
+    """``options`` with the GT_KEYS replaced by one checked ``gt`` (GroundTruthOptions)."""
+    from pipeline.config import validate_section
+    from pipeline.sources.poses import GroundTruthOptions
+
+    given = {k: options.pop(k) for k in GT_KEYS if k in options}
+    given = {k: str(v) for k, v in given.items() if v is not None}
+    return {**options, "gt": validate_section(GroundTruthOptions, "ingest", given)}
 
 
 @click.group()
@@ -98,7 +116,7 @@ def rosbag(bag: Path, **options: Any) -> None:
     """ROS 1 .bag file or ROS 2 bag folder (sqlite3 or mcap storage)."""
     from pipeline.sources import ingest_rosbag
 
-    _done(ingest_rosbag(bag, **options))
+    _done(ingest_rosbag(bag, **_with_ground_truth(options)))
 
 
 @ingest.command("folder")
@@ -117,7 +135,7 @@ def folder(folder: Path, **options: Any) -> None:
     their names (full2 before full10); names that allow no one order are refused."""
     from pipeline.sources import ingest_folder
 
-    _done(ingest_folder(folder, **options))
+    _done(ingest_folder(folder, **_with_ground_truth(options)))
 
 
 @ingest.command("mcap")
@@ -128,19 +146,24 @@ def mcap(path: Path, **options: Any) -> None:
     """Any MCAP with PointCloud2 messages (cdr or ros1 encoding), e.g. a ROS 2 recording."""
     from pipeline.sources import ingest_mcap
 
-    _done(ingest_mcap(path, **options))
+    _done(ingest_mcap(path, **_with_ground_truth(options)))
 
 
 @click.command("ingest-set")
 @params_option
-@dir_option("--out", "out_dir", help="Folder for <NN>.mcap and index.json (data/kitti).")
+@dir_option("--out", "out_dir",
+            help="Folder for <name>.mcap and index.json (data/recordings).")
 def ingest_set(params_path: Path | None, out_dir: Path) -> None:
-    """Ingest the KITTI sequences of the params section ``ingest`` (dvc stage)."""
+    """Ingest the recordings of the params section ``data`` (dvc stage); relative paths in it
+    are relative to the params file's folder."""
     from pipeline.config import load_section
-    from pipeline.sources.dataset import IngestSection, ingest_kitti_set
+    from pipeline.sequence_index import read_index
+    from pipeline.sources.dataset import DataSection, ingest_data_set
 
-    section = load_section(params_path, "ingest", IngestSection)
-    for report in ingest_kitti_set(section, out_dir):
+    section = load_section(params_path, "data", DataSection)
+    base_dir = params_path.parent if params_path is not None else Path.cwd()
+    for report in ingest_data_set(section, out_dir, base_dir):
         _done(report)
-    click.echo(f"{out_dir / 'index.json'}: {len(section.train)} train, "
-               f"{len(section.validation)} validation sequences", err=True)
+    splits = read_index(out_dir).splits
+    click.echo(f"{out_dir / 'index.json'}: "
+               f"{', '.join(f'{len(v)} {k}' for k, v in splits.items())} sequences", err=True)

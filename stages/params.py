@@ -24,24 +24,14 @@ from stages.common import FILE, echo_output, json_option
 def params(algorithm: str, options: tuple[str, ...], params_path: Path | None,
            as_json: bool) -> None:
     """List the parameters ALGORITHM tunes: range, default, kind, scale, unit."""
-    from pipeline.config import load_section, validate_section
-    from pipeline.odometry.registry import build_adapter
-    from pipeline.tuning.smbo import TrialsSection, study_adapter
-    from stages.run import parse_options
+    from stages.run import configured_adapter, parse_options
 
-    given = parse_options(options)
-    source = "built-in"
     if params_path is not None:
-        trials = load_section(params_path, "trials", TrialsSection)
-        if trials.algorithm == algorithm:
-            settings = validate_section(TrialsSection, "trials", {
-                **trials.model_dump(), "adapter_options": {**trials.adapter_options, **given}})
-            adapter = study_adapter(settings)
-            source = f"{params_path} trials.space" if trials.space else source
-        else:
-            adapter = build_adapter(algorithm, given)
+        adapter, source = configured_adapter(params_path, algorithm, parse_options(options))
     else:
-        adapter = build_adapter(algorithm, given)
+        from pipeline.odometry.registry import build_adapter
+
+        adapter, source = build_adapter(algorithm, parse_options(options)), "built-in"
     specs = adapter.space.to_json()
     if as_json:
         echo_output(json.dumps({"algorithm": adapter.name, "source": source,

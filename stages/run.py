@@ -1,4 +1,10 @@
-"""``adaptune run``: one odometry run over a sequence MCAP, fixed parameters or a schedule."""
+"""``adaptune run``: one odometry run over a sequence MCAP, fixed parameters or a schedule.
+
+The adapter is built as the trials stage builds it from the params file (``--params``, default
+./params.yaml): its trials.algorithm unless ``--algorithm`` names another, its
+trials.adapter_options with ``-o`` over them, its trials.space. The trajectory's metadata names
+the sequence (and schedule) by absolute path, so ``adaptune export`` finds them from anywhere.
+"""
 
 from __future__ import annotations
 
@@ -19,13 +25,13 @@ from stages.common import (
 )
 
 
-def parse_params(text: str | None) -> dict[str, float]:
-    """``--params``: a JSON object, or ``@file`` holding one. ConfigError otherwise."""
+def parse_params(text: str | None, flag: str = "--values") -> dict[str, float]:
+    """``--values``: a JSON object, or ``@file`` holding one. ConfigError otherwise."""
     from pipeline.errors import ConfigError
 
     if text is None:
         return {}
-    source = "--params"
+    source = flag
     if text.startswith("@"):
         from pipeline.io_utils import read_input_text
 
@@ -41,6 +47,39 @@ def parse_params(text: str | None) -> dict[str, float]:
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: must be a JSON object of parameter name -> value")
     return data
+
+
+def is_values(text: str) -> bool:
+    """True for ``--params`` in its old form, parameter values (a JSON object or ``@file``),
+    not a params file."""
+    return text.lstrip()[:1] in ("{", "[", "@")
+
+
+def _params_arg(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """--params as given (a params file, or values in the old form); else ./params.yaml where
+    there is one."""
+    if value is not None:
+        return value
+    return "params.yaml" if Path("params.yaml").exists() else None
+
+
+def configured_adapter(params_path: Path | None, algorithm: str | None,
+                       options: dict[str, Any]) -> tuple[Any, str]:
+    """(adapter, where its ranges come from) as a trials run with the params file at
+    ``params_path`` builds it: ``algorithm`` [trials.algorithm], trials.adapter_options and
+    ``options`` over them, and trials.space when the algorithm is trials.algorithm."""
+    from pipeline.config import load_section, validate_section
+    from pipeline.odometry.registry import build_adapter
+    from pipeline.tuning.smbo import TrialsSection, study_adapter
+
+    trials = load_section(params_path, "trials", TrialsSection)
+    name = algorithm or trials.algorithm
+    if name != trials.algorithm:
+        return build_adapter(name, options), "built-in"
+    settings = validate_section(TrialsSection, "trials", {
+        **trials.model_dump(), "adapter_options": {**trials.adapter_options, **options}})
+    source = f"{params_path} trials.space" if trials.space else "built-in"
+    return study_adapter(settings), source
 
 
 def parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
@@ -60,9 +99,14 @@ def parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
 
 
 @click.command("run")
-@algorithm_option("Adapter name (ndt, gicp, kiss_icp, command).", required=True)
-@click.option("--params", "params_json", default=None,
-              help="Fixed parameters as a JSON object or @file.json (missing ones: baseline).")
+@algorithm_option("Adapter name (ndt, gicp, kiss_icp, command) [trials.algorithm].")
+@click.option("--params", "params_arg", default=None, callback=_params_arg,
+              help="The params file: trials.algorithm, trials.adapter_options and "
+              "trials.space, as the trials stage runs it [default: ./params.yaml if there is "
+              "one]. (A JSON object or @file.json here is --values, the older form.)")
+@click.option("--values", "values_json", default=None,
+              help="Fixed parameter values as a JSON object or @file.json (missing ones: the "
+              "baseline).")
 @click.option("--schedule", "schedule_path", type=FILE, default=None,
               help="Per-frame parameter schedule (Parquet).")
 @file_option("--out", "out_path", help="Trajectory Parquet to write.")
@@ -71,29 +115,39 @@ def parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
 @click.option("--time-limit", "time_limit_s", type=float, default=None, help="Seconds.")
 @json_option
 @sequence_argument
-def run(algorithm: str, params_json: str | None, schedule_path: Path | None, out_path: Path,
-        options: tuple[str, ...], time_limit_s: float | None, as_json: bool,
-        sequence: Path) -> None:
-    """Run ALGORITHM once over SEQUENCE (a sequence MCAP) and write its trajectory."""
+def run(algorithm: str | None, params_arg: str | None, values_json: str | None,
+        schedule_path: Path | None, out_path: Path, options: tuple[str, ...],
+        time_limit_s: float | None, as_json: bool, sequence: Path) -> None:
+    """Run an odometry once over SEQUENCE (a sequence MCAP) and write its trajectory."""
     from pipeline.errors import ConfigError
     from pipeline.io_utils import refuse_input_as_output
-    from pipeline.odometry import get_adapter, run_sequence
+    from pipeline.odometry import run_sequence
     from pipeline.odometry.base import Schedule
     from pipeline.trajectory import write_trajectory
 
-    if params_json is not None and schedule_path is not None:
-        raise ConfigError("give --params or --schedule, not both")
-    params_file = params_json[1:] if params_json and params_json.startswith("@") else None
-    refuse_input_as_output(out_path, [sequence, schedule_path, params_file])
-    adapter = get_adapter(algorithm, **parse_options(options))
-    given = Schedule.read(schedule_path) if schedule_path else parse_params(params_json)
-    traj = run_sequence(adapter, sequence, given, time_limit_s=time_limit_s)
-    meta = {"algorithm": algorithm, "sequence": str(sequence)}
+    params_path = None
+    values_flag = "--values"
+    if params_arg is not None and is_values(params_arg):
+        if values_json is not None:
+            raise ConfigError("give the parameter values once: --values (--params JSON is its "
+                              "older form)")
+        values_json, values_flag = params_arg, "--params"
+    elif params_arg is not None:
+        params_path = Path(params_arg)
+    if values_json is not None and schedule_path is not None:
+        raise ConfigError(f"give {values_flag} or --schedule, not both")
+    values_file = values_json[1:] if values_json and values_json.startswith("@") else None
+    refuse_input_as_output(out_path, [sequence, schedule_path, values_file, params_path])
+    adapter, _ = configured_adapter(params_path, algorithm, parse_options(options))
+    given = (Schedule.read(schedule_path) if schedule_path
+             else parse_params(values_json, values_flag))
+    traj = run_sequence(adapter, sequence, given, time_limit_s=time_limit_s, show_progress=True)
+    meta = {"algorithm": adapter.name, "sequence": str(Path(sequence).resolve())}
     if schedule_path:
-        meta["schedule"] = str(schedule_path)
+        meta["schedule"] = str(Path(schedule_path).resolve())
     else:
         meta["params_json"] = json.dumps(adapter.space.validate(given))  # type: ignore[arg-type]
     write_trajectory(out_path, traj, meta)
-    summary = {"algorithm": algorithm, "sequence": str(sequence), "poses": len(traj),
+    summary = {"algorithm": adapter.name, "sequence": str(sequence), "poses": len(traj),
                "out": str(out_path)}
-    report(summary, f"{algorithm}: {len(traj)} poses -> {out_path}", as_json)
+    report(summary, f"{adapter.name}: {len(traj)} poses -> {out_path}", as_json)

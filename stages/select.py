@@ -12,7 +12,8 @@ from stages.common import model_run_options, params_option, report_selection
 
 @click.command()
 @params_option
-@model_run_options("The schedule Parquet (frame, stamp_ns, one column per parameter).")
+@model_run_options("The schedule: Parquet, or CSV when it ends in .csv (frame, stamp_ns, one "
+                   "column per parameter).")
 @click.option("--period-s", type=float, default=None,
               help="Override select.period_s of the params [s].")
 def select(

@@ -68,7 +68,7 @@ def simulate(name: str | None, out: Path, **world: Any) -> None:
     from pipeline.sim.simulate import simulate_sequence
 
     spec = _spec(**world)
-    s = simulate_sequence(spec, out, name=name, progress=sys.stderr.isatty())
+    s = simulate_sequence(spec, out, name=name, progress=True)
     labels = ", ".join(f"{x.label} {x.start}-{x.end}" for x in s.labels)
     click.echo(
         f"{s.path}: {s.frames} frames, {s.points} points, {s.length_m:.0f} m, labels: {labels}",

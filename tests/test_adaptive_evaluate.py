@@ -43,18 +43,26 @@ def _invoke(*args: str) -> tuple[int, str]:
     return result.exit_code, result.output
 
 
-def test_ingest_set_refuses_a_root_without_train_sequences(tmp_path: Path) -> None:
-    params = _params(tmp_path, ingest={"kitti_root": str(tmp_path), "train": []})
+def test_ingest_set_refuses_a_data_set_without_train_sequences(tmp_path: Path) -> None:
+    params = _params(tmp_path, data={"sources": [
+        {"kind": "kitti", "path": str(tmp_path), "sequences": ["04"], "split": "validation"}]})
     code, out = _invoke("ingest-set", "--params", str(params), "--out", str(tmp_path / "k"))
     assert code == 1
     assert out.strip().splitlines() == [
-        f"adaptune: error: ingest: train must name KITTI sequences when kitti_root is set, got "
-        f"(kitti_root={str(tmp_path)!r}, train=[])"]
+        "adaptune: error: data.sources: no recording in split 'train' (the one tuned on), got "
+        "splits ['validation']"]
     assert not (tmp_path / "k" / "index.json").exists()
 
 
-def test_ingest_set_without_a_root_writes_an_empty_index(tmp_path: Path) -> None:
-    params = _params(tmp_path, ingest={})
+def test_an_ingest_section_says_where_its_settings_went(tmp_path: Path) -> None:
+    params = _params(tmp_path, ingest={"kitti_root": str(tmp_path), "train": ["04"]})
+    code, out = _invoke("ingest-set", "--params", str(params), "--out", str(tmp_path / "k"))
+    assert code == 1 and out.count("\n") == 1
+    assert "unknown params section 'ingest'" in out and "a kitti source of the data section" in out
+
+
+def test_ingest_set_without_sources_writes_an_empty_index(tmp_path: Path) -> None:
+    params = _params(tmp_path, data={})
     code, _ = _invoke("ingest-set", "--params", str(params), "--out", str(tmp_path / "k"))
     assert code == 0
     assert json.loads((tmp_path / "k" / "index.json").read_text()) == {
@@ -218,6 +226,12 @@ def test_adaptive_and_evaluate_give_the_same_results_for_any_workers(
             one, two = (pq.read_table(tmp_path / f"ev{w}" / name / f"{setting}.parquet")
                         for w in (1, 2))
             assert one.equals(two)
+    # the trajectory names its sequence relative to itself: export finds it from anywhere
+    from pipeline.export import export_trajectory
+
+    traj = tmp_path / "a1" / "composite_0" / "trajectory.parquet"
+    assert pq.read_schema(traj).metadata[b"adaptune.sequence"] == b"../../composite_0.mcap"
+    assert export_trajectory(traj, "tum", tmp_path / "a.tum") == 40
 
 
 def test_replicas_run_each_setting_with_its_perturbed_parameters(

@@ -48,7 +48,7 @@ def test_adaptune_error_becomes_one_line_exit_1(tmp_path: Path) -> None:
 def test_no_info_lines_without_verbose(tmp_path: Path) -> None:
     """Warnings only by default: the summary line alone on stderr; -v adds the INFO lines."""
     params = tmp_path / "params.yaml"
-    params.write_text("ingest: {}\n")
+    params.write_text("data: {}\n")
     args = [sys.executable, "-m", "stages.cli", "ingest-set", "--params", str(params),
             "--out", str(tmp_path / "k")]
     quiet = subprocess.run(args, capture_output=True, text=True, check=True)
@@ -57,7 +57,7 @@ def test_no_info_lines_without_verbose(tmp_path: Path) -> None:
     verbose = subprocess.run([*args[:3], "-v", *args[3:]], capture_output=True, text=True,
                              check=True)
     assert verbose.stderr.splitlines() == [
-        "INFO pipeline.sources.dataset: ingest: no kitti_root configured, writing an empty "
+        "INFO pipeline.sources.dataset: ingest: no data sources configured, writing an empty "
         "data set", summary]
 
 

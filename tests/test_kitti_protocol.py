@@ -58,16 +58,18 @@ def protocol(kitti_root: Path, tmp_path_factory: pytest.TempPathFactory) -> Path
 def test_the_preset_sets_the_protocol(protocol: Path, kitti_root: Path) -> None:
     params = yaml.safe_load((protocol / "params.yaml").read_text())
     assert params["base"] | {"seed": 0} == {"seed": 0, "length_m": KITTI_L_M,
-                                            "sequences": "data/kitti"}
-    assert params["ingest"] == {"kitti_root": str(kitti_root), "train": ["01", "04"],
-                                "validation": ["06", "10"], "start": None, "end": None}
+                                            "sequences": "data/recordings"}
+    root = str(kitti_root.resolve())
+    assert params["data"] == {"sources": [
+        {"kind": "kitti", "path": root, "sequences": ["01", "04"], "split": "train"},
+        {"kind": "kitti", "path": root, "sequences": ["06", "10"], "split": "validation"}]}
     assert params["evaluate"]["splits"] == ["validation", "train"]
     assert params["evaluate"]["replicas"] == 1
     assert (params["trials"]["iterations"], params["trials"]["startup_trials"],
             params["fixed"]["iterations"]) == (3, 2, 2)
     assert params["devkit"]["lengths_m"] == [2, 4] and "kitti_lengths_m" not in params["evaluate"]
     lock = yaml.safe_load((protocol / "dvc.lock").read_text())["stages"]
-    assert any(d["path"] == "data/kitti" for d in lock["trials"]["deps"])
+    assert any(d["path"] == "data/recordings" for d in lock["trials"]["deps"])
 
 
 def test_train_and_test_sequences_are_scored(protocol: Path) -> None:
@@ -75,7 +77,7 @@ def test_train_and_test_sequences_are_scored(protocol: Path) -> None:
     from pipeline.sequence import SequenceReader
 
     for seq in ("01", "04", "06", "10"):
-        with SequenceReader(protocol / f"data/kitti/{seq}.mcap") as reader:
+        with SequenceReader(protocol / f"data/recordings/{seq}.mcap") as reader:
             assert len(reader) == 10 and reader.info.sensor != "unknown"
         assert (protocol / f"results/adaptive/{seq}/trajectory.parquet").is_file()
     m = json.loads((protocol / "metrics/evaluation.json").read_text())
@@ -204,8 +206,10 @@ def test_preset_stride_and_bad_input(kitti_root: Path) -> None:
     code, out = _preset("--root", str(kitti_root), "--train", "01,04", "--test", "06,10",
                         "--stride", "2", "--params", str(REPO / "params.yaml"))
     assert code == 0
-    assert '--set-param=ingest.train=["01"]' in out.splitlines()
-    assert '--set-param=ingest.validation=["06"]' in out.splitlines()
+    root = json.dumps(str(kitti_root.resolve()))
+    assert (f'--set-param=data.sources=[{{kind:"kitti",path:{root},sequences:["01"],'
+            f'split:"train"}},{{kind:"kitti",path:{root},sequences:["06"],'
+            f'split:"validation"}}]') in out.splitlines()
     assert "trials.time_limit_s" not in out  # params.yaml's, unless asked
     code, out = _preset("--root", str(kitti_root), "--train", "01", "--test", "06",
                         "--time-limit-s", "60", "--params", str(REPO / "params.yaml"))

@@ -313,7 +313,7 @@ def documented_variations() -> dict[str, list[str]]:
         if words[:3] == ["dvc", "exp", "run"]:
             sets = dict(w.split("=", 1) for w in words[4::2])
             assert words[3::2] == ["-S"] * len(sets), line
-            key = "kitti" if "ingest.kitti_root" in sets else ",".join(
+            key = "kitti" if "kind: kitti" in sets.get("data.sources", "") else ",".join(
                 f"{k}={v}" for k, v in sets.items())
             lines[key] = words[3:]
     return lines
@@ -386,8 +386,9 @@ def test_kitti_and_kiss_icp_experiment_with_a_new_length(repro: tuple[Path, str]
     new_l = TINY_L_M + 1
     lines = documented_variations()
     args = tiny(lines["kitti"], **{
-        "base.length_m": str(new_l), "ingest.kitti_root": str(kitti_root),
-        "ingest.train": '["01","06"]', "ingest.validation": '["04"]'})
+        "base.length_m": str(new_l), "data.sources": (
+            f"[{{kind: kitti, path: '{kitti_root}', split: train, sequences: ['01','06']}}, "
+            f"{{kind: kitti, path: '{kitti_root}', split: validation, sequences: ['04']}}]")})
     with tcp_cluster(tmp_path, 1) as (address, _):
         log = exp_run(root, "kitti-kiss", *args, *lines["trials.algorithm=kiss_icp"],
                       *tiny(lines[TCP_LINE], **{"trials.dask": address}),
@@ -406,7 +407,7 @@ def test_kitti_and_kiss_icp_experiment_with_a_new_length(repro: tuple[Path, str]
                   "evaluate"):
         assert f"Running stage '{stage}'" in log
     for seq in ("01", "06", "04"):
-        with SequenceReader(root / f"data/kitti/{seq}.mcap") as reader:
+        with SequenceReader(root / f"data/recordings/{seq}.mcap") as reader:
             assert len(reader) == 10 and reader.info.sensor != "unknown"
     metrics = json.loads((root / "metrics/evaluation.json").read_text())
     assert metrics["algorithm"] == "kiss_icp" and list(metrics["sequences"]) == ["04"]
@@ -423,7 +424,7 @@ def test_kitti_and_kiss_icp_experiment_with_a_new_length(repro: tuple[Path, str]
         con.close()
     assert lengths == [(new_l,)]
     lock = yaml.safe_load((root / "dvc.lock").read_text())["stages"]
-    assert any(d["path"] == "data/kitti" for d in lock["trials"]["deps"])
+    assert any(d["path"] == "data/recordings" for d in lock["trials"]["deps"])
     for stage in ("trials", "fixed", "rte", "evaluate"):
         assert lock[stage]["params"]["params.yaml"]["base.length_m"] == new_l
     diff = json.loads(dvc(root, "metrics", "diff", "main", "--json"))["metrics/evaluation.json"]

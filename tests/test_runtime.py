@@ -154,6 +154,13 @@ def test_schedule_in_range_for_every_scan(
     read = Schedule.read(out)
     read.validate(space, 8)
     assert len(read.changes()) == 1  # period 1 s (select's default): one selection in 0.8 s
+    csv = tmp_path / "sched.csv"  # the same rows as CSV, for a node without pyarrow
+    res = CliRunner().invoke(main, ["select", str(model_dir), str(seq), "--out", str(csv)])
+    assert res.exit_code == 0, res.output
+    rows = csv.read_text().splitlines()
+    assert rows[0] == "frame,stamp_ns," + ",".join(read.values)
+    assert [float(v) for v in rows[1].split(",")[2:]] == list(read.at(0).values())
+    assert [int(r.split(",")[1]) for r in rows[1:]] == read.stamps_ns.tolist()
 
 
 def test_too_few_points_keep_last(model_dir: Path, kitti_root: Path) -> None:

@@ -20,6 +20,7 @@ from pipeline.errors import ConfigError, OdometryError, TrialTimeout
 from pipeline.io_utils import prefetch
 from pipeline.odometry.base import Adapter, Schedule, TimeLimitedAdapter
 from pipeline.odometry.registry import adapter_names, get_adapter
+from pipeline.progress import progress
 from pipeline.sequence import Scan, SequenceReader
 from pipeline.trajectory import Trajectory
 
@@ -28,13 +29,15 @@ __all__ = ["adapter_names", "check_trajectory", "get_adapter", "make_schedule", 
 
 def run_sequence(adapter: Adapter, sequence_path: str | Path,
                  params_or_schedule: Mapping[str, float] | Schedule,
-                 time_limit_s: float | None = None) -> Trajectory:
+                 time_limit_s: float | None = None, show_progress: bool = False) -> Trajectory:
     """Run ``adapter`` over the sequence MCAP at ``sequence_path``; a checked Trajectory.
 
     ``params_or_schedule``: fixed parameters (validated; missing ones take the baseline) or a
     per-frame Schedule (validated against the adapter's space and the frame count).
     ``time_limit_s``: in-process adapters are checked between frames (a soft limit, TrialTimeout);
     adapters with ``accepts_time_limit`` (``command``) enforce it themselves.
+    ``show_progress``: a bar or log lines over the frames (``pipeline.progress``; in-process
+    adapters: an external command's frames are its own).
     Raises ConfigError / InputError for bad parameters or input, OdometryError for a failed run.
     """
     path = Path(sequence_path)
@@ -46,9 +49,10 @@ def run_sequence(adapter: Adapter, sequence_path: str | Path,
             traj = adapter.run(reader, schedule, time_limit_s=time_limit_s)
         else:
             with contextlib.closing(prefetch(reader)) as ahead:  # decoding overlaps odometry
-                scans: Iterable[Scan] = ahead
+                scans: Iterable[Scan] = progress(ahead, len(reader), f"{adapter.name} on "
+                                                 f"{reader.info.name}", enabled=show_progress)
                 if time_limit_s is not None:
-                    scans = _with_deadline(ahead, time_limit_s, adapter.name)
+                    scans = _with_deadline(scans, time_limit_s, adapter.name)
                 try:
                     traj = adapter.run(scans, schedule)
                 except (OdometryError, TrialTimeout):

@@ -238,16 +238,36 @@ class Schedule:
                 raise InputError(f"{who}: {name} must be in [{spec.low}, {spec.high}], "
                                  f"got {arr[k]} at frame {k}{of}")
 
+    def csv_text(self, stamps_ns: NDArray[np.int64] | None = None) -> str:
+        """The schedule as CSV: header ``frame,stamp_ns,<param>...``, one row a frame, values
+        as Python writes floats (round-trip exact); stamps ``stamps_ns`` or the schedule's."""
+        stamps = self._stamps(stamps_ns)
+        names = list(self.values)
+        rows = ["frame,stamp_ns," + ",".join(names)]
+        for i in range(len(self)):
+            vals = ",".join(repr(float(self.values[n][i])) for n in names)
+            rows.append(f"{int(self.frames[i])},{int(stamps[i])},{vals}")
+        return "\n".join(rows) + "\n"
+
+    def _stamps(self, stamps_ns: NDArray[np.int64] | None = None) -> NDArray[np.int64]:
+        if stamps_ns is not None:
+            return np.asarray(stamps_ns, np.int64)
+        return self.stamps_ns if self.stamps_ns is not None else np.zeros(len(self), np.int64)
+
     def write(self, path: str | Path) -> None:
-        """Write as Parquet (schemas.arrow.schedule_schema), atomically."""
+        """Write as Parquet (schemas.arrow.schedule_schema), or as CSV (``csv_text``) when
+        ``path`` ends in .csv, atomically."""
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        from pipeline.io_utils import atomic_path
+        from pipeline.io_utils import atomic_path, atomic_write_text
         from schemas.arrow import schedule_schema
 
+        if Path(path).suffix.lower() == ".csv":
+            atomic_write_text(path, self.csv_text())
+            return
         names = list(self.values)
-        stamps = self.stamps_ns if self.stamps_ns is not None else np.zeros(len(self), np.int64)
+        stamps = self._stamps()
         cols = [pa.array(self.frames, pa.int32()), pa.array(stamps, pa.int64())]
         cols += [pa.array(self.values[n], pa.float64()) for n in names]
         table = pa.Table.from_arrays(cols, schema=schedule_schema(names))

@@ -5,9 +5,14 @@ Per run adaptune makes a work directory and writes into it:
 - ``schedule.csv``: header ``frame,stamp_ns,<param>...``, one row per frame;
 - ``schedule.json``: {"frame": [...], "stamp_ns": [...], "params": {name: [...]}};
 - the sequence: the MCAP the scans came from (its path), or ``sequence.mcap`` written there
-  when the scans are not read from a file.
+  when the scans are not read from a file;
+- with the ``scans`` option ``kitti`` or ``pcd``, the scans as files too, for a tool that reads
+  no MCAP (pipeline/odometry/scan_folder.py): a KITTI-layout folder (``velodyne/NNNNNN.bin``,
+  ``times.txt``) or a folder of binary PCD files (``NNNNNN.pcd``, ``times.txt``), in the work
+  directory, or written once per sequence into ``scans_cache`` and kept for later runs.
 It then runs the argv template ``command`` (a list, or one shell-like string) with these
-placeholders substituted: ``{sequence}``, ``{params}``, ``{schedule}`` (CSV), ``{schedule_json}``,
+placeholders substituted: ``{sequence}``, ``{scans}`` (the scans folder; with ``scans: mcap``
+the sequence), ``{params}``, ``{schedule}`` (CSV), ``{schedule_json}``,
 ``{out}`` (the trajectory file the command must write), ``{workdir}``, ``{python}`` (this
 interpreter). The command gets ``time_limit_s`` (``run_sequence``'s, else the ``timeout_s``
 option); past it its whole process group is killed and TrialTimeout raised. A non-zero exit
@@ -58,7 +63,8 @@ from pipeline.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 
-PLACEHOLDERS = ("sequence", "params", "schedule", "schedule_json", "out", "workdir", "python")
+PLACEHOLDERS = ("sequence", "scans", "params", "schedule", "schedule_json", "out", "workdir",
+                "python")
 
 
 class CommandOptions(Section):
@@ -72,6 +78,8 @@ class CommandOptions(Section):
     workdir: str | None = None
     keep_workdir: bool = False
     stamp_tolerance_s: float = Field(1e-3, gt=0)
+    scans: Literal["mcap", "kitti", "pcd"] = "mcap"
+    scans_cache: str | None = None
 
     @field_validator("command", mode="before")
     @classmethod
@@ -142,13 +150,14 @@ class CommandAdapter:
             output_folder(base)
         work = Path(tempfile.mkdtemp(prefix="adaptune-cmd-", dir=base))
         try:
-            sequence, stamps_ns = self._sequence(scans, work)
+            sequence, folder, stamps_ns = self._inputs(scans, work)
             if len(schedule) != len(stamps_ns):
                 raise OdometryError(f"command: schedule has {len(schedule)} rows for "
                                     f"{len(stamps_ns)} frames")
             files = write_inputs(work, schedule, stamps_ns)
-            argv = [a.format(sequence=sequence, out=work / "trajectory.txt", workdir=work,
-                             python=sys.executable, **files) for a in self.options.command]
+            argv = [a.format(sequence=sequence, scans=folder, out=work / "trajectory.txt",
+                             workdir=work, python=sys.executable, **files)
+                    for a in self.options.command]
             run_process(argv, self.options.cwd, limit,
                         workdir=None if self.options.keep_workdir else work)
             T = read_poses(work / "trajectory.txt", self.options.format, stamps_ns,
@@ -159,6 +168,24 @@ class CommandAdapter:
                 log.info("command: work directory kept at %s", work)
             else:
                 shutil.rmtree(work, ignore_errors=True)
+
+    def _inputs(self, scans: Iterable[Scan], work: Path) -> tuple[Path, Path, np.ndarray]:
+        """(sequence MCAP, scans folder, stamps_ns) of ``scans`` as the ``scans`` option and
+        the command's placeholders ask (the folder is the MCAP with ``scans: mcap``)."""
+        from pipeline.odometry.scan_folder import scan_folder
+
+        if self.options.scans == "mcap":
+            sequence, stamps_ns = self._sequence(scans, work)
+            return sequence, sequence, stamps_ns
+        from_file = getattr(scans, "path", None) is not None
+        wants_sequence = any("{sequence}" in a for a in self.options.command)
+        if wants_sequence and not from_file:
+            scans = list(scans)  # read twice: into the MCAP and the folder
+        folder, stamps_ns = scan_folder(scans, self.options.scans, work,
+                                        self.options.scans_cache)
+        if wants_sequence or from_file:
+            return self._sequence(scans, work)[0], folder, stamps_ns
+        return folder, folder, stamps_ns  # {sequence} unused: no MCAP written
 
     def _sequence(self, scans: Iterable[Scan], work: Path) -> tuple[Path, np.ndarray]:
         """The sequence MCAP holding ``scans`` (theirs, or one written into ``work``) and stamps."""
@@ -178,12 +205,8 @@ def write_inputs(work: Path, schedule: Schedule, stamps_ns: np.ndarray) -> dict[
     names = list(schedule.values)
     params = work / "params.json"
     params.write_text(json.dumps(schedule.at(0), indent=1))
-    rows = ["frame,stamp_ns," + ",".join(names)]
-    for i in range(len(schedule)):
-        vals = ",".join(repr(float(schedule.values[n][i])) for n in names)
-        rows.append(f"{int(schedule.frames[i])},{int(stamps_ns[i])},{vals}")
     csv = work / "schedule.csv"
-    csv.write_text("\n".join(rows) + "\n")
+    csv.write_text(schedule.csv_text(stamps_ns))
     js = work / "schedule.json"
     js.write_text(json.dumps({"frame": schedule.frames.tolist(),
                               "stamp_ns": [int(s) for s in stamps_ns],

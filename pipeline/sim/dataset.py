@@ -12,6 +12,7 @@ from pydantic import Field, field_validator
 
 from pipeline.config import Section
 from pipeline.io_utils import output_folder
+from pipeline.progress import PROGRESS
 from pipeline.sequence_index import write_index
 from pipeline.sim.route import LABELS
 from pipeline.sim.sensors import SensorName
@@ -19,7 +20,6 @@ from pipeline.sim.simulate import SimSpec, SimSummary, derive_seed, simulate_seq
 from pipeline.sim.worlds import MAX_FRAMES, WORLDS
 
 log = logging.getLogger(__name__)
-PROGRESS = logging.getLogger("pipeline.progress")  # shown at any CLI verbosity (stages/cli.py)
 
 
 class SimulateSection(Section):

@@ -139,8 +139,9 @@ def write_world(world: World, sensor: SensorModel, seed: int, out_path: str | Pa
                 motion_distortion: bool = False) -> SimSummary:
     """Ray-cast every frame of ``world`` (noise from ``seed``, sweeps with ``motion_distortion``,
     as ``iter_scans``) into the sequence MCAP ``out_path`` (atomically), labels per frame range
-    from the world's poses."""
-    from tqdm import tqdm
+    from the world's poses. ``progress``: a bar on a terminal, log lines elsewhere
+    (``pipeline.progress``)."""
+    from pipeline.progress import progress as shown
 
     labels = label_ranges(world.poses.frame_labels)
     info = SequenceInfo(name=name, sensor=SENSOR_TITLES[sensor.name], source=source,
@@ -148,7 +149,7 @@ def write_world(world: World, sensor: SensorModel, seed: int, out_path: str | Pa
     points = 0
     with SequenceWriter(out_path, info) as w:
         scans = iter_scans(world, sensor, seed, motion_distortion=motion_distortion)
-        for scan in tqdm(scans, total=world.frames, desc=name, disable=not progress, leave=False):
+        for scan in shown(scans, world.frames, f"simulate {name}", "scan", enabled=progress):
             w.add(scan.stamp_ns, scan.points_lidar, scan.T_world_lidar, scan.time_s)
             points += len(scan.points_lidar)
     length = float(

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from pipeline.errors import InputError
 from pipeline.io_utils import refuse_input_as_output
+from pipeline.progress import progress
 from pipeline.sequence import SequenceInfo, SequenceWriter
 
 log = logging.getLogger(__name__)
@@ -81,7 +82,8 @@ def input_files(*items: str | Path | None) -> tuple[Path, ...]:
 @dataclass(frozen=True)
 class IngestReport:
     """What an ingest wrote: ``frames`` scans with ``points`` points in total, after
-    dropping ``dropped_points`` non-finite ones, into ``out`` in ``seconds``."""
+    dropping ``dropped_points`` non-finite ones, into ``out`` in ``seconds``;
+    ``ground_truth_from``: where the ground truth came from (a topic, a pose file), or ""."""
 
     out: Path
     frames: int
@@ -89,6 +91,7 @@ class IngestReport:
     dropped_points: int
     has_ground_truth: bool
     seconds: float
+    ground_truth_from: str = ""
 
 
 IntensityMode = Literal["auto", "keep"]
@@ -122,8 +125,6 @@ def write_sequence(source: Source, out: str | Path,
     decided on the first scan), "keep" writes them as recorded; the metadata says which
     (``x.intensity``), and whether the scans carry per-point time (``x.point_time``).
     """
-    from tqdm import tqdm
-
     t0 = time.perf_counter()
     out = Path(out)
     refuse_input_as_output(out, source.inputs)
@@ -140,15 +141,8 @@ def write_sequence(source: Source, out: str | Path,
     points = dropped = 0
     with_gt: bool | None = None
     with SequenceWriter(out, info) as writer:
-        bar = tqdm(
-            itertools.chain([first], frames_iter),
-            total=source.expected_frames(),
-            unit="scan",
-            desc=f"ingest {info.name}",
-            disable=None,
-            leave=False,
-        )
-        for frame in bar:
+        for frame in progress(itertools.chain([first], frames_iter), source.expected_frames(),
+                              f"ingest {info.name}", "scan"):
             pts = _as_points(frame)
             has_gt = frame.T_world_lidar is not None
             if with_gt is None:
@@ -177,7 +171,8 @@ def write_sequence(source: Source, out: str | Path,
         frames = len(writer.stamps_ns)
     if dropped:
         log.warning("%s: dropped %d non-finite points in total", out, dropped)
-    return IngestReport(out, frames, points, dropped, bool(with_gt), time.perf_counter() - t0)
+    return IngestReport(out, frames, points, dropped, bool(with_gt), time.perf_counter() - t0,
+                        info.extra.get("ground_truth", "") if with_gt else "")
 
 
 def _as_points(frame: Frame) -> NDArray[np.float32]:

@@ -8,7 +8,8 @@ frame number (``000123.pcd``) take row 123 of a times file or of a pose file wit
 that is longer than the folder (a slice of a KITTI sequence needs no hand-cut files; numbers
 count from 0, as KITTI's: a warning says which lines were used); otherwise row k is scan k.
 The lines used are in the sequence's metadata (``pose_lines``, ``times_lines``; ``info``).
-Ground truth: a pose file of any format pipeline.posefile reads; with stamps it is
+Ground truth (``pipeline.sources.poses.GroundTruthOptions``, no topic): a pose file of any
+format pipeline.posefile reads; with stamps it is
 matched by time when the scans' stamps come from elsewhere, without stamps pose k is scan k.
 ``extrinsic`` (E = T_x_lidar, e.g. KITTI's Tr) turns poses of another frame into LiDAR poses;
 without it a ground truth that moves along the sensor's z axis gets a warning.
@@ -26,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError, InputError
-from pipeline.posefile import PoseFile, PoseFormat, read_pose_file
+from pipeline.posefile import PoseFile
 from pipeline.sequence import SequenceInfo
 from pipeline.sources.base import (
     Frame,
@@ -43,7 +44,7 @@ from pipeline.sources.ordering import (
     rows_for_scans,
 )
 from pipeline.sources.pointtime import relative_times_s
-from pipeline.sources.poses import check_count, lidar_ground_truth
+from pipeline.sources.poses import GroundTruthOptions, check_count, lidar_ground_truth
 from pipeline.sources.scanfiles import SCAN_SUFFIXES, read_scan, scan_files
 from pipeline.stamps import read_times, seconds_to_ns
 
@@ -56,14 +57,16 @@ class FolderSource:
     def __init__(
         self,
         folder: str | Path,
-        poses: str | Path | None = None,
-        poses_format: PoseFormat = "auto",
+        gt: GroundTruthOptions | None = None,
         times: str | Path | None = None,
-        extrinsic: str | Path | None = None,
         rate_hz: float = 10.0,
         name: str | None = None,
         sensor: str = "unknown",
     ) -> None:
+        gt = gt or GroundTruthOptions()
+        if gt.gt_topic is not None:
+            raise ConfigError(f"{folder}: a scan folder has no topics, got gt_topic="
+                              f"{gt.gt_topic!r}; give its ground truth as a pose file (poses)")
         self.folder = Path(folder)
         if not self.folder.is_dir():
             raise InputError(f"{self.folder}: no such folder")
@@ -78,16 +81,17 @@ class FolderSource:
         self.seq_name = name or self.folder.name
         self.sensor = sensor
         self.lines: dict[str, str] = {}  # which lines of the pose / times file (metadata)
-        pf = read_pose_file(poses, poses_format) if poses is not None else None
+        pf = gt.pose_file()
         if pf is not None and pf.stamps_ns is None:  # one pose a frame: the scans' rows
             rows = rows_for_scans(len(pf.T_world_x), len(self.files), self.numbers,
                                   str(pf.path), "poses")
             self.lines["pose_lines"] = lines_used(rows, len(pf.T_world_x))
             pf = replace(pf, T_world_x=pf.T_world_x[rows])
         self.stamps_ns, self.stamps_from = self._stamps(pf, times, rate_hz)
-        gt = lidar_ground_truth(None, pf, extrinsic, len(self.files), str(self.folder))
-        self.T_world_lidar = None if gt is None else gt.all_at(self.stamps_ns)
-        self.inputs = input_files(*self.files, poses, times, extrinsic)
+        truth = lidar_ground_truth(None, pf, gt.extrinsic, len(self.files), str(self.folder))
+        self.T_world_lidar = None if truth is None else truth.all_at(self.stamps_ns)
+        self.gt_note = "none" if pf is None else f"pose file {gt.poses}"
+        self.inputs = input_files(*self.files, times, *gt.files())
 
     def _stamps(self, pf: PoseFile | None, times: str | Path | None,
                 rate_hz: float) -> tuple[NDArray[np.int64], str]:
@@ -111,9 +115,9 @@ class FolderSource:
 
     def sequence_info(self) -> SequenceInfo:
         return SequenceInfo(name=self.seq_name, sensor=self.sensor,
-                            source=f"folder:{self.folder}",
+                            source=f"folder:{self.folder.resolve()}",
                             extra={"stamps": self.stamps_from, "order": "natural (file names)",
-                                   **self.lines})
+                                   "ground_truth": self.gt_note, **self.lines})
 
     def expected_frames(self) -> int:
         return len(self.files)
@@ -132,17 +136,12 @@ class FolderSource:
 def ingest_folder(
     folder: str | Path,
     out: str | Path,
-    poses: str | Path | None = None,
-    poses_format: PoseFormat = "auto",
+    gt: GroundTruthOptions | None = None,
     times: str | Path | None = None,
-    extrinsic: str | Path | None = None,
     rate_hz: float = 10.0,
     name: str | None = None,
     sensor: str = "unknown",
     intensity: IntensityMode = "auto",
 ) -> IngestReport:
     """Scan files of ``folder`` (natural name order) + optional pose file -> MCAP ``out``."""
-    return write_sequence(
-        FolderSource(folder, poses, poses_format, times, extrinsic, rate_hz, name, sensor), out,
-        intensity,
-    )
+    return write_sequence(FolderSource(folder, gt, times, rate_hz, name, sensor), out, intensity)

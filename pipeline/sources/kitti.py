@@ -2,7 +2,9 @@
 ROOT/poses/SEQ.txt (optional ground truth, camera-0 frame -> T_world_lidar = inv(Tr) P Tr).
 
 Frames ``start`` .. ``end`` (both inclusive, KITTI frame numbers) can be picked; stamps are
-times.txt seconds in ns as they are (KITTI times start at 0.0).
+times.txt seconds in ns as they are (KITTI times start at 0.0). The sequence is named as KITTI
+names it (``04``), by ``adaptune ingest kitti`` as in a ``data`` set; the root is recorded as
+an absolute path (metadata ``x.kitti_root``).
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ class KittiSource:
         self.root = Path(root)
         self.seq = str(seq)
         self.dir = self.root / "sequences" / self.seq
-        self.seq_name = name or f"kitti_{self.seq}"
+        self.seq_name = name or self.seq
         velodyne = self.dir / "velodyne"
         if not velodyne.is_dir():
             raise InputError(
@@ -91,10 +93,12 @@ class KittiSource:
             sensor="velodyne_hdl64e",
             source=f"kitti:{self.seq}",
             extra={
-                "kitti_root": str(self.root),
+                "kitti_root": str(self.root.resolve()),
                 "first_frame": str(self.start),
                 "last_frame": str(self.end),
                 "T_cam_lidar": json.dumps(self.Tr.ravel().tolist()),  # KITTI's Tr
+                "ground_truth": "none" if self.T_world_lidar is None else
+                f"pose file poses/{self.seq}.txt (camera 0, through Tr)",
             },
         )
 

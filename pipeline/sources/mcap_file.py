@@ -2,8 +2,10 @@
 sequence MCAP) normalised into a sequence MCAP.
 
 Point clouds in ``cdr`` (ROS 2) or ``ros1`` encoding; the topic is found by itself when there
-is exactly one. Stamps: header stamps (log time where zero). Ground truth, optional: a pose,
-odometry or TF topic in the same file (interpolated to the scan stamps), or a pose file.
+is exactly one. Stamps: header stamps (log time where zero). Ground truth, optional
+(``pipeline.sources.poses.GroundTruthOptions``, as a bag's): a pose, odometry or TF topic in
+the same file (interpolated to the scan stamps; found by itself where there is exactly one
+pose or odometry topic), or a pose file.
 """
 
 from __future__ import annotations
@@ -13,9 +15,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, ClassVar
 
-from pipeline.errors import ConfigError, InputError
+from pipeline.errors import InputError
 from pipeline.io_utils import input_file
-from pipeline.posefile import PoseFormat, read_pose_file
 from pipeline.sequence import SequenceInfo, mcap_errors
 from pipeline.sources.base import (
     Frame,
@@ -24,11 +25,10 @@ from pipeline.sources.base import (
     input_files,
     write_sequence,
 )
-from pipeline.sources.poses import GroundTruth, lidar_ground_truth
-from pipeline.sources.rosbag import pick_topic
+from pipeline.sources.poses import GroundTruth, GroundTruthOptions, lidar_ground_truth
+from pipeline.sources.rosbag import ground_truth_note, pick_ground_truth_topic, pick_topic
 from pipeline.sources.rosmsg import (
     POINTCLOUD2_TYPES,
-    POSE_TYPES,
     cloud_frame,
     collect_poses,
     normalise_type,
@@ -99,18 +99,13 @@ class McapSource:
         self,
         path: str | Path,
         topic: str | None = None,
-        gt_topic: str | None = None,
-        gt_child_frame: str | None = None,
-        poses: str | Path | None = None,
-        poses_format: PoseFormat = "auto",
-        extrinsic: str | Path | None = None,
+        gt: GroundTruthOptions | None = None,
         name: str | None = None,
         sensor: str = "unknown",
     ) -> None:
-        if gt_topic is not None and poses is not None:
-            raise ConfigError("give either --gt-topic or --poses, not both")
+        gt = gt or GroundTruthOptions()
         self.path = Path(path)
-        self.inputs = input_files(path, poses, extrinsic)
+        self.inputs = input_files(path, *gt.files())
         self.seq_name = name or self.path.stem
         self.sensor = sensor
         self.gt: GroundTruth | None = None
@@ -127,14 +122,13 @@ class McapSource:
             self.schema = summary.schemas[self.channel.schema_id]
             counts = summary.statistics.channel_message_counts if summary.statistics else {}
             self.count = int(counts.get(self.channel.id, 0)) or None
-            if gt_topic is not None:
-                pick_topic(
-                    available, gt_topic, POSE_TYPES, str(self.path), "a pose, odometry or TF"
-                )
-                self.gt = self._topic_poses(reader, summary, channels[gt_topic], gt_child_frame)
-        pf = read_pose_file(poses, poses_format) if poses is not None else None
-        self.gt = lidar_ground_truth(self.gt, pf, extrinsic, self.count or 0,
+            self.gt_topic = pick_ground_truth_topic(available, gt, str(self.path))
+            if self.gt_topic is not None:
+                self.gt = self._topic_poses(reader, summary, channels[self.gt_topic],
+                                            gt.gt_child_frame)
+        self.gt = lidar_ground_truth(self.gt, gt.pose_file(), gt.extrinsic, self.count or 0,
                                      f"{self.path} {self.topic}")
+        self.gt_note = ground_truth_note(self.gt_topic, gt)
 
     def _topic_poses(
         self, reader: Any, summary: Any, channel: Any, child_frame: str | None
@@ -150,7 +144,9 @@ class McapSource:
 
     def sequence_info(self) -> SequenceInfo:
         return SequenceInfo(
-            name=self.seq_name, sensor=self.sensor, source=f"mcap:{self.path.name}:{self.topic}"
+            name=self.seq_name, sensor=self.sensor,
+            source=f"mcap:{self.path.resolve()}:{self.topic}",
+            extra={"ground_truth": self.gt_note},
         )
 
     def expected_frames(self) -> int | None:
@@ -168,17 +164,10 @@ def ingest_mcap(
     path: str | Path,
     out: str | Path,
     topic: str | None = None,
-    gt_topic: str | None = None,
-    gt_child_frame: str | None = None,
-    poses: str | Path | None = None,
-    poses_format: PoseFormat = "auto",
-    extrinsic: str | Path | None = None,
+    gt: GroundTruthOptions | None = None,
     name: str | None = None,
     sensor: str = "unknown",
     intensity: IntensityMode = "auto",
 ) -> IngestReport:
     """PointCloud2 scans of any MCAP + optional ground truth -> sequence MCAP ``out``."""
-    return write_sequence(
-        McapSource(path, topic, gt_topic, gt_child_frame, poses, poses_format, extrinsic, name,
-                   sensor), out, intensity,
-    )
+    return write_sequence(McapSource(path, topic, gt, name, sensor), out, intensity)

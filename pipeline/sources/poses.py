@@ -8,6 +8,9 @@
   It is given as 12 or 16 numbers, a file of them, or a KITTI calib.txt (its ``Tr`` line).
 - ``warn_if_not_lidar_frame``: LiDAR frames are x forward, z up; when the ground truth moves
   mostly along the sensor's z axis the poses are likely a camera's (z forward): one warning.
+- ``GroundTruthOptions``: where a source's ground truth comes from (topic, pose file,
+  extrinsic), the one options type of the recording and folder sources, of ``adaptune ingest``
+  and of a params.yaml ``data`` source.
 """
 
 from __future__ import annotations
@@ -18,7 +21,9 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import model_validator
 
+from pipeline.config import Section
 from pipeline.errors import InputError
 from pipeline.geometry import (
     MAX_POSITION_M,
@@ -28,7 +33,7 @@ from pipeline.geometry import (
 )
 from pipeline.io_utils import read_input_text
 from pipeline.kitti_calib import has_kitti_calib, read_kitti_calib
-from pipeline.posefile import PoseFile
+from pipeline.posefile import PoseFile, PoseFormat, read_pose_file
 
 log = logging.getLogger(__name__)
 
@@ -40,13 +45,71 @@ Z_MOTION_SHARE = 0.7
 """Warn when more than this share of the path runs along the sensor's z axis."""
 
 
+class GroundTruthOptions(Section):
+    """Where a source's ground truth comes from; the keys are those of a params.yaml ``data``
+    source and, with dashes, the options of ``adaptune ingest``.
+
+    gt_topic: a PoseStamped, PoseWithCovarianceStamped, TransformStamped, Odometry or TF topic
+    of a recording; None: the recording's only topic of the first four types where it has
+    exactly one (``pick_ground_truth_topic``), else none. gt_child_frame: with a TF topic, the
+    child frame whose pose is the ground truth. poses: a pose file (``pipeline.posefile``) in
+    ``poses_format`` (auto: from its content). extrinsic: E = T_x_lidar (``read_extrinsic``),
+    the LiDAR in the frame the poses describe.
+    """
+
+    gt_topic: str | None = None
+    gt_child_frame: str | None = None
+    poses: str | None = None
+    poses_format: PoseFormat = "auto"
+    extrinsic: str | None = None
+
+    @model_validator(mode="after")
+    def _one_source(self) -> GroundTruthOptions:
+        if self.gt_topic is not None and self.poses is not None:
+            raise ValueError(f"give either gt_topic or poses, not both, got (gt_topic="
+                             f"{self.gt_topic!r}, poses={self.poses!r})")
+        if self.gt_child_frame is not None and self.gt_topic is None:
+            raise ValueError(f"gt_child_frame needs gt_topic (a TF topic), got (gt_topic=None, "
+                             f"gt_child_frame={self.gt_child_frame!r})")
+        return self
+
+    def pose_file(self) -> PoseFile | None:
+        """The pose file ``poses``, read, or None."""
+        return None if self.poses is None else read_pose_file(self.poses, self.poses_format)
+
+    def files(self) -> tuple[str, ...]:
+        """The pose and extrinsic files named (an extrinsic may be numbers instead)."""
+        return tuple(v for v in (self.poses, self.extrinsic) if v is not None)
+
+    def resolved_paths(self, base_dir: Path) -> dict[str, str | None]:
+        """``poses`` and ``extrinsic`` (unless it is numbers) with relative paths made absolute
+        from ``base_dir``."""
+        extrinsic = self.extrinsic
+        if extrinsic is not None and not is_numbers(extrinsic):
+            extrinsic = resolve_path(extrinsic, base_dir)
+        return {"poses": resolve_path(self.poses, base_dir), "extrinsic": extrinsic}
+
+
+def resolve_path(value: str | None, base_dir: Path) -> str | None:
+    """``value`` as an absolute path (``~`` expanded; relative: from ``base_dir``), or None."""
+    if value is None:
+        return None
+    path = Path(value).expanduser()
+    return str(path if path.is_absolute() else base_dir / path)
+
+
+def is_numbers(text: str) -> bool:
+    """True when ``text`` is numbers (an extrinsic given inline), not a file name."""
+    return re.fullmatch(r"[\s,0-9eE.+-]+", text) is not None
+
+
 def read_extrinsic(value: str | Path) -> NDArray[np.float64]:
     """(4, 4) E = T_x_lidar from 12 or 16 numbers (row-major, space or comma separated), a file
     holding them, or a KITTI calib.txt (its ``Tr`` line)."""
     text = str(value)
     source = "--extrinsic"
     path = Path(text)
-    if not re.fullmatch(r"[\s,0-9eE.+-]+", text):
+    if not is_numbers(text):
         try:
             is_file = path.is_file()
         except OSError:  # a name too long

@@ -1,8 +1,9 @@
 """ROS 1 .bag files and ROS 2 bags (sqlite3 or mcap storage) through ``rosbags``.
 
 The PointCloud2 topic is found by itself when the bag has exactly one. Scan stamps are the
-header stamps (the bag's record time where a header stamp is zero). Ground truth, optional:
-a PoseStamped / PoseWithCovarianceStamped / Odometry / TransformStamped topic, or a TF topic
+header stamps (the bag's record time where a header stamp is zero). Ground truth, optional
+(``pipeline.sources.poses.GroundTruthOptions``): a PoseStamped / PoseWithCovarianceStamped /
+Odometry / TransformStamped topic (found by itself when the bag has exactly one), or a TF topic
 with ``gt_child_frame``, or a pose file (TUM: matched by time; KITTI: line k = scan k, the
 counts must match). ``extrinsic`` (pipeline.sources.poses.read_extrinsic) turns poses of another
 frame into LiDAR poses. Stamped poses are interpolated to the scan stamps. Per-point time fields
@@ -11,13 +12,13 @@ are kept (pipeline.sources.pointtime).
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, ClassVar
 
-from pipeline.errors import ConfigError, InputError
-from pipeline.posefile import PoseFormat, read_pose_file
+from pipeline.errors import InputError
 from pipeline.sequence import SequenceInfo
 from pipeline.sources.base import (
     Frame,
@@ -26,15 +27,18 @@ from pipeline.sources.base import (
     input_files,
     write_sequence,
 )
-from pipeline.sources.poses import GroundTruth, lidar_ground_truth
+from pipeline.sources.poses import GroundTruth, GroundTruthOptions, lidar_ground_truth
 from pipeline.sources.rosmsg import (
     POINTCLOUD2_TYPES,
     POSE_TYPES,
+    TF_TYPE,
     cloud_frame,
     collect_poses,
     normalise_type,
     poses_of,
 )
+
+log = logging.getLogger(__name__)
 
 
 def bag_path(path: str | Path) -> Path:
@@ -110,6 +114,35 @@ def pick_topic(
     return matching[0]
 
 
+def pick_ground_truth_topic(available: dict[str, str], gt: GroundTruthOptions,
+                            what: str) -> str | None:
+    """The ground-truth topic among topic -> type ``available``: ``gt.gt_topic`` (checked);
+    without it and without a pose file, the only pose, odometry or transform topic (TF aside:
+    it needs a child frame) where there is exactly one, else None (several: one warning)."""
+    if gt.gt_topic is not None:
+        return pick_topic(available, gt.gt_topic, POSE_TYPES, what, "a pose, odometry or TF")
+    if gt.poses is not None:
+        return None
+    found = sorted(t for t, ty in available.items()
+                   if normalise_type(ty) in POSE_TYPES and normalise_type(ty) != TF_TYPE)
+    if len(found) > 1:
+        log.warning("%s: %d pose or odometry topics (%s): none taken as ground truth; pick one "
+                    "with --gt-topic", what, len(found), ", ".join(found))
+    if len(found) != 1:
+        return None
+    log.info("%s: ground truth from %s, the only pose or odometry topic", what, found[0])
+    return found[0]
+
+
+def ground_truth_note(topic: str | None, gt: GroundTruthOptions) -> str:
+    """Where a recording's ground truth came from, for its metadata (``x.ground_truth``)."""
+    if gt.poses is not None:
+        return f"pose file {gt.poses}"
+    if topic is None:
+        return "none"
+    return f"topic {topic}" + ("" if gt.gt_topic else " (found: the only pose topic)")
+
+
 class RosbagSource:
     """PointCloud2 scans of a ROS 1 or ROS 2 bag."""
 
@@ -119,19 +152,14 @@ class RosbagSource:
         self,
         bag: str | Path,
         topic: str | None = None,
-        gt_topic: str | None = None,
-        gt_child_frame: str | None = None,
-        poses: str | Path | None = None,
-        poses_format: PoseFormat = "auto",
-        extrinsic: str | Path | None = None,
+        gt: GroundTruthOptions | None = None,
         name: str | None = None,
         sensor: str = "unknown",
     ) -> None:
-        if gt_topic is not None and poses is not None:
-            raise ConfigError("give either --gt-topic or --poses, not both")
+        gt = gt or GroundTruthOptions()
         self.bag = bag_path(bag)
         bag_files = sorted(self.bag.iterdir()) if self.bag.is_dir() else [self.bag]
-        self.inputs = input_files(*bag_files, poses, extrinsic)
+        self.inputs = input_files(*bag_files, *gt.files())
         self.seq_name = name or self.bag.stem
         self.sensor = sensor
         with open_bag(self.bag) as reader:
@@ -140,13 +168,13 @@ class RosbagSource:
                 available, topic, POINTCLOUD2_TYPES, str(self.bag), "sensor_msgs/PointCloud2"
             )
             self.count = sum(c.msgcount for c in reader.connections if c.topic == self.topic)
+            self.gt_topic = pick_ground_truth_topic(available, gt, str(self.bag))
             self.gt: GroundTruth | None = None
-            if gt_topic is not None:
-                pick_topic(available, gt_topic, POSE_TYPES, str(self.bag), "a pose, odometry or TF")
-                self.gt = self._topic_poses(reader, gt_topic, gt_child_frame)
-        pf = read_pose_file(poses, poses_format) if poses is not None else None
-        self.gt = lidar_ground_truth(self.gt, pf, extrinsic, self.count,
+            if self.gt_topic is not None:
+                self.gt = self._topic_poses(reader, self.gt_topic, gt.gt_child_frame)
+        self.gt = lidar_ground_truth(self.gt, gt.pose_file(), gt.extrinsic, self.count,
                                      f"{self.bag} {self.topic}")
+        self.gt_note = ground_truth_note(self.gt_topic, gt)
 
     def _topic_poses(self, reader: Any, topic: str, child_frame: str | None) -> GroundTruth:
         what = f"{self.bag} {topic}"
@@ -161,7 +189,9 @@ class RosbagSource:
 
     def sequence_info(self) -> SequenceInfo:
         return SequenceInfo(
-            name=self.seq_name, sensor=self.sensor, source=f"rosbag:{self.bag.name}:{self.topic}"
+            name=self.seq_name, sensor=self.sensor,
+            source=f"rosbag:{self.bag.resolve()}:{self.topic}",
+            extra={"ground_truth": self.gt_note},
         )
 
     def expected_frames(self) -> int:
@@ -179,17 +209,10 @@ def ingest_rosbag(
     bag: str | Path,
     out: str | Path,
     topic: str | None = None,
-    gt_topic: str | None = None,
-    gt_child_frame: str | None = None,
-    poses: str | Path | None = None,
-    poses_format: PoseFormat = "auto",
-    extrinsic: str | Path | None = None,
+    gt: GroundTruthOptions | None = None,
     name: str | None = None,
     sensor: str = "unknown",
     intensity: IntensityMode = "auto",
 ) -> IngestReport:
-    """PointCloud2 scans of a ROS 1/2 bag + optional ground truth -> sequence MCAP ``out``."""
-    return write_sequence(
-        RosbagSource(bag, topic, gt_topic, gt_child_frame, poses, poses_format, extrinsic, name,
-                     sensor), out, intensity,
-    )
+    """PointCloud2 scans of a ROS 1 / ROS 2 bag + optional ground truth -> sequence MCAP ``out``."""
+    return write_sequence(RosbagSource(bag, topic, gt, name, sensor), out, intensity)

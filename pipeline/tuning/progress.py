@@ -8,17 +8,14 @@ when it ends: done, failed, pruned, lost, best, ETA (from this run's pace).
 
 from __future__ import annotations
 
-import logging
 import math
 import sys
 import time
 from collections.abc import Mapping
 from typing import Any
 
+from pipeline.progress import PROGRESS, duration
 from pipeline.tuning.job import TrialResult
-
-PROGRESS = logging.getLogger("pipeline.progress")
-"""Progress lines (INFO); the CLI keeps this logger at INFO whatever its verbosity."""
 
 
 class StudyProgress:
@@ -71,7 +68,7 @@ class StudyProgress:
         best = _best(done)
         left = self.total - len(done)
         pace_s = (time.monotonic() - self.t0) / max(self.ran, 1)
-        eta = f"ETA {_duration(left * pace_s)}" if left and self.ran else "done"
+        eta = f"ETA {duration(left * pace_s)}" if left and self.ran else "done"
         shown = f"best {best[1]:.4g} % (trial {best[0]})" if best else "no ok trial yet"
         return (f"{len(done)}/{self.total} done, {counts['failed']} failed, "
                 f"{counts['pruned']} pruned, {counts['lost']} lost, {shown}, {eta}")
@@ -81,7 +78,7 @@ class StudyProgress:
             self.bar.close()
         elif self.enabled and self.ran:
             PROGRESS.info("%s finished: %s in %s (%d run now)", self.name,
-                          self.line(self.done), _duration(time.monotonic() - self.t0),
+                          self.line(self.done), duration(time.monotonic() - self.t0),
                           self.ran)
 
 
@@ -99,10 +96,3 @@ def _best(done: Mapping[int, TrialResult]) -> tuple[int, float] | None:
     objective, trial = min(ok)
     return trial, objective
 
-
-def _duration(seconds: float) -> str:
-    if seconds < 90:
-        return f"{seconds:.0f} s"
-    if seconds < 5400:
-        return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.1f} h"

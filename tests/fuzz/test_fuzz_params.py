@@ -22,13 +22,13 @@ from pipeline.metrics.section import DevkitSection
 from pipeline.odometry import get_adapter
 from pipeline.odometry.base import Schedule
 from pipeline.sim.dataset import SimulateSection
-from pipeline.sources.dataset import IngestSection
+from pipeline.sources.dataset import DataSection
 from pipeline.surrogates.section import SurrogateSection
 from pipeline.tuning.smbo import FixedSection, TrialsSection
 from stages.run import parse_params
 
 SECTIONS: dict[str, type[Section]] = {
-    "base": BaseSection, "simulate": SimulateSection, "ingest": IngestSection,
+    "base": BaseSection, "simulate": SimulateSection, "data": DataSection,
     "descriptors": DescriptorsSection, "trials": TrialsSection, "fixed": FixedSection,
     "devkit": DevkitSection, "surrogate": SurrogateSection, "evaluate": EvaluateSection,
 }
@@ -37,7 +37,7 @@ DEFAULTS = yaml.safe_load((Path(__file__).parents[2] / "params.yaml").read_text(
 SCALARS = st.one_of(
     st.none(), st.booleans(), st.integers(-(2**65), 2**65), st.floats(),
     st.sampled_from([math.inf, -math.inf, math.nan, 0, -1, 0.5, 1e9]),
-    st.sampled_from(["", "ndt", "auto", "train", "1.0", "nan", "data/kitti", "hdl32"]),
+    st.sampled_from(["", "ndt", "auto", "train", "1.0", "nan", "data/recordings", "hdl32"]),
     st.text(max_size=5),
 )
 VALUES = st.recursive(SCALARS, lambda inner: st.lists(inner, max_size=3)

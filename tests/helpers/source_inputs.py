@@ -229,12 +229,14 @@ def write_bag(
     shape: str = "flat",
     cloud_topic: str = "/velodyne_points",
     extra_topics: tuple[str, ...] = (),
+    more_gt: tuple[str, ...] = (),
 ) -> Path:
     """A real ROS 1 .bag (ros=1) or ROS 2 bag folder (ros=2, sqlite3 | mcap storage) of ``kf``.
 
     Scan k is at BAG_T0_NS + kf.stamps_ns[k]; ground truth (``gt``: a kind of GT_TOPICS, or
     None) at the same stamps. Clouds in ``layout`` (LAYOUTS) and ``shape`` (flat or one of
-    ORGANIZED). ``extra_topics`` are more PointCloud2 topics (one message each).
+    ORGANIZED). ``extra_topics`` are more PointCloud2 topics (one message each); ``more_gt``
+    more ground-truth kinds, each on its own topic as ``gt``.
     """
     ros1 = ros == 1
     ts = typestore(ros1)
@@ -255,15 +257,15 @@ def write_bag(
         pc2 = "sensor_msgs/msg/PointCloud2"
         conn = writer.add_connection(cloud_topic, pc2, typestore=ts)
         extra = [writer.add_connection(t, pc2, typestore=ts) for t in extra_topics]
-        gt_conn = None
-        if gt is not None:
-            msgtype = gt_msg(ts, gt, 0, np.eye(4), ros1)[0]
-            gt_conn = writer.add_connection(GT_TOPICS[gt], msgtype, typestore=ts)
+        gt_conns = {}
+        for kind in ([gt] if gt is not None else []) + list(more_gt):
+            msgtype = gt_msg(ts, kind, 0, np.eye(4), ros1)[0]
+            gt_conns[kind] = writer.add_connection(GT_TOPICS[kind], msgtype, typestore=ts)
         for k, pts in enumerate(kf.points):
             t = int(stamps[k])
             writer.write(conn, t, serialize(cloud_msg(ts, t, pts, ros1, layout, shape), pc2))
-            if gt_conn is not None:
-                msgtype, msg = gt_msg(ts, gt, t, kf.T_world_lidar[k], ros1)  # type: ignore[arg-type]
+            for kind, gt_conn in gt_conns.items():
+                msgtype, msg = gt_msg(ts, kind, t, kf.T_world_lidar[k], ros1)
                 writer.write(gt_conn, t, serialize(msg, msgtype))
         for c in extra:
             t = int(stamps[0])

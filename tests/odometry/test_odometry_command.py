@@ -104,3 +104,52 @@ def test_check_trajectory_rejects_nan_and_lost_frames() -> None:
     T[2, :3, :3] *= 2
     with pytest.raises(OdometryError, match="frame 2 is not a rigid transform"):
         check_trajectory(Trajectory(np.arange(5), stamps, T), stamps, "x")
+
+
+COUNT_SCANS = """
+import sys, pathlib
+import numpy as np
+scans, layout, out = pathlib.Path(sys.argv[1]), sys.argv[2], sys.argv[3]
+files = sorted((scans / 'velodyne').glob('*.bin') if layout == 'kitti' else scans.glob('*.pcd'))
+times = np.loadtxt(scans / 'times.txt', ndmin=1)
+assert len(files) == len(times), (len(files), len(times))
+with open(out, 'w') as fh:
+    for k, t in enumerate(times):
+        fh.write('%.9f %d 0 0 0 0 0 1\\n' % (t, k))
+"""
+"""A tool that reads the scans folder with numpy only and writes a TUM trajectory: x = frame,
+stamped with the times.txt line (the stamps the adapter matches)."""
+
+
+@pytest.mark.parametrize("layout", ["kitti", "pcd"])
+def test_scans_reach_the_tool_as_kitti_or_pcd_files(layout: str, synthetic_seq: Seq,
+                                                    tmp_path: Path) -> None:
+    """scans: kitti | pcd hands the tool a folder of .bin or .pcd files and times.txt, the
+    scans exactly (read back with adaptune's readers and open3d), stamps matched to the
+    frames; scans_cache writes them once per sequence."""
+    import open3d as o3d
+
+    from pipeline.sequence import SequenceReader
+    from pipeline.sources.scanfiles import read_scan
+
+    cache = tmp_path / "cache"
+    adapter = get_adapter(
+        "command", command=["{python}", "-c", COUNT_SCANS, "{scans}", layout, "{out}"],
+        space=[{"name": "k", "low": 0.0, "high": 1.0, "default": 0.5}], format="tum",
+        scans=layout, scans_cache=str(cache))
+    traj = run_sequence(adapter, synthetic_seq.path, {})
+    np.testing.assert_array_equal(traj.T_world_lidar[:, 0, 3], np.arange(len(synthetic_seq)))
+    (folder,) = cache.iterdir()
+    files = sorted((folder / "velodyne").glob("*.bin") if layout == "kitti"
+                   else folder.glob("*.pcd"))
+    with SequenceReader(synthetic_seq.path) as reader:
+        assert len(files) == len(reader)
+        for k in (0, len(reader) - 1):
+            np.testing.assert_array_equal(read_scan(files[k]).points, reader[k].points_lidar)
+        if layout == "pcd":
+            cloud = o3d.t.io.read_point_cloud(str(files[3]))
+            np.testing.assert_array_equal(cloud.point.positions.numpy(), reader[3].xyz)
+    written = files[0].stat().st_mtime_ns
+    run_sequence(adapter, synthetic_seq.path, {})
+    assert [p.name for p in cache.iterdir()] == [folder.name]
+    assert files[0].stat().st_mtime_ns == written  # read again, not written again

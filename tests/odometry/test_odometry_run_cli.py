@@ -130,3 +130,57 @@ def test_a_command_writing_a_non_utf8_trajectory_fails_with_one_line(
     assert res.exit_code == 1 and "Traceback" not in res.output
     assert res.output.strip() == ("adaptune: error: command: trajectory.txt is not UTF-8 text "
                                   "(byte 0xff at offset 0)")
+
+
+def test_run_takes_a_params_file_as_every_stage_does(synthetic_seq: Seq, tmp_path: Path,
+                                                     caplog: pytest.LogCaptureFixture) -> None:
+    """--params is a params.yaml: its trials.algorithm, adapter_options and space (here a
+    baseline resolution of 3 m) give the run; --values sets parameters; the frames show
+    progress (log lines off a terminal)."""
+    import yaml
+
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump({"trials": {
+        "algorithm": "ndt", "adapter_options": {"source_voxel_m": 0.8},
+        "space": {"resolution": {"default": 3.0}}}}))
+    out = tmp_path / "t.parquet"
+    res = CliRunner().invoke(main, ["run", "--params", str(params), str(synthetic_seq.path),
+                                    "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    odom = get_adapter("ndt", source_voxel_m=0.8).start({"resolution": 3.0})
+    direct = np.stack([odom.step(s.xyz, s.stamp_ns) for s in synthetic_seq.scans])
+    np.testing.assert_array_equal(read_trajectory(out).T_world_lidar[:, :3], direct[:, :3])
+    assert f"ndt on yard: {len(synthetic_seq)} frames" in caplog.text
+    assert "ndt on yard finished" in caplog.text
+    values = tmp_path / "v.parquet"
+    res = CliRunner().invoke(main, ["run", "--params", str(params), "--values",
+                                    '{"resolution": 3.0}', str(synthetic_seq.path),
+                                    "--out", str(values)])
+    assert res.exit_code == 0, res.output
+    np.testing.assert_array_equal(read_trajectory(values).T_world_lidar, direct)
+    res = CliRunner().invoke(main, ["run", "--params", str(tmp_path / "none.yaml"),
+                                    str(synthetic_seq.path), "--out", str(values)])
+    assert res.exit_code == 1 and "none.yaml: no such params file" in res.output
+
+
+def test_export_finds_the_sequence_from_anywhere(synthetic_seq: Seq, tmp_path: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run given its sequence by a relative path stores the absolute one: `export` works
+    after a `cd` (issue 34, item 5)."""
+    import shutil
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    shutil.copy(synthetic_seq.path, tmp_path / "a" / "seq.mcap")
+    monkeypatch.chdir(tmp_path / "a")
+    res = CliRunner().invoke(main, ["run", "-a", "ndt", "seq.mcap", "--out", "traj.parquet"])
+    assert res.exit_code == 0, res.output
+    import pyarrow.parquet as pq
+
+    meta = pq.read_schema("traj.parquet").metadata
+    assert meta[b"adaptune.sequence"].decode() == str(tmp_path / "a" / "seq.mcap")
+    monkeypatch.chdir(tmp_path / "b")
+    res = CliRunner().invoke(main, ["export", "../a/traj.parquet", "--format", "tum",
+                                    "--out", "traj.tum"])
+    assert res.exit_code == 0, res.output
+    assert len((tmp_path / "b" / "traj.tum").read_text().splitlines()) == len(synthetic_seq)

@@ -111,3 +111,22 @@ def test_organized_big_endian_clouds_and_every_ground_truth_type(
         np.testing.assert_allclose(r.ground_truth(), small.T_world_lidar, atol=1e-6)
         for k in range(3):
             np.testing.assert_array_equal(r[k].points_lidar, small.points[k])
+
+
+def test_the_only_pose_topic_is_the_ground_truth(frames: KittiFrames, tmp_path: Path,
+                                                 caplog: pytest.LogCaptureFixture) -> None:
+    """Without --gt-topic a bag's only Odometry (or PoseStamped) topic is the ground truth, and
+    the summary and the metadata say so; with two, none is taken and a warning names both."""
+    small = replace(frames, bins=frames.bins[:3], stamps_ns=frames.stamps_ns[:3],
+                    T_world_cam=frames.T_world_cam[:3], points=[p[:500] for p in frames.points[:3]])
+    bag = write_bag(tmp_path / "one", small, ros=2, storage="sqlite3", gt="odom")
+    out = cli("ingest", "rosbag", bag, "--out", tmp_path / "one.mcap")
+    assert "ground truth: yes (topic /odom (found: the only pose topic))" in out
+    assert "ingest one: 3 scans" in caplog.text and "ingest one finished" in caplog.text
+    with SequenceReader(tmp_path / "one.mcap") as r:
+        np.testing.assert_allclose(r.ground_truth(), small.T_world_lidar, atol=1e-6)
+        assert r.info.extra["ground_truth"] == "topic /odom (found: the only pose topic)"
+    two = write_bag(tmp_path / "two.bag", small, ros=1, gt="odom", more_gt=("pose",))
+    out = cli("ingest", "rosbag", two, "--out", tmp_path / "two.mcap")
+    assert "ground truth: no" in out
+    assert "2 pose or odometry topics (/ground_truth, /odom)" in caplog.text

@@ -30,6 +30,7 @@ from pipeline.sources import SOURCES, Source, get_source, source_names, write_se
 from pipeline.sources.folder import FolderSource
 from pipeline.sources.kitti import KittiSource
 from pipeline.sources.mcap_file import McapSource
+from pipeline.sources.poses import GroundTruthOptions
 from pipeline.sources.rosbag import RosbagSource
 
 N_FRAMES = 3
@@ -50,10 +51,10 @@ def _kitti(tmp: Path, root: Path, kf: KittiFrames) -> Case:
 
 def _bag_case(tmp: Path, kf: KittiFrames, **kw: Any) -> Case:
     path = write_bag(tmp / ("b.bag" if kw["ros"] == 1 else "b"), kf, **kw)
-    gt_topic = {"pose": "/ground_truth", "odom": "/odom", "tf": "/tf"}[kw["gt"]]
-    src = RosbagSource(
-        path, gt_topic=gt_topic, gt_child_frame="velodyne" if kw["gt"] == "tf" else None
-    )
+    gt = {"pose": GroundTruthOptions(gt_topic="/ground_truth"),
+          "odom": GroundTruthOptions(),  # the only Odometry topic: found without gt_topic
+          "tf": GroundTruthOptions(gt_topic="/tf", gt_child_frame="velodyne")}[kw["gt"]]
+    src = RosbagSource(path, gt=gt)
     return Case(src, BAG_T0_NS + kf.stamps_ns, kf.points, kf.T_world_lidar)
 
 
@@ -61,7 +62,7 @@ def _ros1_bag_tum(tmp: Path, root: Path, kf: KittiFrames) -> Case:
     """A ROS 1 bag without ground truth plus a TUM file of poses matched by time."""
     path = write_bag(tmp / "b.bag", kf, ros=1, gt=None)
     write_tum(tmp / "gt.tum", BAG_T0_NS + kf.stamps_ns, kf.T_world_lidar)
-    src = RosbagSource(path, poses=tmp / "gt.tum", poses_format="tum")
+    src = RosbagSource(path, gt=GroundTruthOptions(poses=str(tmp / "gt.tum"), poses_format="tum"))
     return Case(src, BAG_T0_NS + kf.stamps_ns, kf.points, kf.T_world_lidar)
 
 
@@ -73,13 +74,9 @@ def _folder_pcd(tmp: Path, root: Path, kf: KittiFrames) -> Case:
         write_pcd(d / f"{k:06d}.pcd", pts)
     write_kitti_poses(tmp / "poses.txt", kf.T_world_cam)
     (tmp / "times.txt").write_text("\n".join(f"{t / 1e9:.6e}" for t in kf.stamps_ns) + "\n")
-    src = FolderSource(
-        d,
-        poses=tmp / "poses.txt",
-        poses_format="kitti",
-        times=tmp / "times.txt",
-        extrinsic=root / "sequences" / SEQ / "calib.txt",
-    )
+    gt = GroundTruthOptions(poses=str(tmp / "poses.txt"), poses_format="kitti",
+                            extrinsic=str(root / "sequences" / SEQ / "calib.txt"))
+    src = FolderSource(d, gt, times=tmp / "times.txt")
     return Case(src, kf.stamps_ns, kf.points, kf.T_world_lidar)
 
 
@@ -91,7 +88,8 @@ def _folder_bin_tum(tmp: Path, root: Path, kf: KittiFrames) -> Case:
         os.symlink(b, d / b.name)
     write_tum(tmp / "gt.txt", BAG_T0_NS + kf.stamps_ns, kf.T_world_lidar)
     return Case(
-        FolderSource(d, poses=tmp / "gt.txt"), BAG_T0_NS + kf.stamps_ns, kf.points, kf.T_world_lidar
+        FolderSource(d, GroundTruthOptions(poses=str(tmp / "gt.txt"))), BAG_T0_NS + kf.stamps_ns,
+        kf.points, kf.T_world_lidar
     )
 
 
@@ -99,7 +97,7 @@ def _mcap_ros2_recording(tmp: Path, root: Path, kf: KittiFrames) -> Case:
     """The .mcap file of a ROS 2 bag (mcap storage), TF ground truth with a decoy frame."""
     bag = write_bag(tmp / "rec", kf, ros=2, storage="mcap", gt="tf")
     (mcap_file,) = bag.glob("*.mcap")
-    src = McapSource(mcap_file, gt_topic="/tf", gt_child_frame="velodyne")
+    src = McapSource(mcap_file, gt=GroundTruthOptions(gt_topic="/tf", gt_child_frame="velodyne"))
     return Case(src, BAG_T0_NS + kf.stamps_ns, kf.points, kf.T_world_lidar)
 
 
@@ -134,7 +132,8 @@ def _mcap_ros1_encoding(tmp: Path, root: Path, kf: KittiFrames) -> Case:
             )
         w.finish()
     return Case(
-        McapSource(path, gt_topic="/gt"), BAG_T0_NS + kf.stamps_ns, kf.points, kf.T_world_lidar
+        McapSource(path, gt=GroundTruthOptions(gt_topic="/gt")), BAG_T0_NS + kf.stamps_ns,
+        kf.points, kf.T_world_lidar
     )
 
 

@@ -32,6 +32,8 @@ def test_ingest_real_kitti_sequence(seq: str, kitti_root: Path, tmp_path: Path) 
         # KITTI rotations are orthonormal to ~1e-7 only; PoseStamped keeps a unit quaternion
         np.testing.assert_allclose(r.ground_truth(), kf.T_world_lidar, atol=1e-6)
         assert r.info.sensor == "velodyne_hdl64e" and r.info.source == f"kitti:{seq}"
+        # named as KITTI (and a data set, index.json) names it; the root stored absolute
+        assert r.info.name == seq and r.info.extra["kitti_root"] == str(kitti_root.resolve())
 
 
 def ingest_06(kitti_root: Path, out: Path, start: int, end: int) -> Result:
