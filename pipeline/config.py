@@ -38,7 +38,7 @@ class BaseSection(Section):
     (``FROM_BASE``); and the sequence folder every stage after ``simulate`` / ``ingest``
     reads (dvc.yaml ``${...}``)."""
 
-    seed: int = Field(0, ge=0)
+    seed: int = Field(42, ge=0)
     length_m: float = Field(25.0, gt=0)
     sequences: Literal["data/sequences", "data/kitti", "data/kitti_sim"] = "data/sequences"
 
