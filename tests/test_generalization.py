@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -153,3 +154,28 @@ def test_replica_figures() -> None:
     plain = WorldScore("b", ("cave",), "hdl32", 10, 1, {"baseline": 2.0, "fixed": 1.0,
                        "adaptive": 1.5}, {}, 0, 0.0)
     assert "replica_summary" not in suite_metrics([plain], "dev", 1, 200, "ndt", 25.0)
+
+
+def test_a_suite_of_no_world_writes_outputs_that_say_so(tmp_path: Path) -> None:
+    """generalize.worlds = 0 (the KITTI protocol): no model is read, no world run; the metrics
+    are empty (an experiment shows no figure of an earlier suite), the record and the figure
+    say why, the plot data has its header and no row; outputs of an earlier run are replaced."""
+    import json
+
+    from pipeline.generalization.report import GeneralizationPaths, run_generalization
+
+    paths = GeneralizationPaths(tmp_path / "no-model", tmp_path / "no-fixed", tmp_path / "runs",
+                                tmp_path / "metrics/g.json", tmp_path / "records/g.json",
+                                tmp_path / "plots/g.csv", tmp_path / "report/g.png")
+    paths.metrics.parent.mkdir()
+    paths.metrics.write_text('{"summary": {"adaptive_vs_best": {"median": 0.5}}}')
+    section = validate_section(GeneralizeSection, "generalize", {"worlds": 0})
+    summary = run_generalization(paths, section)
+    assert summary["worlds"] == 0
+    assert json.loads(paths.metrics.read_text()) == {}
+    assert json.loads(paths.record.read_text()) == summary
+    assert paths.plot_data.read_text().splitlines() == [
+        "world,segments,sensor,frames,baseline_pct,fixed_pct,adaptive_pct,adaptive_vs_best,"
+        "adaptive_vs_baseline,adaptive_vs_fixed"]
+    assert paths.figure.read_bytes()[:4] == b"\x89PNG"
+    assert (paths.runs / "not_run.txt").read_text().startswith("generalize.worlds is 0")

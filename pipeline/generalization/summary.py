@@ -1,5 +1,6 @@
 """The suite's figures: per-world ratios and their median, worst world, win rate and a
-bootstrap interval of the median (``metrics/generalization.json``, ``plots/generalization.csv``).
+bootstrap interval of the median (``metrics/generalization.json``, ``plots/generalization.csv``;
+``records/generalization.json`` holds the rest of the summary: ``RECORD_KEYS``).
 
 A ratio below 1 means adaptive beat the other setting on that world (lower RTE); the win rate
 is the fraction of worlds whose ratio is below 1. The interval is the percentile bootstrap
@@ -26,6 +27,13 @@ from numpy.typing import NDArray
 from pipeline.generalization.run import WorldScore
 
 RATIOS = ("adaptive_vs_best", "adaptive_vs_baseline", "adaptive_vs_fixed")
+RECORD_KEYS = ("seed_root", "length_m", "worlds", "frames", "replicas", "seed", "wall_time_s",
+               "replicas_rte_pct")
+"""The summary's bookkeeping (besides its text: names, segments, sensors): the suite's seeds
+and sizes, L, wall times and the replica runs' raw lists."""
+PLOT_COLUMNS = ("world", "segments", "sensor", "frames", "baseline_pct", "fixed_pct",
+                "adaptive_pct", *RATIOS)
+"""The columns of ``plot_rows`` without replicas (the header of a suite without worlds)."""
 INTERVAL = 0.90
 TARGET_MEDIAN = 0.75
 TARGET_WORST = 1.05
@@ -55,8 +63,7 @@ def ratio_summary(names: Sequence[str], ratios: Sequence[float], resamples: int,
 
 def suite_metrics(scores: Sequence[WorldScore], suite: str, root: int, resamples: int,
                   algorithm: str, length_m: float) -> dict[str, Any]:
-    """The JSON of ``metrics/generalization.json``: the suite, every world, every ratio's
-    summary (module docstring)."""
+    """The summary of the suite, every world, every ratio (module docstring)."""
     names = [s.name for s in scores]
     summary = {k: ratio_summary(names, [s.ratios()[k] for s in scores], resamples, root)
                for k in RATIOS}
