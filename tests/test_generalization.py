@@ -16,7 +16,7 @@ from pipeline.config import validate_section
 from pipeline.errors import ConfigError
 from pipeline.generalization.run import WorldScore
 from pipeline.generalization.suite import GeneralizeSection, suite_worlds, world_of
-from pipeline.generalization.summary import ratio_summary
+from pipeline.generalization.summary import ratio_summary, suite_metrics
 from pipeline.sim.raycast import Raycaster
 from pipeline.sim.simulate import SimSpec, label_ranges, make_world
 
@@ -79,6 +79,21 @@ def test_ratio_summary() -> None:
     lo, hi = s["median_interval"]
     assert 0.5 <= lo <= s["median"] <= hi <= 1.2
     assert ratio_summary(names, [0.5, 0.8, 1.2, 0.6, math.nan], 500, seed=1) == s
+
+
+def test_the_verdict_is_a_metric() -> None:
+    """summary.adaptive_vs_best.targets_met: issue 12's three targets (median <= 0.75, worst <=
+    1.05, win rate >= 90 %) on the suite's worlds, a figure of metrics/generalization.json."""
+    def world(i: int, adaptive: float) -> WorldScore:
+        return WorldScore(f"w{i}", ("cave", "open"), "hdl32", 100, i,
+                          {"baseline": 2.0, "fixed": 4.0, "adaptive": adaptive}, {}, 0, 0.0)
+
+    good = suite_metrics([world(i, 1.0) for i in range(5)], "test", 1, 200, "ndt", 25.0)
+    assert good["summary"]["adaptive_vs_best"]["targets_met"] is True
+    one_loss = suite_metrics([*(world(i, 1.0) for i in range(5)), world(5, 2.2)], "test", 1,
+                             200, "ndt", 25.0)
+    assert one_loss["summary"]["adaptive_vs_best"]["targets_met"] is False  # worst 1.1
+    assert "targets_met" not in one_loss["summary"]["adaptive_vs_fixed"]
 
 
 def test_each_ratio_divides_by_its_own_setting() -> None:

@@ -223,6 +223,7 @@ def test_generalize_scores_every_world_of_the_suite(repro: tuple[Path, str]) -> 
         assert m["replica_summary"][ratio]["worst"] == max(
             w["replica_ratio"][ratio] for w in worlds.values())
     assert m["replicas"] == 2 and m["noise"]["chance_ratio_p95"] >= 1.0
+    assert isinstance(m["summary"]["adaptive_vs_best"]["targets_met"], bool)  # the verdict
     rows = (root / "plots/generalization.csv").read_text().splitlines()
     assert len(rows) == 4 and rows[0].startswith("world,segments,sensor,frames,")
     assert rows[0].endswith(",replica_adaptive_vs_best")

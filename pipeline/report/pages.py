@@ -31,6 +31,7 @@ from pipeline.generalization.summary import (
     TARGET_MEDIAN,
     TARGET_WIN_RATE,
     TARGET_WORST,
+    meets_targets,
 )
 from pipeline.report.outputs import merge_leaves, record_beside
 from pipeline.report.table2 import table2_json, table2_markdown
@@ -272,7 +273,8 @@ def _suite(gen: Mapping[str, Any]) -> list[str]:
             for name, w in worlds.items()]
     head = ["world", "sensor", "segments", "frames", "baseline", "fixed", "adaptive",
             "adaptive / min", *([f"the same, medians of {runs} runs"] if runs > 1 else [])]
-    verdicts = [f"{'met' if _met(gen[block]['adaptive_vs_best']) else 'not met'} by {what}"
+    verdicts = [f"{'met' if meets_targets(gen[block]['adaptive_vs_best']) else 'not met'} by "
+                f"{what}"
                 for block, what in (("summary", "the one-run figures"),
                                     ("replica_summary", f"the medians of {runs} runs"))
                 if block in gen and (block == "summary" or runs > 1)]
@@ -309,12 +311,6 @@ def _suite(gen: Mapping[str, Any]) -> list[str]:
                                     for s in ("baseline", "fixed", "adaptive"))]
                            for name, w in worlds.items()])]
     return lines
-
-
-def _met(summary: Mapping[str, Any]) -> bool:
-    """Whether a ratio summary meets issue 12's three targets."""
-    return bool(summary["median"] <= TARGET_MEDIAN and summary["worst"] <= TARGET_WORST
-                and summary["win_rate"] >= TARGET_WIN_RATE)
 
 
 def _summary_rows(gen: Mapping[str, Any], runs: int) -> list[list[object]]:
