@@ -39,7 +39,7 @@ class BaseSection(Section):
     ``simulate_kitti`` reads (dvc.yaml ``${...}``): the simulated worlds, the recordings of
     the ``data`` section, or simulated KITTI (``SEQUENCE_FOLDERS``)."""
 
-    seed: int = Field(0, ge=0)
+    seed: int = Field(42, ge=0)
     length_m: float = Field(25.0, gt=0)
     sequences: Literal["data/sequences", "data/recordings", "data/kitti_sim"] = "data/sequences"
 

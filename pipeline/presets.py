@@ -10,7 +10,9 @@ trajectories (the ``simulate_kitti`` stage, pipeline/sim/kitti_world.py). Real K
 ``kitti`` sources of the ``data`` section (train, and test as the ``validation`` split), its
 root stored absolute. Options size the run
 to a machine: a frame window of every sequence (or of single sequences, simulated KITTI), a
-stride over the sequences, the SMBO budget.
+stride over the sequences, the SMBO budget. The protocol has no generalization suite
+(``generalize.worlds = 0``: that stage writes outputs that say so), so its experiment carries
+no figure of the toy's suite.
 
 A preset never edits params.yaml itself: ``set_params`` lists ``section.key=value`` pairs
 for ``dvc exp run --set-param`` (values in its override grammar, Hydra's), which keeps
@@ -103,7 +105,8 @@ def kitti_protocol(protocol: KittiProtocol, params: Mapping[str, Any]) -> dict[s
                 "simulate_kitti.train": train, "simulate_kitti.validation": test,
                 "simulate_kitti.start": protocol.start, "simulate_kitti.end": protocol.end,
                 "simulate_kitti.windows": _windows(protocol, [*train, *test])}
-    data |= {"base.length_m": protocol.length_m, "evaluate.splits": ["validation", "train"]}
+    data |= {"base.length_m": protocol.length_m, "evaluate.splits": ["validation", "train"],
+             "generalize.worlds": 0}
     if protocol.algorithm is not None:
         data["trials.algorithm"] = protocol.algorithm
     if protocol.iterations is not None:

@@ -1,7 +1,8 @@
 """``adaptune evaluate``: baseline vs fixed vs adaptive on the validation sequences (dvc stage).
 
-Writes metrics/*.json for ``dvc metrics show``, CSV files for ``dvc plots show`` and
-report/report.md with its PNG figures (``pipeline.report.report`` documents them).
+Writes the figures for ``dvc metrics show`` (--metrics) and the rest of the summary (--record),
+CSV files for ``dvc plots show`` and report/report.md with its PNG figures
+(``pipeline.report.report`` documents them).
 """
 
 from __future__ import annotations
@@ -20,12 +21,14 @@ from stages.common import dir_option, file_option, params_option, sequences_opti
 @dir_option("--fixed", "fixed_dir", help="Joint SMBO output.")
 @dir_option("--adaptive", "adaptive_dir", help="Adaptive runs.")
 @dir_option("--out", "runs_dir", help="Folder for the baseline and fixed trajectories.")
-@file_option("--metrics", "metrics_path", help="Metrics JSON to write.")
+@file_option("--metrics", "metrics_path", help="Metrics JSON to write (the figures).")
+@file_option("--record", "record_path",
+             help="JSON to write with the rest: what ran, trial counts, wall times.")
 @dir_option("--plots", "plots_dir", help="Folder for plot CSVs.")
 @dir_option("--report", "report_dir", help="Folder for report.md and its figures.")
 def evaluate(params_path: Path | None, sequence_dir: Path, trials_dir: Path, fixed_dir: Path,
-             adaptive_dir: Path, runs_dir: Path, metrics_path: Path, plots_dir: Path,
-             report_dir: Path) -> None:
+             adaptive_dir: Path, runs_dir: Path, metrics_path: Path, record_path: Path,
+             plots_dir: Path, report_dir: Path) -> None:
     """Score baseline, fixed and adaptive parameters; write metrics, plots and the report."""
     from pipeline.config import load_section
     from pipeline.evaluate.section import EvaluateSection
@@ -35,7 +38,7 @@ def evaluate(params_path: Path | None, sequence_dir: Path, trials_dir: Path, fix
     settings = load_section(params_path, "evaluate", EvaluateSection)
     trials = load_section(params_path, "trials", TrialsSection)
     paths = EvaluationPaths(sequence_dir, trials_dir, fixed_dir, adaptive_dir, runs_dir,
-                            metrics_path, plots_dir, report_dir)
+                            metrics_path, record_path, plots_dir, report_dir)
     m = run_evaluation(paths, settings, trials.adapter_options)
     rte, ratio = m["rte_pct"], m["ratio"]
     click.echo(f"{m['algorithm']}: RTE baseline {rte['baseline']:.3f} %, fixed "

@@ -73,7 +73,7 @@ def kitti_preset(root: Path | None, simulated: Path | None, train: str | None,
     \b
     make kitti KITTI_ROOT=... (or KITTI_SIMULATED=...) runs them; by hand:
       adaptune kitti-preset --root /data/kitti/dataset > kitti.args
-      xargs -a kitti.args -d '\\n' dvc exp run evaluate
+      xargs -a kitti.args -d '\\n' dvc exp run evaluate generalize
     """
     from pipeline.config import read_params, validate_section
     from pipeline.errors import ConfigError
@@ -99,7 +99,11 @@ def kitti_preset(root: Path | None, simulated: Path | None, train: str | None,
 @click.argument("metrics", nargs=-1, required=True, type=FILE)
 @dir_option("--out", help="Folder for table.md and table.json.")
 def kitti_table(metrics: tuple[Path, ...], out: Path) -> None:
-    """Lay the evaluate metrics JSON of every algorithm out as the paper's Table II."""
+    """Lay the evaluate metrics of every algorithm out as the paper's Table II.
+
+    Each METRICS file DIR/metrics/NAME.json goes with its record DIR/records/NAME.json (as the
+    evaluate stage writes them: metrics/evaluation.json, records/evaluation.json).
+    """
     from pipeline.report.table2 import KITTI_SPLIT_TITLES, write_table2
 
     table = write_table2(list(metrics), out, KITTI_SPLIT_TITLES)

@@ -1,5 +1,5 @@
-"""`adaptune metric kitti GT EST` (the KITTI devkit metric) and `adaptune metric rte GT EST
---length L` (RTE, APE, RPE of runs of any length)."""
+"""`adaptune metric kitti GT EST` (the KITTI devkit metric, any segment lengths) and `adaptune
+metric rte GT EST --length L` (RTE, and evo's APE and RPE, of runs of any length)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,11 @@ from pathlib import Path
 
 import click
 
-from stages.common import FILE, echo_output
+from stages.common import FILE, echo_output, params_option
 from stages.ingest import POSE_FORMATS
+
+ALIGNMENTS = ("none", "origin", "se3", "sim3")
+"""pipeline.metrics.trajectory_error.ALIGNMENTS (kept here so that --help imports no numpy)."""
 
 
 @click.group()
@@ -17,26 +20,51 @@ def metric() -> None:
     """Trajectory error metrics."""
 
 
+def _lengths(text: str | None) -> list[float] | None:
+    if text is None:
+        return None
+    from pipeline.errors import ConfigError
+
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise ConfigError(f"--lengths must be metres separated by commas, got {text!r}") from None
+
+
 @metric.command()
 @click.argument("gt_poses", type=FILE)
 @click.argument("est_poses", type=FILE)
+@click.option("--lengths", "lengths_m", default=None,
+              help="Segment lengths [m], comma-separated, e.g. 5,10,20 for a short run "
+              "[params.yaml's devkit.lengths_m: the devkit's 100,...,800].")
+@click.option("--step-frames", type=int, default=None,
+              help="A segment starts every N frames [params.yaml's devkit.step_frames: 10].")
+@params_option
 @click.option("--json", "as_json", is_flag=True,
               help="Print JSON (t_err_pct, r_err_deg_per_m, segments, per_length).")
-def kitti(gt_poses: Path, est_poses: Path, as_json: bool) -> None:
+def kitti(gt_poses: Path, est_poses: Path, lengths_m: str | None, step_frames: int | None,
+          params_path: Path | None, as_json: bool) -> None:
     """KITTI devkit error of EST_POSES against GT_POSES (KITTI pose files, camera frame).
 
-    Segments of 100..800 m starting every 10 frames; the mean over all segments, as
-    evaluate_odometry.cpp computes it.
+    Segments of every length that fits (100..800 m unless --lengths), one starting every 10
+    frames; the mean over all segments, as evaluate_odometry.cpp computes it.
     """
+    from pipeline.config import load_section, validate_section
     from pipeline.metrics.kitti import evaluate_kitti_files
+    from pipeline.metrics.section import DevkitSection
 
-    result = evaluate_kitti_files(gt_poses, est_poses)
+    devkit = load_section(params_path, "devkit", DevkitSection)
+    given = {"lengths_m": _lengths(lengths_m), "step_frames": step_frames}
+    devkit = validate_section(DevkitSection, "devkit", {
+        **devkit.model_dump(), **{k: v for k, v in given.items() if v is not None}})
+    result = evaluate_kitti_files(gt_poses, est_poses, devkit.lengths_m, devkit.step_frames)
     if as_json:
         echo_output(json.dumps(result, indent=1))
         return
     echo_output(f"t_err {result['t_err_pct']:.4f} %   r_err {result['r_err_deg_per_m']:.6f} "
                 f"deg/m ({result['r_err_deg_per_m'] * 100:.4f} deg/100 m)   "
-                f"{result['segments']} segments, {result['frames']} frames")
+                f"{result['segments']} segments of "
+                f"{', '.join(result['per_length'])} m, {result['frames']} frames")
 
 
 @metric.command()
@@ -45,35 +73,51 @@ def kitti(gt_poses: Path, est_poses: Path, as_json: bool) -> None:
 @click.option("--length", "length_m", type=float, required=True,
               help="L [m]: the sub-trajectory length of the RTE (any length; KITTI's 100-800 m "
               "are `metric kitti`).")
-@click.option("--scale", is_flag=True, help="Align with scale too (Sim(3); monocular methods).")
+@click.option("--align", "alignment", type=click.Choice(ALIGNMENTS), default="se3",
+              show_default=True,
+              help="How the estimate is aligned before APE and RPE: none; origin (first poses "
+              "on each other); se3 (Umeyama); sim3 (Umeyama with scale, monocular methods).")
+@click.option("--delta", type=float, default=1.0, show_default=True,
+              help="RPE: the distance between the poses of a pair, in --delta-unit.")
+@click.option("--delta-unit", type=click.Choice(["frames", "m"]), default="frames",
+              show_default=True, help="RPE: the unit of --delta (m: metres of path).")
+@click.option("--all-pairs", is_flag=True,
+              help="RPE: a pair from every frame, not consecutive pairs.")
+@click.option("--pairs-from-reference", is_flag=True,
+              help="RPE: pairs along the ground truth's path, not the aligned estimate's.")
 @click.option("--gt-format", type=click.Choice(POSE_FORMATS), default="auto", show_default=True,
               help="Format of a GROUND_TRUTH pose file.")
 @click.option("--est-format", type=click.Choice(POSE_FORMATS), default="auto",
               show_default=True, help="Format of an ESTIMATE pose file.")
-@click.option("--json", "as_json", is_flag=True, help="Print JSON (rte, ape, rpe).")
-def rte(ground_truth: Path, estimate: Path, length_m: float, scale: bool, gt_format: str,
+@click.option("--json", "as_json", is_flag=True, help="Print JSON (rte, alignment, ape, rpe).")
+def rte(ground_truth: Path, estimate: Path, length_m: float, alignment: str, delta: float,
+        delta_unit: str, all_pairs: bool, pairs_from_reference: bool, gt_format: str,
         est_format: str, as_json: bool) -> None:
-    """RTE over --length L (the pipeline's per-start-frame error), evo-style APE (Umeyama
-    alignment) and RPE (1 frame) of ESTIMATE against GROUND_TRUTH.
+    """RTE over --length L (the pipeline's per-start-frame error), and evo's APE and RPE
+    (translation [m] and rotation angle [deg]) of ESTIMATE against GROUND_TRUTH.
 
     Each is a sequence MCAP (its ground truth), a trajectory Parquet (`adaptune run`) or a pose
     file (KITTI, TUM, EuRoC CSV, 4x4 blocks). Stamped poses pair by time (10 ms), others by
     index.
     """
-    from pipeline.metrics.trajectory_error import evaluate_files
+    from pipeline.metrics.trajectory_error import RpeSettings, evaluate_files
 
-    r = evaluate_files(ground_truth, estimate, length_m, scale, gt_format,  # type: ignore[arg-type]
-                       est_format)  # type: ignore[arg-type]
+    rpe = RpeSettings(delta, delta_unit, all_pairs, pairs_from_reference)  # type: ignore[arg-type]
+    r = evaluate_files(ground_truth, estimate, length_m, alignment, rpe,  # type: ignore[arg-type]
+                       gt_format, est_format)  # type: ignore[arg-type]
     if as_json:
         echo_output(json.dumps(r, indent=1))
         return
-    rt, ape, rpe = r["rte"], r["ape"], r["rpe"]
+    rt, al = r["rte"], r["alignment"]
     stats = "rmse {rmse:.4f}  mean {mean:.4f}  median {median:.4f}  std {std:.4f}  " \
-            "min {min:.4f}  max {max:.4f} m"
+            "min {min:.4f}  max {max:.4f}"
     echo_output("\n".join([
         f"{r['frames']} frames, {r['path_m']:.1f} m of ground truth",
         f"RTE  L = {rt['length_m']:g} m, {rt['segments']} start frames: "
         f"t_err {rt['t_err_pct']:.4f} %  r_err {rt['r_err_deg_per_m']:.6f} deg/m",
-        f"APE  {ape['alignment']} Umeyama alignment (scale {ape['scale']:.4f}): "
-        + stats.format(**ape),
-        "RPE  1 frame: " + stats.format(**rpe)]))
+        f"APE  alignment {al['method']} (scale {al['scale']:.4f}), {r['frames']} poses",
+        f"  translation [m]:   {stats.format(**r['ape']['translation_m'])}",
+        f"  rotation [deg]:    {stats.format(**r['ape']['rotation_deg'])}",
+        f"RPE  {rpe.describe()}, {r['rpe']['pairs']} pairs",
+        f"  translation [m]:   {stats.format(**r['rpe']['translation_m'])}",
+        f"  rotation [deg]:    {stats.format(**r['rpe']['rotation_deg'])}"]))

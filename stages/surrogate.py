@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
@@ -20,7 +19,10 @@ from stages.common import algorithm_option, dir_option, file_option, params_opti
             help="The trials output (results/trials), whose stored parameter space the model "
                  "uses [default: the adapter's built-in ranges].")
 @algorithm_option("Algorithm of the rows (default: the only one).")
-@file_option("--metrics", "metrics_path", required=False, help="Write the CV error here (JSON).")
+@file_option("--metrics", "metrics_path", required=False,
+             help="Write the CV errors here (JSON; the figures).")
+@file_option("--record", "record_path", required=False,
+             help="Write the rest of the CV summary here (JSON: algorithm, folds, rows).")
 def surrogate(
     params_path: Path | None,
     db_path: Path,
@@ -29,16 +31,21 @@ def surrogate(
     trials_dir: Path | None,
     algorithm: str | None,
     metrics_path: Path | None,
+    record_path: Path | None,
 ) -> None:
     """Fit the surrogate S(E, x) ~ y and write the deployable artifact."""
     from pipeline.descriptors.dataset import DescriptorsSection
-    from pipeline.io_utils import atomic_write_text
+    from pipeline.errors import ConfigError
     from pipeline.odometry.registry import get_adapter
+    from pipeline.report.outputs import write_metrics
+    from pipeline.surrogates.cross_validation import RECORD_KEYS
     from pipeline.surrogates.fit import ModelInputs, build_model
     from pipeline.surrogates.section import SurrogateSection
     from pipeline.tuning.smbo import TrialsSection
     from pipeline.tuning.table import read_space
 
+    if (metrics_path is None) != (record_path is None):
+        raise ConfigError("--metrics and --record go together (the CV figures and the rest)")
     section = load_section(params_path, "surrogate", SurrogateSection)
     descriptors = load_section(params_path, "descriptors", DescriptorsSection)
     options = load_section(params_path, "trials", TrialsSection).adapter_options
@@ -49,8 +56,8 @@ def surrogate(
     manifest = build_model(ModelInputs(db_path, pca_dir), out, section, descriptors, space_of,
                            algorithm)
     algo, cv, training = manifest["algorithm"], manifest["cross_validation"], manifest["training"]
-    if metrics_path is not None:
-        atomic_write_text(metrics_path, json.dumps({"algorithm": algo, **cv}, indent=2))
+    if metrics_path is not None and record_path is not None:
+        write_metrics(metrics_path, record_path, {"algorithm": algo, **cv}, RECORD_KEYS)
     click.echo(
         f"{algo}: {training['rows']} rows, {training['environments']} frames "
         f"-> {out}; LOSO CV MAE {cv['mae']}, RMSE {cv['rmse']}, regret {cv['regret_mean']}",

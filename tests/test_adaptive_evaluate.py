@@ -120,7 +120,8 @@ def _evaluate(tmp_path: Path, sequences: Path, fixed: Path, adaptive: Path) -> t
     return _invoke("evaluate", "--params", str(REPO / "params.yaml"), "--sequences",
                    str(sequences), "--trials", str(tmp_path / "trials"), "--fixed", str(fixed),
                    "--adaptive", str(adaptive), "--out", str(tmp_path / "ev"), "--metrics",
-                   str(tmp_path / "m.json"), "--plots", str(tmp_path / "plots"), "--report",
+                   str(tmp_path / "m.json"), "--record", str(tmp_path / "r.json"),
+                   "--plots", str(tmp_path / "plots"), "--report",
                    str(tmp_path / "report"))
 
 

@@ -134,3 +134,49 @@ def test_length_is_set_once_in_base(tmp_path: Path) -> None:
     p.write_text("base:\n  length_m: 0\n")
     with pytest.raises(ConfigError, match=r"^base\.length_m: .*greater than 0"):
         load_section(p, "trials", TrialsSection)
+
+
+def effective(section: Section) -> dict[str, object]:
+    """What a section configures: its fields (with the keys it takes from ``base`` and the
+    sections it shares), and for sections that hold another home's settings as extra keys
+    (``select``, ``descriptors``) those settings resolved, defaults included."""
+    extra = section.model_extra or {}
+    out = {k: v for k, v in section.model_dump().items() if k not in extra}
+    if hasattr(section, "settings"):  # select: pipeline.selection.SelectionSettings
+        out["settings"] = section.settings().to_json()
+    if hasattr(section, "descriptor"):  # descriptors: the descriptor built from its settings
+        out["descriptor"] = section.descriptor().to_json()
+    return out
+
+
+def _differences(code: object, yaml: object, where: str) -> list[str]:
+    if isinstance(code, dict) and isinstance(yaml, dict):
+        return [d for key in dict.fromkeys([*code, *yaml])
+                for d in _differences(code.get(key, "<none>"), yaml.get(key, "<none>"),
+                                      f"{where}.{key}")]
+    return [] if code == yaml else [f"{where}: code {code!r}, params.yaml {yaml!r}"]
+
+
+def test_the_codes_defaults_are_the_repositorys_params() -> None:
+    """Outside the repository (no params file) every section is what the repository's
+    params.yaml sets (issue 34: pruning was on, base.seed 0, fixed.iterations 256 ...), the
+    keys taken from base and the shared sections included."""
+    code, repo = load_params(None), load_params(REPO / "params.yaml")
+    assert list(code) == list(repo) == list(SECTIONS)
+    differences = [d for name in SECTIONS
+                   for d in _differences(effective(code[name]), effective(repo[name]), name)]
+    assert differences == []
+
+
+def test_the_defaults_check_sees_a_difference(tmp_path: Path) -> None:
+    """The comparison above fails on a value params.yaml sets apart from the code, nested
+    (trials.pruning.percentile), taken from base (trials.length_m) or resolved (select)."""
+    p = tmp_path / "params.yaml"
+    p.write_text("base: {length_m: 30.0}\ntrials: {pruning: {percentile: 40}}\n"
+                 "select: {window: 2}\n")
+    code, other = load_params(None), load_params(p)
+    differences = [d for name in SECTIONS
+                   for d in _differences(effective(code[name]), effective(other[name]), name)]
+    assert {d.split(":")[0] for d in differences} >= {
+        "base.length_m", "trials.length_m", "evaluate.length_m", "trials.pruning.percentile",
+        "select.settings.window"}

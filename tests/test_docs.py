@@ -22,6 +22,7 @@ from pipeline.report.pages import (
     EVALUATION,
     GENERALIZATION,
     RUNS,
+    SUMMARIES,
     SURROGATE,
     TOY_PAGE,
     render_docs,
@@ -45,7 +46,8 @@ def test_the_generated_pages_are_what_the_committed_metrics_give() -> None:
 
 def _copy(tmp: Path) -> Path:
     """What the generator reads, in a scratch repository ``tmp``."""
-    for name in ("README.md", "dvc.lock", str(RUNS), EVALUATION, SURROGATE, GENERALIZATION):
+    for name in ("README.md", "dvc.lock", str(RUNS), EVALUATION, SURROGATE, GENERALIZATION,
+                 *SUMMARIES.values()):
         (tmp / name).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(REPO / name, tmp / name)
     return tmp
@@ -68,12 +70,24 @@ def test_a_new_run_renders_only_once_its_commit_is_recorded(tmp_path: Path) -> N
     with pytest.raises(InputError, match=r"runs\.yaml"):
         render_docs(repo)
     runs = yaml.safe_load((repo / RUNS).read_text())
-    runs["toy"]["metrics"][EVALUATION] = md5
+    runs["toy"]["outputs"][EVALUATION] = md5
     runs["toy"]["commit"] = "abcdef1"
     (repo / RUNS).write_text(yaml.safe_dump(runs))
     pages = render_docs(repo)
     assert "**0.123**" in pages[Path("README.md")] and "main@abcdef1" in pages[TOY_PAGE]
     assert "| 0.123 |" in pages[TOY_PAGE]
+
+
+def test_the_records_are_checked_too(tmp_path: Path) -> None:
+    """A record (the bookkeeping beside the metrics) changed after the run is refused as a
+    metrics file is: the page quotes it (the algorithm, the trial counts)."""
+    repo = _copy(tmp_path)
+    path = repo / SUMMARIES[EVALUATION]
+    record = json.loads(path.read_text())
+    record["algorithm"] = "gicp"
+    path.write_text(json.dumps(record))
+    with pytest.raises(InputError, match=r"records/evaluation\.json: md5 .* dvc\.lock"):
+        render_docs(repo)
 
 
 # ---------------------------------------------------------------- links

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from pipeline.config import validate_section
 from pipeline.errors import ConfigError
 from pipeline.generalization.run import WorldScore
 from pipeline.generalization.suite import GeneralizeSection, suite_worlds, world_of
-from pipeline.generalization.summary import ratio_summary
+from pipeline.generalization.summary import ratio_summary, suite_metrics
 from pipeline.sim.raycast import Raycaster
 from pipeline.sim.simulate import SimSpec, label_ranges, make_world
 
@@ -78,6 +79,21 @@ def test_ratio_summary() -> None:
     lo, hi = s["median_interval"]
     assert 0.5 <= lo <= s["median"] <= hi <= 1.2
     assert ratio_summary(names, [0.5, 0.8, 1.2, 0.6, math.nan], 500, seed=1) == s
+
+
+def test_the_verdict_is_a_metric() -> None:
+    """summary.adaptive_vs_best.targets_met: issue 12's three targets (median <= 0.75, worst <=
+    1.05, win rate >= 90 %) on the suite's worlds, a figure of metrics/generalization.json."""
+    def world(i: int, adaptive: float) -> WorldScore:
+        return WorldScore(f"w{i}", ("cave", "open"), "hdl32", 100, i,
+                          {"baseline": 2.0, "fixed": 4.0, "adaptive": adaptive}, {}, 0, 0.0)
+
+    good = suite_metrics([world(i, 1.0) for i in range(5)], "test", 1, 200, "ndt", 25.0)
+    assert good["summary"]["adaptive_vs_best"]["targets_met"] is True
+    one_loss = suite_metrics([*(world(i, 1.0) for i in range(5)), world(5, 2.2)], "test", 1,
+                             200, "ndt", 25.0)
+    assert one_loss["summary"]["adaptive_vs_best"]["targets_met"] is False  # worst 1.1
+    assert "targets_met" not in one_loss["summary"]["adaptive_vs_fixed"]
 
 
 def test_each_ratio_divides_by_its_own_setting() -> None:
@@ -153,3 +169,28 @@ def test_replica_figures() -> None:
     plain = WorldScore("b", ("cave",), "hdl32", 10, 1, {"baseline": 2.0, "fixed": 1.0,
                        "adaptive": 1.5}, {}, 0, 0.0)
     assert "replica_summary" not in suite_metrics([plain], "dev", 1, 200, "ndt", 25.0)
+
+
+def test_a_suite_of_no_world_writes_outputs_that_say_so(tmp_path: Path) -> None:
+    """generalize.worlds = 0 (the KITTI protocol): no model is read, no world run; the metrics
+    are empty (an experiment shows no figure of an earlier suite), the record and the figure
+    say why, the plot data has its header and no row; outputs of an earlier run are replaced."""
+    import json
+
+    from pipeline.generalization.report import GeneralizationPaths, run_generalization
+
+    paths = GeneralizationPaths(tmp_path / "no-model", tmp_path / "no-fixed", tmp_path / "runs",
+                                tmp_path / "metrics/g.json", tmp_path / "records/g.json",
+                                tmp_path / "plots/g.csv", tmp_path / "report/g.png")
+    paths.metrics.parent.mkdir()
+    paths.metrics.write_text('{"summary": {"adaptive_vs_best": {"median": 0.5}}}')
+    section = validate_section(GeneralizeSection, "generalize", {"worlds": 0})
+    summary = run_generalization(paths, section)
+    assert summary["worlds"] == 0
+    assert json.loads(paths.metrics.read_text()) == {}
+    assert json.loads(paths.record.read_text()) == summary
+    assert paths.plot_data.read_text().splitlines() == [
+        "world,segments,sensor,frames,baseline_pct,fixed_pct,adaptive_pct,adaptive_vs_best,"
+        "adaptive_vs_baseline,adaptive_vs_fixed"]
+    assert paths.figure.read_bytes()[:4] == b"\x89PNG"
+    assert (paths.runs / "not_run.txt").read_text().startswith("generalize.worlds is 0")

@@ -2,8 +2,9 @@
 
 What `make kitti` runs: `adaptune kitti-preset` prints the `dvc exp run --set-param`s, `dvc exp
 run` takes them (a git + DVC project), `adaptune kitti-table` lays the metrics out. Here on the
-10-frame slices of ../shared/data (01, 04 train; 06, 10 test), 3 + 2 trials, L = 1.5 m, up to the
-evaluate stage (the generalize stage's test is in test_pipeline_dvc.py).
+10-frame slices of ../shared/data (01, 04 train; 06, 10 test), 3 + 2 trials, L = 1.5 m (sequence
+10's 10 frames run 1.7 m), the stages up to evaluate and generalize, which the protocol runs
+without a world (its suite's test is in test_pipeline_dvc.py).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import yaml
 from click.testing import CliRunner
 from test_pipeline_dvc import BIN, REPO, dvc, git, project, tiny_params
 
+from pipeline.report.outputs import read_summary
 from stages.cli import main
 
 pytestmark = pytest.mark.slow
@@ -35,8 +37,9 @@ def _preset(*args: str) -> tuple[int, str]:
 
 @pytest.fixture(scope="module")
 def protocol(kitti_root: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A git + DVC project on the tiny params, turned into the KITTI protocol and run up to the
-    evaluate stage (the simulated worlds of the simulate stage are not made)."""
+    """A git + DVC project on the tiny params, turned into the KITTI protocol and run as `make
+    kitti` runs it: the evaluate and generalize targets (the simulated worlds of the simulate
+    stage are not made; the generalize stage runs no world)."""
     p = tiny_params()
     p["descriptors"]["range_bins"] = 10  # the default width here
     # searched ranges from params.yaml, wider than ndt's built-in [1, 10] m: every later stage
@@ -50,8 +53,9 @@ def protocol(kitti_root: Path, tmp_path_factory: pytest.TempPathFactory) -> Path
          "--test", "06,10", "--iterations", "3", "--joint-iterations", "2",
          "--length-m", str(KITTI_L_M), "--kitti-lengths-m", "2,4", "--replicas", "1"],
         cwd=root, check=True, capture_output=True, text=True).stdout.splitlines()
-    log = dvc(root, "exp", "run", *args, "evaluate")
+    log = dvc(root, "exp", "run", *args, "evaluate", "generalize")
     assert "Running stage 'ingest'" in log and "Running stage 'simulate'" not in log
+    assert "Running stage 'generalize'" in log
     return root
 
 
@@ -68,6 +72,7 @@ def test_the_preset_sets_the_protocol(protocol: Path, kitti_root: Path) -> None:
     assert (params["trials"]["iterations"], params["trials"]["startup_trials"],
             params["fixed"]["iterations"]) == (3, 2, 2)
     assert params["devkit"]["lengths_m"] == [2, 4] and "kitti_lengths_m" not in params["evaluate"]
+    assert params["generalize"]["worlds"] == 0
     lock = yaml.safe_load((protocol / "dvc.lock").read_text())["stages"]
     assert any(d["path"] == "data/recordings" for d in lock["trials"]["deps"])
 
@@ -80,7 +85,7 @@ def test_train_and_test_sequences_are_scored(protocol: Path) -> None:
         with SequenceReader(protocol / f"data/recordings/{seq}.mcap") as reader:
             assert len(reader) == 10 and reader.info.sensor != "unknown"
         assert (protocol / f"results/adaptive/{seq}/trajectory.parquet").is_file()
-    m = json.loads((protocol / "metrics/evaluation.json").read_text())
+    m = read_summary(protocol / "metrics/evaluation.json")
     assert m["headline_split"] == "validation"
     assert {s: v["sequences"] for s, v in m["splits"].items()} == {
         "validation": ["06", "10"], "train": ["01", "04"]}
@@ -103,10 +108,31 @@ def test_train_and_test_sequences_are_scored(protocol: Path) -> None:
     assert "| ndt | baseline |" in report and "## Per split" in report
 
 
+def test_the_protocol_carries_no_stale_suite(protocol: Path) -> None:
+    """The experiment's generalize stage ran no world: its metrics are empty, its record and
+    figure say so (not the tiny project's suite: it never ran one here, `make kitti` runs on
+    the repository's committed toy figures)."""
+    assert json.loads((protocol / "metrics/generalization.json").read_text()) == {}
+    record = json.loads((protocol / "records/generalization.json").read_text())
+    assert record["worlds"] == 0 and "no world" in record["not_run"]
+    assert (protocol / "report/generalization.png").read_bytes()[:4] == b"\x89PNG"
+    assert (protocol / "plots/generalization.csv").read_text().startswith("world,")
+
+
+def _write_summary(folder: Path, summary: dict[str, Any]) -> Path:
+    """``summary`` as folder/metrics/NAME.json and folder/records/NAME.json (kitti-table's
+    input, as `make kitti` copies it); the metrics path."""
+    from pipeline.report.metrics import RECORD_KEYS
+    from pipeline.report.outputs import write_metrics
+
+    path = folder / "metrics" / "other.json"
+    write_metrics(path, folder / "records" / "other.json", summary, RECORD_KEYS)
+    return path
+
+
 def test_table2_lays_out_every_algorithm(protocol: Path, tmp_path: Path) -> None:
-    m = json.loads((protocol / "metrics/evaluation.json").read_text())
-    other = tmp_path / "other.json"
-    other.write_text(json.dumps({**m, "algorithm": "other"}))
+    m = read_summary(protocol / "metrics/evaluation.json")
+    other = _write_summary(tmp_path, {**m, "algorithm": "other"})
     code = CliRunner().invoke(main, ["kitti-table", str(protocol / "metrics/evaluation.json"),
                                      str(other), "--out", str(tmp_path / "t")]).exit_code
     assert code == 0
@@ -129,7 +155,7 @@ def test_table2_lays_out_every_algorithm(protocol: Path, tmp_path: Path) -> None
     lo, hi = sorted(m["splits"]["train"]["replicas"]["baseline"]["kitti_t_err_pct"])
     assert f"{(lo + hi) / 2:.3f} [{lo:.3f}, {hi:.3f}]" in spread.split("|")[4]
     # blocks of different protocols do not share a table
-    other.write_text(json.dumps({**m, "algorithm": "other", "length_m": 100.0}))
+    _write_summary(tmp_path, {**m, "algorithm": "other", "length_m": 100.0})
     result = CliRunner().invoke(main, ["kitti-table", str(protocol / "metrics/evaluation.json"),
                                        str(other), "--out", str(tmp_path / "u")])
     assert result.exit_code == 1
@@ -139,8 +165,8 @@ def test_table2_lays_out_every_algorithm(protocol: Path, tmp_path: Path) -> None
 
 
 def _without_wall_times(node: Any) -> Any:
-    """``node`` (parsed JSON) without its ``wall_time_s`` entries, the only figures a rerun
-    may change."""
+    """``node`` (parsed JSON) without its ``wall_time_s`` entries, the only values of a record
+    a rerun may change."""
     if isinstance(node, dict):
         return {k: _without_wall_times(v) for k, v in node.items() if k != "wall_time_s"}
     return node
@@ -148,18 +174,26 @@ def _without_wall_times(node: Any) -> Any:
 
 def test_a_second_run_gives_the_same_numbers(protocol: Path, tmp_path: Path) -> None:
     """Determinism (issue 15): the protocol run again from scratch in a copy of the project
-    (`dvc repro -f`: every stage again, the KITTI ingest included) gives the same metrics, the
-    same trials tables and the same trajectories of every trial and setting, wall times aside."""
+    (`dvc repro -f`: every stage again, the KITTI ingest included) gives the same metrics
+    (`dvc metrics diff` of the two runs shows nothing: wall times are no metric), the same
+    records but the wall times, the same trials tables and the same trajectories of every
+    trial and setting."""
     import pyarrow.parquet as pq
 
     again = tmp_path / "again"
     shutil.copytree(protocol, again, symlinks=True)
+    git(again, "add", "-A")
+    git(again, "commit", "-qm", "the first run")
     log = dvc(again, "repro", "-f", "evaluate")
     for stage in ("ingest", "trials", "fixed", "surrogate", "adaptive", "evaluate"):
         assert f"Running stage '{stage}'" in log
-    first, second = (json.loads((root / "metrics/evaluation.json").read_text())
+    assert json.loads(dvc(again, "metrics", "diff", "--json")) == {}
+    for name in ("metrics/evaluation.json", "metrics/surrogate.json"):
+        assert (again / name).read_text() == (protocol / name).read_text()
+    first, second = (json.loads((root / "records/evaluation.json").read_text())
                      for root in (protocol, again))
     assert _without_wall_times(second) == _without_wall_times(first)
+    assert second["trials"]["trials"]["wall_time_s"] > 0
     tables = sorted(p.relative_to(protocol) for p in protocol.glob("results/**/*.parquet"))
     assert sorted(p.relative_to(again) for p in again.glob("results/**/*.parquet")) == tables
     assert any(p.name == "trials.parquet" for p in tables)

@@ -294,3 +294,35 @@ def test_a_stdout_that_takes_nothing_is_one_line(tmp_path: Path, command: str,
     reason = "No space left on device" if device == "full" else "Broken pipe"
     assert done.returncode == 1 and len(lines) == 1, done.stderr.decode()
     assert lines[0] == f"adaptune: error: stdout: cannot write the output ({reason})", lines
+
+
+def test_metrics_hold_the_figures_and_the_record_the_rest(tmp_path: Path) -> None:
+    """write_metrics splits a summary: text, the named bookkeeping keys (wherever they nest)
+    and lists of text go to the record, figures (numbers, null, lists of numbers) to the
+    metrics; read_summary puts back exactly the summary."""
+    import json
+
+    from pipeline.report.outputs import read_summary, record_beside, split_leaves, write_metrics
+
+    summary = {"algorithm": "ndt", "length_m": 25.0, "rte_pct": {"baseline": 2.0, "fixed": None},
+               "splits": {"validation": {"sequences": ["a", "b"], "ratio": 0.5,
+                                         "kitti": {"segments": 7, "t_err_pct": 1.5}}},
+               "per_world": {"w": {"wall_time_s": 3.0, "name": "w"}},
+               "summary": {"median_interval": [0.9, 1.1]}}
+    figures, record = split_leaves(summary, ("length_m", "segments", "wall_time_s"))
+    assert figures == {"rte_pct": {"baseline": 2.0, "fixed": None},
+                       "splits": {"validation": {"ratio": 0.5, "kitti": {"t_err_pct": 1.5}}},
+                       "summary": {"median_interval": [0.9, 1.1]}}
+    assert record == {"algorithm": "ndt", "length_m": 25.0,
+                      "splits": {"validation": {"sequences": ["a", "b"],
+                                                "kitti": {"segments": 7}}},
+                      "per_world": {"w": {"wall_time_s": 3.0, "name": "w"}}}
+    metrics = tmp_path / "metrics" / "x.json"
+    write_metrics(metrics, record_beside(metrics), summary, ("length_m", "segments",
+                                                             "wall_time_s"))
+    assert json.loads(metrics.read_text()) == figures
+    assert (tmp_path / "records" / "x.json").is_file()
+    back = read_summary(metrics)
+    assert json.dumps(back, sort_keys=True) == json.dumps(summary, sort_keys=True)
+    with pytest.raises(InputError, match=r"missing\.json"):
+        read_summary(tmp_path / "metrics" / "missing.json")

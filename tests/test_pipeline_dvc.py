@@ -1,12 +1,14 @@
 """The whole pipeline through DVC itself, on a tiny params file, in a temporary git repository.
 
-Every stage of dvc.yaml runs (`dvc repro`), every output exists and follows its schema, and a
-second `dvc repro` does nothing. Then the variation lines of docs/usage.md run as DVC
-experiments on the same project (`dvc exp run -S ...`), and `dvc exp show`, `dvc exp diff` and
-`dvc metrics diff` compare them: the metrics and plot data are committed to git
-(``cache: false``), as DVC's example-get-started does. The generalize stage runs in the first
-`dvc repro` alone (its test here); the command adapter's repro and the experiments stop at the
-evaluate stage, whose metrics they compare, to keep the suite short.
+Every stage of dvc.yaml runs (`dvc repro`, without a warning), every output exists and follows
+its schema, and a second `dvc repro` does nothing. Then the variation lines of docs/usage.md run
+as DVC experiments on the same project (`dvc exp run -S ...`), and `dvc exp show` (the
+documented `--keep` line: at most 120 columns), `dvc exp diff`, `dvc metrics diff` and `dvc
+plots diff` compare them: the metrics, records and plot data are committed to git
+(``cache: false``), as DVC's example-get-started does, and the metrics hold figures only. The
+generalize stage runs its suite in the first `dvc repro` alone (its test here); the experiments
+run it with ``generalize.worlds=0`` (no world, outputs that say so: no stale figure of the first
+run) and the command adapter's repro stops at the evaluate stage, to keep the suite short.
 """
 
 from __future__ import annotations
@@ -48,8 +50,12 @@ def tiny_params() -> dict[str, Any]:
     return p
 
 
-def dvc(cwd: Path, *args: str) -> str:
+def dvc(cwd: Path, *args: str, columns: int | None = None) -> str:
+    """``dvc ARGS`` in ``cwd`` (its tables ``columns`` wide, else rich's default); stdout and
+    stderr, after asserting that it succeeded."""
     env = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ.get('PATH', '')}"}
+    if columns is not None:
+        env["COLUMNS"] = str(columns)
     done = subprocess.run([str(BIN / "dvc"), *args], cwd=cwd, env=env, capture_output=True,
                           text=True, timeout=600)
     assert done.returncode == 0, f"dvc {' '.join(args)} failed:\n{done.stdout}\n{done.stderr}"
@@ -98,6 +104,8 @@ def test_every_stage_ran(repro: tuple[Path, str]) -> None:
     stages = yaml.safe_load((root / "dvc.yaml").read_text())["stages"]
     for name in stages:
         assert f"Running stage '{name}'" in log
+    # a clean run warns of nothing (DVC warned "'pipeline/x/__init__.py' is empty" 42 times)
+    assert [line for line in log.splitlines() if "WARNING" in line or "Warning" in line] == []
     lock = yaml.safe_load((root / "dvc.lock").read_text())["stages"]
     assert set(lock) == set(stages)
     # the library code a stage runs is one of its dependencies, hashed without __pycache__
@@ -157,9 +165,15 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
     metrics = json.loads((root / "metrics/evaluation.json").read_text())
     assert set(metrics["rte_pct"]) == set(SETTINGS)
     assert all(v > 0 for v in metrics["rte_pct"].values())
-    assert metrics["trials"]["trials"]["trials"] == 6
+    record = json.loads((root / "records/evaluation.json").read_text())
+    assert record["trials"]["trials"]["trials"] == 6 and record["algorithm"] == "ndt"
     assert "cross_validation" not in metrics and "mae" in json.loads(
         (root / "metrics/surrogate.json").read_text())
+    for name in ("evaluation", "surrogate", "generalization"):  # figures, nothing else
+        leaves = dict(flat_leaves(json.loads((root / f"metrics/{name}.json").read_text())))
+        assert leaves and all(isinstance(v, int | float | list) or v is None
+                              for v in leaves.values()), name
+        assert not [k for k in leaves if "wall_time" in k or k.endswith(("segments", "rows"))]
     report = (root / "report/report.md").read_text()
     for png in ("world_composite_0.png", "schedule_composite_0.png", "rte_composite_0.png",
                 "trajectory_composite_0.png", "trials.png"):
@@ -175,10 +189,11 @@ def test_generalize_scores_every_world_of_the_suite(repro: tuple[Path, str]) -> 
     """The generalize stage: three unseen worlds (one per sensor), three settings each."""
     from pipeline.generalization.summary import RATIOS
     from pipeline.odometry.base import Schedule
+    from pipeline.report.outputs import read_summary
     from pipeline.trajectory import read_trajectory
 
     root, log = repro
-    m = json.loads((root / "metrics/generalization.json").read_text())
+    m = read_summary(root / "metrics/generalization.json")
     assert (m["suite"], m["seed_root"], m["worlds"]) == ("test", 90217, 3)
     worlds = m["per_world"]
     assert [w["sensor"] for w in worlds.values()] == ["hdl32", "vlp16", "hdl64"]
@@ -208,6 +223,7 @@ def test_generalize_scores_every_world_of_the_suite(repro: tuple[Path, str]) -> 
         assert m["replica_summary"][ratio]["worst"] == max(
             w["replica_ratio"][ratio] for w in worlds.values())
     assert m["replicas"] == 2 and m["noise"]["chance_ratio_p95"] >= 1.0
+    assert isinstance(m["summary"]["adaptive_vs_best"]["targets_met"], bool)  # the verdict
     rows = (root / "plots/generalization.csv").read_text().splitlines()
     assert len(rows) == 4 and rows[0].startswith("world,segments,sensor,frames,")
     assert rows[0].endswith(",replica_adaptive_vs_best")
@@ -276,19 +292,23 @@ def test_the_command_adapter_runs_the_whole_pipeline(
     for stage in ("trials", "fixed", "rte", "surrogate", "adaptive", "evaluate"):
         assert f"Running stage '{stage}'" in log
     assert "Running stage 'simulate'" not in log and "Running stage 'descriptors'" not in log
+    from pipeline.report.outputs import read_summary
+
     model = load_model(root / "model", expected_algorithm="command")
     assert model.names == ["max_correspondence_distance", "downsampling_resolution"]
-    metrics = json.loads((root / "metrics/evaluation.json").read_text())
+    metrics = read_summary(root / "metrics/evaluation.json")
     assert metrics["algorithm"] == "command"
     assert all(v > 0 for v in metrics["rte_pct"].values())
 
 
 def test_metrics_and_plot_data_are_committed(repro: tuple[Path, str]) -> None:
-    """metrics/ and plots/ are in git, not ignored, not in the DVC cache: nothing left over."""
+    """metrics/, records/ and plots/ are in git, not ignored, not in the DVC cache: nothing left
+    over."""
     root, _ = repro
-    tracked = git(root, "ls-files", "metrics", "plots").split()
+    tracked = git(root, "ls-files", "metrics", "records", "plots").split()
     assert {"metrics/evaluation.json", "metrics/surrogate.json", "plots/rte_frames.csv",
-            "plots/schedule/resolution.csv"} <= set(tracked)
+            "plots/schedule/resolution.csv", "records/evaluation.json",
+            "records/generalization.json", "records/surrogate.json"} <= set(tracked)
     assert git(root, "status", "--porcelain") == ""
 
 
@@ -328,10 +348,23 @@ def tiny(args: list[str], **values: str) -> list[str]:
     return out
 
 
+SKIP_SUITE = ["-S", "generalize.worlds=0"]
+"""The experiments' generalize stage runs no world (docs/usage.md): their metrics say so."""
+
+
 def exp_run(root: Path, name: str, *args: str, temp: bool = True) -> str:
-    """``dvc exp run -n NAME ARGS evaluate``: the stages up to the evaluate stage (in a
-    temporary copy unless ``temp`` is False)."""
-    return dvc(root, "exp", "run", *(["--temp"] if temp else []), "-n", name, *args, "evaluate")
+    """``dvc exp run -n NAME ARGS -S generalize.worlds=0 evaluate generalize``: the stages up to
+    evaluate, and generalize without a world (in a temporary copy unless ``temp`` is False)."""
+    return dvc(root, "exp", "run", *(["--temp"] if temp else []), "-n", name, *args,
+               *SKIP_SUITE, "evaluate", "generalize")
+
+
+def flat_leaves(node: Any, prefix: str = "") -> list[tuple[str, Any]]:
+    """The leaves of a parsed JSON as (dotted key, value), as DVC flattens metrics."""
+    if isinstance(node, dict):
+        return [leaf for k, v in node.items()
+                for leaf in flat_leaves(v, f"{prefix}.{k}" if prefix else str(k))]
+    return [(prefix, node)]
 
 
 def exp_shown(root: Path) -> dict[str, dict[str, Any]]:
@@ -364,8 +397,10 @@ def test_gicp_on_dask_experiment(repro: tuple[Path, str]) -> None:
     metrics = shown["metrics"]["metrics/evaluation.json"]["data"]
     params = shown["params"]["params.yaml"]["data"]
     assert (params["surrogate"]["k"], params["select"]["window"]) == (5, 1)
-    assert metrics["algorithm"] == "gicp" and metrics["length_m"] == TINY_L_M
+    assert params["trials"]["algorithm"] == "gicp" and params["base"]["length_m"] == TINY_L_M
     assert all(0 < v < 100 for v in metrics["rte_pct"].values()), metrics
+    # no world was run: no figure of the first run's suite rides along
+    assert shown["metrics"]["metrics/generalization.json"]["data"] == {}
     assert git(root, "status", "--porcelain") == ""
 
 
@@ -409,7 +444,9 @@ def test_kitti_and_kiss_icp_experiment_with_a_new_length(repro: tuple[Path, str]
     for seq in ("01", "06", "04"):
         with SequenceReader(root / f"data/recordings/{seq}.mcap") as reader:
             assert len(reader) == 10 and reader.info.sensor != "unknown"
-    metrics = json.loads((root / "metrics/evaluation.json").read_text())
+    from pipeline.report.outputs import read_summary
+
+    metrics = read_summary(root / "metrics/evaluation.json")
     assert metrics["algorithm"] == "kiss_icp" and list(metrics["sequences"]) == ["04"]
     assert metrics["length_m"] == new_l
     assert metrics["params"]["baseline"]["max_range"] == 220.0
@@ -427,10 +464,50 @@ def test_kitti_and_kiss_icp_experiment_with_a_new_length(repro: tuple[Path, str]
     assert any(d["path"] == "data/recordings" for d in lock["trials"]["deps"])
     for stage in ("trials", "fixed", "rte", "evaluate"):
         assert lock[stage]["params"]["params.yaml"]["base.length_m"] == new_l
-    diff = json.loads(dvc(root, "metrics", "diff", "main", "--json"))["metrics/evaluation.json"]
-    assert diff["length_m"] == {"old": TINY_L_M, "new": new_l, "diff": new_l - TINY_L_M}
+    # dvc metrics diff: figures only (no wall time, no name), and the first run's suite gone
+    diff = json.loads(dvc(root, "metrics", "diff", "main", "--json"))
+    rows = {f"{path}:{key}": row for path, keys in diff.items() for key, row in keys.items()}
+    assert "metrics/evaluation.json:rte_pct.adaptive" in rows
+    assert not [k for k in rows if "wall_time" in k or "algorithm" in k or "length_m" in k]
+    assert rows["metrics/generalization.json:summary.adaptive_vs_best.median"]["new"] is None
+    # dvc plots diff loads every plot of both revisions (the suite's figure of this experiment
+    # says it was not run; before, the stale one failed to load)
+    plots = json.loads(dvc(root, "plots", "diff", "main", "--json"))
+    assert not plots.get("errors"), plots.get("errors")
     assert {"gicp-dask", "kitti-kiss"} <= set(exp_metrics(root))
     diff = json.loads(dvc(root, "exp", "diff", "gicp-dask", "kitti-kiss", "--json"))
     assert diff["params"]["params.yaml"]["trials.algorithm"] == {"old": "gicp", "new": "kiss_icp"}
     assert {f"rte_pct.{s}" for s in ("baseline", "fixed", "adaptive")} <= set(
         diff["metrics"]["metrics/evaluation.json"])
+
+
+EXP_SHOW_WIDTH = 120
+
+
+def documented_exp_show() -> list[str]:
+    """The arguments of the `dvc exp show` line of docs/usage.md's ``sh`` blocks."""
+    blocks = [b.split("```", 1)[0] for b in (REPO / "docs/usage.md").read_text().split("```sh")[1:]]
+    (line,) = [ln for b in blocks for ln in b.replace("\\\n", " ").splitlines()
+               if ln.startswith("dvc exp show ")]
+    return shlex.split(line, comments=True)[3:]
+
+
+def test_the_documented_exp_show_fits_in_120_columns(repro: tuple[Path, str]) -> None:
+    """docs/usage.md's `dvc exp show --keep ...` line, given all the room it wants: every line
+    of its table is at most 120 columns, and it shows its columns whole (no "…") for the
+    workspace, main and the experiments above (the table had 593 columns)."""
+    root, _ = repro
+    args = documented_exp_show()
+    assert "--keep" in args and "--drop" in args
+    table = dvc(root, "exp", "show", "--no-pager", *args, columns=1000)
+    lines = table.rstrip("\n").splitlines()
+    assert max(len(line) for line in lines) <= EXP_SHOW_WIDTH, "\n" + table
+    assert "…" not in table
+    header = next(line for line in lines if "Experiment" in line).split()
+    assert header == ["Experiment", "rte_pct.baseline", "rte_pct.fixed", "rte_pct.adaptive",
+                      "summary.adaptive_vs_best.median"]
+    rows = [line.split() for line in lines[3:-1]]  # rule, header, rule ... rule
+    assert [r[0] for r in rows[:2]] == ["workspace", "main"], table
+    assert {r[2] for r in rows[2:]} >= {"[gicp-dask]", "[kitti-kiss]"}, table  # ├── rev [name]
+    for row in rows[2:]:  # the experiments ran no world: no figure of main's suite
+        assert row[-1] == "-", table

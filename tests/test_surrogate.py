@@ -212,6 +212,8 @@ def test_surrogate_stage(tmp_path: Path, kitti_root: Path) -> None:
             str(out),
             "--metrics",
             str(metrics),
+            "--record",
+            str(tmp_path / "record.json"),
         ],
     )
     assert res.exit_code == 0, res.output
@@ -220,7 +222,11 @@ def test_surrogate_stage(tmp_path: Path, kitti_root: Path) -> None:
     # no trials tables in this database: no joint study to compare, the defaults stay
     assert model.novelty_fallback["chosen"] == "defaults"
     assert model.fallback() == model.defaults()
-    assert json.loads(metrics.read_text())["folds"] == 4
+    record = json.loads((tmp_path / "record.json").read_text())
+    assert (record["algorithm"], record["folds"]) == ("ndt", 4)  # bookkeeping: not a metric
+    figures = json.loads(metrics.read_text())
+    assert "folds" not in figures and figures["mae"] > 0
+    assert set(figures["per_sequence"]) == set(record["per_sequence"])
     # an algorithm the database does not have: one line, exit 1, no new artifact
     res = CliRunner().invoke(
         main,

@@ -1,9 +1,15 @@
 """The ``generalize`` stage's outputs: ``run_generalization`` reads like its table of contents.
 
 Take the fixed parameters from the joint SMBO, score baseline, fixed and adaptive on every
-world of the suite (``pipeline.generalization.run``), then write the metrics JSON, the plot
-data (one row per world) and the figure (RTE of every setting per world above, the ratio
-adaptive / min(baseline, fixed) per world below, with the issue's targets).
+world of the suite (``pipeline.generalization.run``), then write the metrics JSON (the figures)
+and the record (the rest), the plot data (one row per world) and the figure (RTE of every
+setting per world above, the ratio adaptive / min(baseline, fixed) per world below, with the
+issue's targets).
+
+``generalize.worlds: 0`` runs no world: the stage then writes empty metrics, a record that says
+so, plot data without rows and a figure that says so. An experiment that skips the suite (the
+KITTI protocol: ``make kitti``) thus carries no figure of an earlier run's suite, as it would if
+it stopped at the ``evaluate`` target (DVC keeps the outputs of the stages it does not run).
 """
 
 from __future__ import annotations
@@ -18,6 +24,8 @@ import numpy as np
 from pipeline.generalization.run import SuiteInputs, WorldScore, run_suite
 from pipeline.generalization.suite import GeneralizeSection
 from pipeline.generalization.summary import (
+    PLOT_COLUMNS,
+    RECORD_KEYS,
     TARGET_MEDIAN,
     TARGET_WORST,
     plot_rows,
@@ -34,7 +42,8 @@ class GeneralizationPaths:
     model: Path  # model/ (the artifact)
     fixed: Path  # results/fixed (joint SMBO)
     runs: Path  # results/generalization: trajectories and schedules per world
-    metrics: Path  # metrics/generalization.json
+    metrics: Path  # metrics/generalization.json (the figures)
+    record: Path  # records/generalization.json (the rest of the summary)
     plot_data: Path  # plots/generalization.csv
     figure: Path  # report/generalization.png
 
@@ -43,10 +52,13 @@ def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
                        adapter_options: Mapping[str, Any] | None = None,
                        selection: SelectionSettings | None = None) -> dict[str, Any]:
     """Score the suite ``section.suite`` with the selector's runtime ``selection`` (params
-    ``select``; None: the defaults); write metrics, plot data and figure; return the
-    metrics."""
+    ``select``; None: the defaults); write metrics, record, plot data and figure; return the
+    summary (metrics and record together)."""
     from pipeline.evaluate.runs import best_fixed_params
-    from pipeline.report.outputs import csv_text, write_json
+    from pipeline.report.outputs import csv_text, write_metrics
+
+    if section.worlds == 0:
+        return no_suite(paths, section)
 
     algorithm, fixed = best_fixed_params(paths.fixed)
     inputs = SuiteInputs(paths.model, paths.fixed, algorithm, fixed, dict(adapter_options or {}),
@@ -55,10 +67,28 @@ def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
     scores = run_suite(section, inputs, paths.runs)
     result = suite_metrics(scores, section.suite, section.root, section.bootstrap, algorithm,
                            section.length_m)
-    write_json(paths.metrics, result)
+    write_metrics(paths.metrics, paths.record, result, RECORD_KEYS)
     atomic_write_text(paths.plot_data, csv_text(plot_rows(scores)))
     suite_figure(scores, result, paths.figure)
     return result
+
+
+def no_suite(paths: GeneralizationPaths, section: GeneralizeSection) -> dict[str, Any]:
+    """The outputs of a suite of no world (module docstring); returns its summary."""
+    from pipeline.io_utils import atomic_dir
+    from pipeline.report.outputs import csv_text, figure, write_metrics
+
+    note = "generalize.worlds is 0: no world was run"
+    summary: dict[str, Any] = {"suite": section.suite, "worlds": 0, "not_run": note}
+    with atomic_dir(paths.runs) as tmp:
+        (tmp / "not_run.txt").write_text(note + "\n", encoding="utf-8")
+    write_metrics(paths.metrics, paths.record, summary, RECORD_KEYS)
+    atomic_write_text(paths.plot_data, csv_text([], header=PLOT_COLUMNS))
+    with figure(paths.figure, size=(6, 1.5)) as (_, ax):
+        ax[0, 0].axis("off")
+        ax[0, 0].text(0.5, 0.5, f"{section.suite} suite not run (generalize.worlds = 0)",
+                      ha="center", va="center")
+    return summary
 
 
 def suite_figure(scores: Sequence[WorldScore], metrics: Mapping[str, Any], out_png: Path) -> Path:

@@ -32,7 +32,8 @@ class GeneralizeSection(Section):
 
     seed_roots: the root of every suite's seeds (fixed before any result was seen);
     worlds: worlds per suite; segments: (min, max) segments per world; segment_frames: (min,
-    max) frames per segment (10 Hz); bootstrap: resamples of the bootstrap interval of the
+    max) frames per segment (10 Hz; 0 worlds: no suite, ``pipeline.generalization.report``);
+    bootstrap: resamples of the bootstrap interval of the
     median ratio; replicas: extra runs of every setting on every world with the parameters
     moved by at most ``replica_scale`` (relative), to measure how far one run is from the next
     (``pipeline.evaluate.replicas``; 0: none); workers: worlds run in parallel;
@@ -41,7 +42,7 @@ class GeneralizeSection(Section):
 
     suite: Literal["dev", "test"] = "test"
     seed_roots: dict[str, int] = Field(default_factory=lambda: {"dev": 61403, "test": 90217})
-    worlds: int = Field(6, ge=1)
+    worlds: int = Field(6, ge=0)
     segments: tuple[int, int] = (2, 5)
     segment_frames: tuple[int, int] = (150, 300)
     labels: tuple[str, ...] = LABELS

@@ -1,5 +1,7 @@
 """The suite's figures: per-world ratios and their median, worst world, win rate and a
-bootstrap interval of the median (``metrics/generalization.json``, ``plots/generalization.csv``).
+bootstrap interval of the median, and the verdict on issue 12's targets (``targets_met`` of
+adaptive / min(baseline, fixed)) (``metrics/generalization.json``, ``plots/generalization.csv``;
+``records/generalization.json`` holds the rest of the summary: ``RECORD_KEYS``).
 
 A ratio below 1 means adaptive beat the other setting on that world (lower RTE); the win rate
 is the fraction of worlds whose ratio is below 1. The interval is the percentile bootstrap
@@ -17,7 +19,7 @@ the ratios a selector no better and no worse than a fixed setting would show by 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -26,12 +28,28 @@ from numpy.typing import NDArray
 from pipeline.generalization.run import WorldScore
 
 RATIOS = ("adaptive_vs_best", "adaptive_vs_baseline", "adaptive_vs_fixed")
+RECORD_KEYS = ("seed_root", "length_m", "worlds", "frames", "replicas", "seed", "wall_time_s",
+               "replicas_rte_pct")
+"""The summary's bookkeeping (besides its text: names, segments, sensors): the suite's seeds
+and sizes, L, wall times and the replica runs' raw lists."""
+PLOT_COLUMNS = ("world", "segments", "sensor", "frames", "baseline_pct", "fixed_pct",
+                "adaptive_pct", *RATIOS)
+"""The columns of ``plot_rows`` without replicas (the header of a suite without worlds)."""
 INTERVAL = 0.90
 TARGET_MEDIAN = 0.75
 TARGET_WORST = 1.05
 TARGET_WIN_RATE = 0.90
 """Issue 12's targets on the test worlds: median ratio adaptive / min(baseline, fixed), worst
 world (drawn in the figure) and win rate."""
+
+
+def meets_targets(summary: Mapping[str, Any]) -> bool | None:
+    """The verdict: whether a ``ratio_summary`` of adaptive / min(baseline, fixed) meets the
+    three targets (None without a finite ratio)."""
+    if summary["median"] is None:
+        return None
+    return bool(summary["median"] <= TARGET_MEDIAN and summary["worst"] <= TARGET_WORST
+                and summary["win_rate"] >= TARGET_WIN_RATE)
 
 
 def ratio_summary(names: Sequence[str], ratios: Sequence[float], resamples: int,
@@ -55,11 +73,11 @@ def ratio_summary(names: Sequence[str], ratios: Sequence[float], resamples: int,
 
 def suite_metrics(scores: Sequence[WorldScore], suite: str, root: int, resamples: int,
                   algorithm: str, length_m: float) -> dict[str, Any]:
-    """The JSON of ``metrics/generalization.json``: the suite, every world, every ratio's
-    summary (module docstring)."""
+    """The summary of the suite, every world, every ratio (module docstring)."""
     names = [s.name for s in scores]
     summary = {k: ratio_summary(names, [s.ratios()[k] for s in scores], resamples, root)
                for k in RATIOS}
+    summary["adaptive_vs_best"]["targets_met"] = meets_targets(summary["adaptive_vs_best"])
     out: dict[str, Any] = {
         "algorithm": algorithm,
         "suite": suite,
@@ -74,6 +92,8 @@ def suite_metrics(scores: Sequence[WorldScore], suite: str, root: int, resamples
         out["replica_summary"] = {
             k: ratio_summary(names, [s.replica_ratios()[k] for s in scores], resamples, root)
             for k in RATIOS}
+        best = out["replica_summary"]["adaptive_vs_best"]
+        best["targets_met"] = meets_targets(best)
         out["noise"] = noise_summary(scores)
     out["per_world"] = {s.name: s.to_json() for s in scores}
     return out

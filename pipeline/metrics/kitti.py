@@ -186,8 +186,11 @@ def check_poses(poses: F64, what: str) -> None:
 
 
 def evaluate_kitti_files(gt_path: str | Path, est_path: str | Path,
-                         lengths_m: Sequence[float] = LENGTHS_M) -> dict[str, Any]:
-    """The devkit metric of two KITTI pose files (camera frame, as the benchmark ships them).
+                         lengths_m: Sequence[float] = LENGTHS_M,
+                         step_frames: int = STEP_FRAMES) -> dict[str, Any]:
+    """The devkit metric of two KITTI pose files (camera frame, as the benchmark ships them),
+    over segments of ``lengths_m`` (any lengths: short runs take short ones) starting every
+    ``step_frames`` frames.
 
     Returns {"t_err_pct", "r_err_deg_per_m", "segments", "frames", "per_length": {length:
     {"t_err_pct", "r_err_deg_per_m", "segments"}}}. InputError names the file when the files
@@ -199,11 +202,11 @@ def evaluate_kitti_files(gt_path: str | Path, est_path: str | Path,
     if len(est) != len(gt):
         raise InputError(f"{est_path}: estimate has {len(est)} poses, "
                          f"ground truth {gt_path} has {len(gt)}")
-    seg = kitti_errors(gt, est, lengths_m)
+    seg = kitti_errors(gt, est, lengths_m, step_frames)
     if not len(seg):
         total = float(trajectory_distances(gt)[-1])
         raise InputError(f"{gt_path}: path is {total:.1f} m long, too short for a "
-                         f"{min(lengths_m):g} m segment")
+                         f"{min(lengths_m):g} m segment (shorter segment lengths: --lengths)")
     per_length = {}
     for length in lengths_m:
         m = seg.length_m == float(length)

@@ -1,15 +1,27 @@
-"""Errors of an estimated trajectory against a ground truth, for runs of any length.
+"""Errors of an estimated trajectory against a ground truth, for runs of any length, as evo
+computes them (evo_ape, evo_rpe; tests/metrics/test_trajectory_error.py checks each against
+evo's Python API).
 
 - RTE: the pipeline's own per-start-frame relative error over ``length_m`` metres
-  (pipeline.metrics.rte), averaged over the start frames: the number trials optimise.
-- APE (as evo_ape): translation error [m] of every pose after aligning the estimate to the
-  ground truth with Umeyama's method (rotation and translation; scale too with ``scale``).
-- RPE (as evo_rpe): translation error [m] of the relative motion between consecutive frames.
+  (pipeline.metrics.rte), averaged over the start frames: the number trials optimise. It is
+  taken on the estimate as given (no alignment).
+- Alignment of the estimate to the ground truth (evo's ``-a`` / ``-s`` / ``--align_origin``):
+  ``none``; ``origin`` (its first pose onto the ground truth's first pose); ``se3`` (Umeyama:
+  rotation and translation fitted to every position); ``sim3`` (Umeyama with scale).
+- APE (evo_ape): per pose, the translation error [m] and the rotation angle [deg] of
+  inv(est) gt, after the alignment.
+- RPE (evo_rpe): per pair (i, j), the translation error [m] and the rotation angle [deg] of
+  inv(inv(gt_i) gt_j) inv(est_i) est_j, after the alignment. Pairs: every ``delta`` frames,
+  or every ``delta`` metres of path (consecutive pairs: a new pair starts where the last one
+  ended, once the path since reaches ``delta``); with ``all_pairs``, from every frame (frames:
+  i + delta; metres: the frame whose path distance from i is nearest ``delta``, kept within
+  10 % of it). The path is the aligned estimate's (evo's default) or the ground truth's.
 APE and RPE give rmse, mean, median, std, min and max, as evo does.
 
 Inputs: a sequence MCAP (its ground truth), a trajectory Parquet (``adaptune run``) or a pose
-file of any format pipeline.posefile reads. Stamped poses on both sides are paired by
-the nearest stamp within 10 ms (evo's default); otherwise pose k pairs with pose k.
+file of any format pipeline.posefile reads. Stamped poses on both sides are paired as
+evo.core.sync does: every pose of the side with fewer poses takes the nearest stamp of the
+other within 10 ms (the earlier one on a tie); otherwise pose k pairs with pose k.
 """
 
 from __future__ import annotations
@@ -17,7 +29,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,8 +40,15 @@ from pipeline.metrics.rte import per_frame_rte
 from pipeline.posefile import PoseFormat, read_pose_file
 
 F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+Alignment = Literal["none", "origin", "se3", "sim3"]
+ALIGNMENTS: tuple[Alignment, ...] = ("none", "origin", "se3", "sim3")
+DeltaUnit = Literal["frames", "m"]
 MAX_STAMP_DIFF_NS = 10_000_000
 """Stamped poses pair with the nearest stamp within 10 ms (evo's max_diff 0.01 s)."""
+REL_DELTA_TOL = 0.1
+"""RPE over all pairs with a delta in metres: a pair is kept when its path distance is within
+10 % of the delta (evo's rel_delta_tol)."""
 
 
 @dataclass(frozen=True)
@@ -39,6 +58,31 @@ class Poses:
     what: str
     T: F64
     stamps_ns: NDArray[np.int64] | None
+
+
+@dataclass(frozen=True)
+class RpeSettings:
+    """Which pairs the RPE compares (module docstring): ``delta`` frames (a whole number) or
+    metres, consecutive pairs or ``all_pairs``, along the path of the aligned estimate or,
+    with ``pairs_from_reference``, of the ground truth."""
+
+    delta: float = 1.0
+    unit: DeltaUnit = "frames"
+    all_pairs: bool = False
+    pairs_from_reference: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.delta > 0:
+            raise InputError(f"the RPE delta must be > 0, got {self.delta:g} {self.unit}")
+        if self.unit == "frames" and float(self.delta) != int(self.delta):
+            raise InputError(f"the RPE delta in frames must be a whole number, got "
+                             f"{self.delta:g}")
+
+    def describe(self) -> str:
+        """``1 frame, consecutive pairs``."""
+        unit = ("frame" if self.delta == 1 else "frames") if self.unit == "frames" else "m"
+        pairs = "all pairs" if self.all_pairs else "consecutive pairs"
+        return f"{self.delta:g} {unit}, {pairs}"
 
 
 def load_poses(path: str | Path, fmt: PoseFormat = "auto") -> Poses:
@@ -61,23 +105,36 @@ def load_poses(path: str | Path, fmt: PoseFormat = "auto") -> Poses:
 
 
 def associate(gt: Poses, est: Poses) -> tuple[F64, F64]:
-    """Paired (M, 4, 4) ground-truth and estimated poses (module docstring)."""
+    """Paired (M, 4, 4) ground-truth and estimated poses (module docstring: evo's rule)."""
     if gt.stamps_ns is None or est.stamps_ns is None:
         if len(gt.T) != len(est.T):
             raise InputError(f"{est.what}: {len(est.T)} poses, the ground truth {gt.what} has "
                              f"{len(gt.T)} (without stamps on both sides, pose k pairs with "
                              "pose k)")
         return gt.T, est.T
-    idx = np.clip(np.searchsorted(gt.stamps_ns, est.stamps_ns), 1, max(len(gt.T) - 1, 1))
-    before = np.abs(est.stamps_ns - gt.stamps_ns[idx - 1])
-    after = np.abs(est.stamps_ns - gt.stamps_ns[np.minimum(idx, len(gt.T) - 1)])
-    nearest = np.where(before <= after, idx - 1, np.minimum(idx, len(gt.T) - 1))
-    ok = np.minimum(before, after) <= MAX_STAMP_DIFF_NS
-    ok &= np.concatenate([[True], np.diff(nearest) > 0])  # each ground-truth pose once
-    if ok.sum() < 2:
+    est_shorter = len(est.T) <= len(gt.T)  # evo: the side with fewer poses keeps them all
+    short, long = (est, gt) if est_shorter else (gt, est)
+    i_short, i_long = nearest_stamps(short.stamps_ns, long.stamps_ns)  # type: ignore[arg-type]
+    if len(i_short) < 2:
         raise InputError(f"{est.what}: fewer than 2 poses within 10 ms of a ground-truth stamp "
                          f"in {gt.what}")
-    return gt.T[nearest[ok]], est.T[ok]
+    if est_shorter:
+        return gt.T[i_long], est.T[i_short]
+    return gt.T[i_short], est.T[i_long]
+
+
+def nearest_stamps(short_ns: I64, long_ns: I64) -> tuple[I64, I64]:
+    """(i_short, i_long): every stamp of ``short_ns`` that has one of the increasing
+    ``long_ns`` within 10 ms, and the index of the nearest such one (the earlier on a tie),
+    as evo.core.sync.matching_time_indices."""
+    last = len(long_ns) - 1
+    upper = np.minimum(np.searchsorted(long_ns, short_ns, side="right"), last)
+    lower = np.maximum(upper - 1, 0)
+    d_upper = np.abs(long_ns[upper] - short_ns)
+    d_lower = np.where(upper > 0, np.abs(short_ns - long_ns[lower]), np.iinfo(np.int64).max)
+    nearest = np.where(d_upper < d_lower, upper, lower)
+    ok = np.minimum(d_upper, d_lower) <= MAX_STAMP_DIFF_NS
+    return np.flatnonzero(ok).astype(np.int64), nearest[ok].astype(np.int64)
 
 
 def umeyama(src: F64, dst: F64, scale: bool) -> tuple[F64, F64, float]:
@@ -97,29 +154,110 @@ def umeyama(src: F64, dst: F64, scale: bool) -> tuple[F64, F64, float]:
     return R, mu_d - s * R @ mu_s, s
 
 
+def align(gt: F64, est: F64, alignment: Alignment) -> tuple[F64, float]:
+    """(``est`` aligned to ``gt`` (M, 4, 4), the scale applied) for paired (M, 4, 4) poses."""
+    if alignment == "none":
+        return est, 1.0
+    if alignment == "origin":
+        return gt[0] @ inv_se3(est[:1]) @ est, 1.0
+    R, t, s = umeyama(est[:, :3, 3], gt[:, :3, 3], scale=alignment == "sim3")
+    aligned = est.copy()
+    aligned[:, :3, :3] = R @ est[:, :3, :3]
+    aligned[:, :3, 3] = s * est[:, :3, 3] @ R.T + t
+    return aligned, s
+
+
+def rotation_angle_deg(R: F64) -> F64:
+    """(M,) angle [deg] of (M, 3, 3) rotations: the norm of their rotation vectors (evo's
+    so3_log_angle; exact for small angles, unlike the arccos of the trace)."""
+    from scipy.spatial.transform import Rotation
+
+    return np.degrees(Rotation.from_matrix(R).magnitude())
+
+
+def ape_errors(gt: F64, aligned: F64) -> tuple[F64, F64]:
+    """APE of paired (M, 4, 4) poses: (translation error [m], rotation angle [deg]), each
+    (M,)."""
+    t_err = np.linalg.norm(aligned[:, :3, 3] - gt[:, :3, 3], axis=1)
+    E = inv_se3(aligned) @ gt
+    return t_err, rotation_angle_deg(E[:, :3, :3])
+
+
+def rpe_pairs(poses: F64, settings: RpeSettings) -> tuple[I64, I64]:
+    """(i, j) index pairs (P,) of the RPE along the path of (M, 4, 4) ``poses`` (module
+    docstring); InputError when there is none."""
+    n = len(poses)
+    if settings.unit == "frames":
+        d = int(settings.delta)
+        first = np.arange(0, n - d) if settings.all_pairs else np.arange(0, n, d)[:-1]
+        i, j = first, first + d
+    elif settings.all_pairs:
+        i, j = _all_pairs_by_path(path_distances(poses), settings.delta)
+    else:
+        i, j = _consecutive_pairs_by_path(poses, settings.delta)
+    if not len(i):
+        raise InputError(f"no RPE pair of {settings.describe()} in {n} poses: try a smaller "
+                         "delta")
+    return i.astype(np.int64), j.astype(np.int64)
+
+
+def _all_pairs_by_path(dist_m: F64, delta_m: float) -> tuple[I64, I64]:
+    """From every frame i, the later frame j whose path distance from i is nearest
+    ``delta_m`` (the first of equals), kept when within REL_DELTA_TOL of it."""
+    i_out, j_out = [], []
+    for i in range(len(dist_m) - 1):
+        gap = np.abs(dist_m[i + 1:] - dist_m[i] - delta_m)
+        k = int(np.argmin(gap))
+        if gap[k] <= delta_m * REL_DELTA_TOL:
+            i_out.append(i)
+            j_out.append(i + 1 + k)
+    return np.array(i_out, np.int64), np.array(j_out, np.int64)
+
+
+def _consecutive_pairs_by_path(poses: F64, delta_m: float) -> tuple[I64, I64]:
+    """Pairs that follow each other along the path: a pair ends at the first frame where the
+    path since its start reaches ``delta_m``, and the next one starts there."""
+    steps = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
+    ends = [0]
+    since = 0.0
+    for k, step in enumerate(steps, start=1):
+        since += float(step)
+        if since >= delta_m:
+            ends.append(k)
+            since = 0.0
+    return np.array(ends[:-1], np.int64), np.array(ends[1:], np.int64)
+
+
+def rpe_errors(gt: F64, aligned: F64, i: I64, j: I64) -> tuple[F64, F64]:
+    """RPE of the pairs (i, j) of paired (M, 4, 4) poses: (translation error [m], rotation
+    angle [deg]), each (P,)."""
+    d_gt = inv_se3(gt[i]) @ gt[j]
+    d_est = inv_se3(aligned[i]) @ aligned[j]
+    E = inv_se3(d_gt) @ d_est
+    return np.linalg.norm(E[:, :3, 3], axis=1), rotation_angle_deg(E[:, :3, :3])
+
+
 def _stats(err: F64) -> dict[str, float]:
     return {"rmse": float(np.sqrt(np.mean(err**2))), "mean": float(err.mean()),
             "median": float(np.median(err)), "std": float(err.std()),
             "min": float(err.min()), "max": float(err.max())}
 
 
-def trajectory_errors(gt: F64, est: F64, length_m: float, scale: bool = False) -> dict[str, Any]:
-    """RTE over ``length_m``, APE after Umeyama alignment (Sim(3) with ``scale``) and RPE
-    between consecutive frames of paired (M, 4, 4) poses; JSON-ready."""
+def trajectory_errors(gt: F64, est: F64, length_m: float, alignment: Alignment = "se3",
+                      rpe: RpeSettings | None = None) -> dict[str, Any]:
+    """RTE over ``length_m`` (of ``est`` as given), then APE and RPE after ``alignment``, of
+    paired (M, 4, 4) poses; JSON-ready."""
+    rpe = rpe or RpeSettings()
     path = path_distances(gt)
     if path[-1] <= length_m:
         raise InputError(f"the ground truth runs {path[-1]:.2f} m, not longer than "
                          f"--length {length_m:g} m: no sub-trajectory to score")
     t_err, r_err = per_frame_rte(gt, est, length_m)
     ok = np.isfinite(t_err)
-    R, t, s = umeyama(est[:, :3, 3], gt[:, :3, 3], scale)
-    aligned = est.copy()
-    aligned[:, :3, :3] = R @ est[:, :3, :3]
-    aligned[:, :3, 3] = s * est[:, :3, 3] @ R.T + t
-    ape = np.linalg.norm(aligned[:, :3, 3] - gt[:, :3, 3], axis=1)
-    d_gt = inv_se3(gt[:-1]) @ gt[1:]
-    d_est = inv_se3(aligned[:-1]) @ aligned[1:]
-    rpe = np.linalg.norm((inv_se3(d_gt) @ d_est)[:, :3, 3], axis=1)
+    aligned, scale = align(gt, est, alignment)
+    ape_t, ape_r = ape_errors(gt, aligned)
+    i, j = rpe_pairs(gt if rpe.pairs_from_reference else aligned, rpe)
+    rpe_t, rpe_r = rpe_errors(gt, aligned, i, j)
     return {
         "frames": len(gt), "path_m": float(path[-1]),
         "rte": {"length_m": float(length_m), "segments": int(ok.sum()),
@@ -127,13 +265,17 @@ def trajectory_errors(gt: F64, est: F64, length_m: float, scale: bool = False) -
                 "r_err_deg_per_m": float(np.degrees(r_err[ok].mean())),
                 "t_err_pct_median": float(np.median(t_err[ok])),
                 "t_err_pct_max": float(t_err[ok].max())},
-        "ape": {"alignment": "sim3" if scale else "se3", "scale": s, **_stats(ape)},
-        "rpe": {"delta_frames": 1, **_stats(rpe)},
+        "alignment": {"method": alignment, "scale": scale},
+        "ape": {"translation_m": _stats(ape_t), "rotation_deg": _stats(ape_r)},
+        "rpe": {"delta": rpe.delta, "delta_unit": rpe.unit, "all_pairs": rpe.all_pairs,
+                "pairs_from": "ground truth" if rpe.pairs_from_reference else "estimate",
+                "pairs": len(i), "translation_m": _stats(rpe_t), "rotation_deg": _stats(rpe_r)},
     }
 
 
 def evaluate_files(gt_path: str | Path, est_path: str | Path, length_m: float,
-                   scale: bool = False, gt_format: PoseFormat = "auto",
+                   alignment: Alignment = "se3", rpe: RpeSettings | None = None,
+                   gt_format: PoseFormat = "auto",
                    est_format: PoseFormat = "auto") -> dict[str, Any]:
     """``trajectory_errors`` of two files (module docstring: which files)."""
     if not length_m > 0:
@@ -142,4 +284,4 @@ def evaluate_files(gt_path: str | Path, est_path: str | Path, length_m: float,
     if not (np.isfinite(gt).all() and np.isfinite(est).all()):
         raise InputError(f"{est_path}: a pose is not finite")
     return {"ground_truth": str(gt_path), "estimate": str(est_path),
-            **trajectory_errors(gt, est, length_m, scale)}
+            **trajectory_errors(gt, est, length_m, alignment, rpe)}

@@ -1,5 +1,6 @@
-"""The ``evaluate`` stage's metrics JSON (``dvc metrics show``): RTE per setting, split, label
-and sequence, the ratios, the devkit metric, replica runs, trial counts."""
+"""The ``evaluate`` stage's summary: RTE per setting, split, label and sequence, the ratios, the
+devkit metric, replica runs, trial counts. ``metrics/evaluation.json`` holds its figures,
+``records/evaluation.json`` the rest (``RECORD_KEYS``; ``pipeline.report.outputs``)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,11 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.evaluate.result import SETTINGS, Evaluation
+
+RECORD_KEYS = ("length_m", "replicas", "kitti_lengths_m", "segments", "wall_time_s", "params",
+               "trials", "replicas_rte_pct")
+"""The summary's bookkeeping (besides its text): params echoed, segment counts, wall times,
+the parameters baseline and fixed ran with, trial counts, the replica runs' raw lists."""
 
 
 def trials_summary(studies: Mapping[str, Path]) -> dict[str, dict[str, float]]:
@@ -46,8 +52,8 @@ def split_metrics(ev: Evaluation, split: str) -> dict[str, Any]:
 
 
 def metrics(ev: Evaluation, trials: Mapping[str, Mapping[str, float]]) -> dict[str, Any]:
-    """The JSON of ``dvc metrics show``: RTE per setting (headline split: overall, per label;
-    per split; per sequence), ratios, KITTI metric, failed-trial counts and wall times."""
+    """The stage's summary: RTE per setting (headline split: overall, per label; per split;
+    per sequence), ratios, KITTI metric, failed-trial counts and wall times."""
     splits = {split: split_metrics(ev, split) for split in ev.splits}
     head = splits[ev.splits[0]]
     return {

@@ -18,8 +18,8 @@ from pipeline.evaluate.runs import best_fixed_params, evaluate
 from pipeline.evaluate.section import EvaluateSection
 from pipeline.io_utils import atomic_write_text
 from pipeline.report import figures
-from pipeline.report.metrics import metrics, trials_summary
-from pipeline.report.outputs import csv_text, write_json
+from pipeline.report.metrics import RECORD_KEYS, metrics, trials_summary
+from pipeline.report.outputs import csv_text, write_metrics
 from pipeline.report.table2 import table2_json, table2_markdown
 
 
@@ -32,7 +32,8 @@ class EvaluationPaths:
     fixed: Path  # results/fixed (joint SMBO)
     adaptive: Path  # results/adaptive
     runs: Path  # results/evaluation: baseline and fixed trajectories
-    metrics: Path  # metrics/evaluation.json
+    metrics: Path  # metrics/evaluation.json (the figures)
+    record: Path  # records/evaluation.json (the rest of the summary)
     plots: Path  # plots/ (CSV for dvc plots)
     report: Path  # report/ (report.md + PNG)
 
@@ -40,7 +41,7 @@ class EvaluationPaths:
 def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection,
                    adapter_options: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Evaluate baseline, fixed and adaptive on the sequences of ``settings.splits``; write
-    everything; return the metrics."""
+    everything; return the summary (metrics and record together)."""
     from pipeline.sequence_index import read_index
     from pipeline.tuning.layout import read_trials_tables
 
@@ -49,7 +50,7 @@ def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection,
     ev = evaluate(list(split_of), algorithm, fixed, paths.adaptive, paths.runs, settings,
                   adapter_options, paths.fixed, {p.stem: split for p, split in split_of.items()})
     result = metrics(ev, trials_summary({"trials": paths.trials, "fixed": paths.fixed}))
-    write_json(paths.metrics, result)
+    write_metrics(paths.metrics, paths.record, result, RECORD_KEYS)
     write_plot_data(ev, paths.plots)
     trial_rows = [r for r in read_trials_tables(paths.trials).to_pylist()
                   if r["algorithm"] == algorithm]

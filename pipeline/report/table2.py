@@ -3,8 +3,9 @@
 One block per algorithm, one row per setting (baseline, fixed, adaptive), one column per
 sequence grouped by split (training sequences first), each split followed by its average: the
 devkit t_err [%] pooled over every segment of the split's sequences, as the devkit pools a
-benchmark. The input is the ``evaluate`` stage's metrics JSON (``pipeline.report.metrics.
-metrics``) of each algorithm; ``table2_json`` and ``table2_markdown`` lay them out.
+benchmark. The input is the ``evaluate`` stage's summary (``pipeline.report.metrics.metrics``:
+its metrics JSON and its record) of each algorithm; ``table2_json`` and ``table2_markdown`` lay
+them out.
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ def table2_json(blocks: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
 def _check(m: Mapping[str, Any]) -> None:
     keys = ("algorithm", "length_m", "splits", "sequences")
     if not isinstance(m, Mapping) or any(k not in m for k in keys):
-        raise InputError("not the metrics JSON of the evaluate stage (needs "
+        raise InputError("not the summary of the evaluate stage (its metrics and record need "
                          f"{', '.join(keys)})")
 
 
@@ -136,19 +137,13 @@ KITTI_SPLIT_TITLES = {"train": "training", "validation": "test"}
 
 def write_table2(metrics_paths: Sequence[Path], out_dir: Path,
                  split_titles: Mapping[str, str] | None = None) -> dict[str, Any]:
-    """Read the ``evaluate`` metrics JSON of every algorithm, write ``out_dir``/table.json and
-    table.md (atomically); return the table. InputError for a file that is not one."""
-    import json
+    """Read the ``evaluate`` summary of every algorithm (each metrics JSON with the record
+    ``pipeline.report.outputs.record_beside`` it), write ``out_dir``/table.json and table.md
+    (atomically); return the table. InputError for a file that is not one."""
+    from pipeline.io_utils import atomic_write_text
+    from pipeline.report.outputs import read_summary, write_json
 
-    from pipeline.io_utils import atomic_write_text, read_input_text
-    from pipeline.report.outputs import write_json
-
-    blocks = []
-    for path in metrics_paths:
-        try:
-            blocks.append(json.loads(read_input_text(path, "metrics JSON", strict=True)))
-        except json.JSONDecodeError as exc:
-            raise InputError(f"{path}: cannot read the metrics JSON ({exc})") from None
+    blocks = [read_summary(path) for path in metrics_paths]
     if not blocks:
         raise InputError("no metrics JSON given")
     table = table2_json(blocks)

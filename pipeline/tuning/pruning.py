@@ -33,9 +33,10 @@ F64 = NDArray[np.float64]
 
 
 class PruningSection(Section):
-    """params.yaml ``trials.pruning``: the percentile pruner (``percentile: null`` = off)."""
+    """params.yaml ``trials.pruning``: the percentile pruner (``percentile: null`` = off, the
+    default; ``fixed.pruning`` turns it on for the joint study)."""
 
-    percentile: float | None = Field(50.0, gt=0, lt=100)
+    percentile: float | None = Field(None, gt=0, lt=100)
     checkpoints: int = Field(10, ge=2, le=1000)
     warmup: float = Field(0.2, ge=0, lt=1)
     min_trials: int = Field(5, ge=1)

@@ -80,7 +80,7 @@ class TrialsSection(Section):
 
     algorithm: str = "ndt"
     iterations: int = Field(256, ge=1)
-    workers: int = Field(1, ge=1)
+    workers: int = Field(2, ge=1)
     dask: str | None = None
     time_limit_s: float | None = Field(600.0, gt=0)
     penalty_pct: float = Field(100.0, gt=0)
@@ -114,7 +114,8 @@ class TrialsSection(Section):
 
 class FixedSection(Section):
     """params.yaml ``fixed``: what the joint study (the paper's "fixed" parameters) does
-    differently from ``trials``; null keeps the ``trials`` value.
+    differently from ``trials``; null keeps the ``trials`` value. The defaults are params.yaml's
+    (64 iterations after a warm start of 4, its own pruner at the 50th percentile).
 
     warm_start: the joint study starts from what the per-sequence studies measured: after the
     baseline, its first ``warm_start`` trials are the parameter sets they predict best for all
@@ -123,10 +124,11 @@ class FixedSection(Section):
     every training sequence, and its rows do not train the surrogate.
     """
 
-    iterations: int | None = Field(None, ge=1)
+    iterations: int | None = Field(64, ge=1)
     workers: int | None = Field(None, ge=1)
-    warm_start: int = Field(0, ge=0)
-    pruning: PruningSection | None = None
+    warm_start: int = Field(4, ge=0)
+    pruning: PruningSection | None = Field(
+        default_factory=lambda: PruningSection.model_validate({"percentile": 50.0}))
 
 
 @dataclass

@@ -17,15 +17,17 @@ from stages.cli import main
 FLOAT32_RTOL = 2.0**-23  # kiss-icp returns std::tuple<float, float>: one float32 rounding
 
 
-def devkit_loop(gt: np.ndarray, est: np.ndarray) -> list[tuple[int, float, float, float]]:
-    """calcSequenceErrors of evaluate_odometry.cpp, transcribed line by line."""
+def devkit_loop(gt: np.ndarray, est: np.ndarray, lengths: tuple[float, ...] = LENGTHS_M,
+                step: int = 10) -> list[tuple[int, float, float, float]]:
+    """calcSequenceErrors of evaluate_odometry.cpp, transcribed line by line (its lengths and
+    step as arguments)."""
     dist = [0.0]
     for i in range(1, len(gt)):
         dx, dy, dz = gt[i - 1][:3, 3] - gt[i][:3, 3]
         dist.append(dist[i - 1] + np.sqrt(dx * dx + dy * dy + dz * dz))
     err = []
-    for first in range(0, len(gt), 10):
-        for length in LENGTHS_M:
+    for first in range(0, len(gt), step):
+        for length in lengths:
             last = next((i for i in range(first, len(dist)) if dist[i] > dist[first] + length), -1)
             if last == -1:
                 continue
@@ -136,3 +138,31 @@ def test_metric_cli_bad_inputs(tmp_path: Path, kitti_trajectories: Path) -> None
     cli_fails(["metric", "kitti", str(gt_path), str(tmp_path / "bad.txt")], "bad.txt line 1",
               "expected 12")
     cli_fails(["metric", "kitti", str(gt_path), str(tmp_path / "missing.txt")], "missing.txt")
+
+
+def test_short_runs_score_with_short_lengths(tmp_path: Path, kitti_trajectories: Path) -> None:
+    """A 60 m run has no 100 m segment: the default lengths refuse it (naming --lengths), and
+    --lengths 5,10,20 --step-frames 2 (or a params file's devkit section) scores it as the
+    transcribed devkit does with those lengths."""
+    gt = read_kitti_poses(kitti_trajectories / "04.txt")[:60]
+    est = drifting(gt, seed=2, scale=1.01)
+    write_kitti_poses(tmp_path / "gt.txt", gt)
+    write_kitti_poses(tmp_path / "est.txt", est)
+    args = ["metric", "kitti", str(tmp_path / "gt.txt"), str(tmp_path / "est.txt")]
+    cli_fails(args, "too short for a 100 m segment", "--lengths")
+    got = json.loads(CliRunner().invoke(main, [*args, "--lengths", "20,5,10", "--step-frames",
+                                               "2", "--json"]).stdout)
+    ref = devkit_loop(read_kitti_poses(tmp_path / "gt.txt"),
+                      read_kitti_poses(tmp_path / "est.txt"), (5.0, 10.0, 20.0), 2)
+    assert got["segments"] == len(ref) > 40
+    assert got["t_err_pct"] == pytest.approx(100 * np.mean([e[2] for e in ref]), rel=1e-9)
+    assert got["r_err_deg_per_m"] == pytest.approx(np.degrees(np.mean([e[1] for e in ref])),
+                                                   rel=1e-9)
+    assert list(got["per_length"]) == ["5", "10", "20"]
+    (tmp_path / "params.yaml").write_text("devkit:\n  lengths_m: [5, 10, 20]\n"
+                                          "  step_frames: 2\n")
+    from_params = json.loads(CliRunner().invoke(
+        main, [*args, "--params", str(tmp_path / "params.yaml"), "--json"]).stdout)
+    assert from_params == got
+    cli_fails([*args, "--lengths", "10,10"], "devkit.lengths_m", "listed twice")
+    cli_fails([*args, "--lengths", "ten"], "--lengths must be metres")

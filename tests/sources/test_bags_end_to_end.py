@@ -61,7 +61,7 @@ def test_bag_ingest_run_metric(frames: KittiFrames, tmp_path: Path, ros: int, st
         np.testing.assert_array_equal(r[3].points_lidar, frames.points[3])
     score = run_and_score(seq, tmp_path, "gicp")
     assert score["frames"] == FRAMES and score["rte"]["segments"] >= 1
-    assert score["rte"]["t_err_pct"] < 5.0 and score["ape"]["rmse"] < 0.3, score
+    assert score["rte"]["t_err_pct"] < 5.0 and score["ape"]["translation_m"]["rmse"] < 0.3, score
 
 
 def test_bag_with_float64_xyz_uint8_intensity_ring_and_time(frames: KittiFrames,

@@ -14,7 +14,8 @@ from pipeline.tuning.table import trials_path
 from stages.cli import main
 
 
-def params_file(tmp_path: Path, **trials: object) -> Path:
+def params_file(tmp_path: Path, fixed: dict[str, object] | None = None,
+                **trials: object) -> Path:
     p = tmp_path / "params.yaml"
     section = dict(
         algorithm="helpers.tuning_adapters:drift",
@@ -23,7 +24,8 @@ def params_file(tmp_path: Path, **trials: object) -> Path:
         startup_trials=2,
     )
     section.update(trials)
-    p.write_text(json.dumps({"base": {"seed": 3, "length_m": 5.0}, "trials": section}))
+    p.write_text(json.dumps({"base": {"seed": 3, "length_m": 5.0}, "trials": section,
+                             **({"fixed": fixed} if fixed is not None else {})}))
     return p
 
 
@@ -41,7 +43,7 @@ def test_dvc_form_reads_the_split_of_index_json(sequences: list[Path], tmp_path:
             "--out",
             str(out),
             "--params",
-            str(params_file(tmp_path)),
+            str(params_file(tmp_path, fixed={"warm_start": 0})),  # the default 4 needs trials
             "--iterations",
             "2",
         ],

@@ -88,7 +88,8 @@ def test_the_joint_study_has_its_own_pruner(sequences: list[Path], tmp_path: Pat
         "base": {"seed": 1, "length_m": 5.0},
         "trials": {"algorithm": "helpers.tuning_adapters:drift", "iterations": 12, "workers": 1,
                    "startup_trials": 3, "pruning": {"percentile": None}},
-        "fixed": {"pruning": {"percentile": 10.0, "checkpoints": 5, "warmup": 0.2,
+        "fixed": {"iterations": 12, "warm_start": 0,  # not the defaults: 64 and 4
+                  "pruning": {"percentile": 10.0, "checkpoints": 5, "warmup": 0.2,
                               "min_trials": 3}}}))
 
     def statuses(*extra: str) -> set[str]:
