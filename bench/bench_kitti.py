@@ -1,34 +1,53 @@
-"""What the full KITTI protocol costs (issue 15 item 3), from the per-frame cost of every
-in-process adapter on simulated KITTI (docs/kitti.md, "What the full protocol costs").
+"""What the full KITTI protocol costs, whole trials against successive halving (issues 15 and
+33; docs/kitti.md, "What the full protocol costs").
 
-Scans: simulated KITTI (``pipeline.sim.kitti_dataset``, HDL-64E, ~125k points a scan), the
-first FRAMES frames of one sequence per environment: 07 urban, 00 residential, 04 rural,
-01 highway. Every adapter runs each of them through ``run_sequence`` (MCAP decoding included:
-full KITTI sequences exceed a trial worker's scan cache, so every trial decodes its MCAP), once
-with its defaults (the baseline) and with SAMPLES parameter sets drawn uniformly from its search
-space (what an SMBO trial costs on average). The figure is CPU time per frame (the process and
-its decoding thread), the core-seconds the estimate adds up; the wall time per frame on this
-shared machine is beside it.
+Two measurements, one model.
 
-The estimate weights the environments by their share of KITTI's frames (the simulated-KITTI
-schedules, ``pipeline.sim.kitti_world.SCHEDULES``), per sequence, and counts the odometry runs
-of the protocol (frame counts n_s from ``kitti_trajectories``: 23,201 frames, 14,136 of them in
-00-05; I = J = 256):
+1. Per-frame cost of every in-process adapter on simulated KITTI (``pipeline.sim.kitti_dataset``,
+   HDL-64E, ~125k points a scan): the first FRAMES frames of one sequence per environment (07
+   urban, 00 residential, 04 rural, 01 highway), each run through ``run_sequence`` as a trial
+   runs it (MCAP decoding included: full KITTI sequences exceed a trial worker's scan cache),
+   once with the defaults and with SAMPLES parameter sets drawn uniformly from the adapter's
+   space. The figure is CPU time per frame (the process and its decoding thread).
+2. Promotion at the rungs of successive halving (``trials.fidelity: halving`` with the params'
+   ``trials.halving``): one real study of the paper's budget, 256 proposals of NDT, with the told
+   lag of 16 workers (``told_lag(16)`` = 31: the first 31 trials run whole, and every threshold
+   lags 31 trials), run one trial at a time (the study is the same for any executor) on the
+   first HALVING_FRAMES frames of sequence 00, L scaled so that the window is as many L long as
+   sequence 00 is 100 m. Measured: the fraction of frames its trials ran, and p_r, the fraction
+   of the trials checked at rung r that went on. NDT's p_r stand for every adapter (the rule
+   promotes the best 1/eta of what was told, whatever the odometry).
 
-    core-s = I * sum_{s in 00-05} n_s c_s  +  J * sum_{s in 00-05} n_s c_s  +  3 * sum_s n_s d_s
-    wall(N) = ceil(I / N) * sum_{s in 00-05} n_s c_s  +  ceil(J / N) * sum_{s in 00-05} n_s c_s
-              + 3 * sum_s n_s d_s
+The model counts the odometry of the protocol: n_s frames of sequence s (from
+``kitti_trajectories``: 23,201 frames, 14,136 in 00-05), each frame at the CPU cost of its
+environment (the simulated-KITTI schedules); c = sampled parameters (a trial, the fixed and the
+adaptive runs), d = the defaults (the baseline). C_s(a, b) = the cost of frames a..b-1 of s.
 
-c_s: CPU per frame of sequence s, sampled parameters (trials); d_s: with the defaults. The
-trials stage runs its six studies one after another, each with up to N trials in flight (one
-per worker); a joint trial runs all six sequences in one job; the evaluate and adaptive stages
-run baseline, fixed and adaptive over all 11 sequences in one process. Left out: simulation or
-ingest, descriptors, RTE scoring, the surrogate (each a single pass over the frames or less).
-Environment: ADAPTUNE_BENCH_KITTI_FRAMES (default 20), ADAPTUNE_BENCH_KITTI_SAMPLES (3).
+    whole:    core-s = I * sum_s C_s(0, n_s) + J * sum_s C_s(0, n_s) + E
+    halving:  core-s = I * sum_s sum_r R_s,r C_s(k_s,r-1, k_s,r) + J * sum_r R_r sum_s C_s(...) + E
+
+k_s,r: the last frame of rung r of s (``pipeline.tuning.pruning.rungs``; k_s,-1 = 0); R_s,r:
+the share of trials that run rung r, the product of p_q over the rungs q < r at which a
+trial of s is checked (a rung is checked only where a segment of L = 100 m has ended, from the
+ground-truth path; a joint trial's rung where one has ended on any sequence). E: the adaptive
+and evaluate stages, baseline (d), fixed and adaptive (c) over all 11 sequences, each a job of
+its own, ``evaluate.workers`` at a time. I = J = 256 is the paper's budget; the preset's own
+(256 per sequence, 64 joint, warm-started) is given apart: a smaller budget is not a saving.
+
+Wall time on N workers: the six per-sequence studies one after another, each with N trials in
+flight, then the joint study: whole trials ceil(I / N) * C_s (waves of N), halving I F_s C_s / N
++ C_s (the work spread over N workers, and one whole trial's tail; F_s = the study's fraction of
+frames); then E as the longest processing time first schedule of its jobs on N processes
+(``evaluate.workers`` = N). Left out: simulation or ingest, descriptors, RTE scoring, the
+surrogate and the selector (each a single pass over the frames or less).
+Environment: ADAPTUNE_BENCH_KITTI_FRAMES (default 20), ADAPTUNE_BENCH_KITTI_SAMPLES (3),
+ADAPTUNE_BENCH_HALVING_FRAMES (150), ADAPTUNE_BENCH_HALVING_TRIALS (256: a smaller study is a
+smoke test, not the figure).
 """
 
 from __future__ import annotations
 
+import heapq
 import math
 import os
 import tempfile
@@ -42,8 +61,12 @@ from common import Row, data_root, size
 ADAPTERS = ("gicp", "kiss_icp", "ndt")
 ENVIRONMENT_SEQUENCE = {"urban": "07", "residential": "00", "rural": "04", "highway": "01"}
 TRAIN = ("00", "01", "02", "03", "04", "05")
+TEST = ("06", "07", "08", "09", "10")
 ITERATIONS = 256
-WORKERS = (1, 16, 64, 256)
+PRESET_JOINT = 64
+WORKERS = 16
+LENGTH_M = 100.0
+HALVING_SEQUENCE = "00"
 
 
 @dataclass
@@ -56,46 +79,78 @@ class Cost:
     failed: int
 
 
+@dataclass
+class Drive:
+    """One KITTI sequence of the protocol: the environment of every frame and the path [m]."""
+
+    environments: list[str]
+    distance_m: np.ndarray
+
+    @property
+    def frames(self) -> int:
+        return len(self.environments)
+
+
+@dataclass
+class Promotion:
+    """What the halving study measured: p_r per rung, the fraction of frames run, CPU time."""
+
+    rates: list[float]
+    fraction: float
+    trials: int
+    cpu_s: float
+
+
 def run() -> list[Row]:
     trajectories = data_root() / "kitti_trajectories"
     if not trajectories.is_dir():
         return []
     frames = int(os.environ.get("ADAPTUNE_BENCH_KITTI_FRAMES", size("20", "2")))
     samples = int(os.environ.get("ADAPTUNE_BENCH_KITTI_SAMPLES", size("3", "1")))
-    counts = frame_counts(trajectories)
+    halving_frames = int(os.environ.get("ADAPTUNE_BENCH_HALVING_FRAMES", size("150", "16")))
+    drives = kitti_drives(trajectories)
     rows: list[Row] = []
     with tempfile.TemporaryDirectory() as tmp:
         paths, points = simulate(trajectories, frames, Path(tmp))
+        promotion = halving_promotion(trajectories, halving_frames, drives, Path(tmp))
+        rows.append(promotion_row(promotion, halving_frames))
         for name in ADAPTERS:
             by_path = {path: adapter_cost(name, path, samples) for path in set(paths.values())}
             costs = {env: by_path[path] for env, path in paths.items()}
             rows += cost_rows(name, costs, points, samples)
-            rows.append(protocol_row(name, costs, counts))
+            rows += protocol_rows(name, costs, drives, promotion)
     return rows
 
 
-def frame_counts(trajectories: Path) -> dict[str, dict[str, int]]:
-    """Sequence -> environment -> frames of KITTI 00-10 (their simulated-KITTI schedules)."""
+def kitti_drives(trajectories: Path) -> dict[str, Drive]:
+    """Sequence -> its Drive, for KITTI 00-10 (their simulated-KITTI schedules)."""
+    from pipeline.geometry import path_distances
     from pipeline.sim.kitti import kitti_lidar_poses
     from pipeline.sim.kitti_world import SCHEDULES, frame_environments
 
     out = {}
     for seq in SCHEDULES:
-        envs = frame_environments(seq, len(kitti_lidar_poses(trajectories / f"{seq}.txt")[0]))
-        out[seq] = {env: envs.count(env) for env in ENVIRONMENT_SEQUENCE if env in envs}
+        poses = kitti_lidar_poses(trajectories / f"{seq}.txt")[0]
+        out[seq] = Drive(frame_environments(seq, len(poses)), path_distances(poses))
     return out
+
+
+def simulate_window(trajectories: Path, seq: str, frames: int, out: Path) -> Path:
+    """The first ``frames`` frames of simulated KITTI ``seq`` as an MCAP at ``out``."""
+    from pipeline.sim.kitti_dataset import SimulateKittiSection, simulate_kitti_sequence
+
+    section = SimulateKittiSection(trajectories=str(trajectories), train=[seq],
+                                   windows=[(seq, 0, frames - 1)])
+    return simulate_kitti_sequence(section, seq, 0, out).path
 
 
 def simulate(trajectories: Path, frames: int, tmp: Path) -> tuple[dict[str, Path], dict[str, int]]:
     """The first ``frames`` frames of each environment's sequence as MCAPs; mean points a scan."""
     from pipeline.sequence import SequenceReader
-    from pipeline.sim.kitti_dataset import SimulateKittiSection, simulate_kitti_sequence
 
     paths, points = {}, {}
     for env, seq in size(ENVIRONMENT_SEQUENCE, {"rural": "04"}).items():
-        section = SimulateKittiSection(trajectories=str(trajectories), train=[seq],
-                                       windows=[(seq, 0, frames - 1)])
-        paths[env] = simulate_kitti_sequence(section, seq, 0, tmp / f"{seq}.mcap").path
+        paths[env] = simulate_window(trajectories, seq, frames, tmp / f"{seq}.mcap")
         with SequenceReader(paths[env]) as reader:
             points[env] = int(np.mean([len(scan.points_lidar) for scan in reader]))
     for env in ENVIRONMENT_SEQUENCE:  # a smoke run simulates one: it stands for them all
@@ -146,20 +201,167 @@ def cost_rows(name: str, costs: dict[str, Cost], points: dict[str, int],
     return rows
 
 
-def per_sequence(costs: dict[str, Cost], counts: dict[str, int], sampled: bool) -> float:
-    """Core-seconds of one run of a sequence with environment frame ``counts``."""
-    return sum(n * (costs[env].cpu_sampled if sampled else costs[env].cpu_default)
-               for env, n in counts.items())
+# -- the halving study -------------------------------------------------------------------
+
+def halving_settings(length_m: float) -> object:
+    """The measured study's TrialsSection: NDT, the paper's budget, the told lag of WORKERS
+    workers, the params' halving, no time limit (in the process)."""
+    from pipeline.tuning.smbo import TrialsSection
+
+    trials = int(os.environ.get("ADAPTUNE_BENCH_HALVING_TRIALS", size(str(ITERATIONS), "4")))
+    return TrialsSection(algorithm="ndt", iterations=trials, workers=WORKERS,
+                         time_limit_s=None, length_m=length_m, fidelity="halving")
 
 
-def protocol_row(name: str, costs: dict[str, Cost], counts: dict[str, dict[str, int]]) -> Row:
-    """The full protocol's core-hours and its wall time on N workers (module docstring)."""
-    train_run = sum(per_sequence(costs, counts[s], sampled=True) for s in TRAIN)
-    evaluate = 3 * sum(per_sequence(costs, c, sampled=False) for c in counts.values())
-    core_h = (2 * ITERATIONS * train_run + evaluate) / 3600
-    walls = [(2 * math.ceil(ITERATIONS / n) * train_run + evaluate) / 3600 for n in WORKERS]
-    frames = sum(sum(c.values()) for c in counts.values())
-    return Row(f"{name}: full KITTI protocol ({frames} frames, {ITERATIONS} + {ITERATIONS} "
-               "SMBO iterations), core-hours", core_h, "core-h",
-               "wall on N workers: " + ", ".join(f"N={n}: {w:.1f} h"
-                                                 for n, w in zip(WORKERS, walls, strict=True)))
+def halving_promotion(trajectories: Path, frames: int, drives: dict[str, Drive],
+                      tmp: Path) -> Promotion:
+    """Run the halving study (module docstring, 2.) and read what it promoted."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from pipeline.tuning.smbo import run_trials
+
+    path = simulate_window(trajectories, HALVING_SEQUENCE, frames, tmp / "halving.mcap")
+    drive = drives[HALVING_SEQUENCE]
+    length_m = LENGTH_M * float(drive.distance_m[frames - 1]) / float(drive.distance_m[-1])
+    settings = halving_settings(length_m)
+    cpu = time.process_time()
+    with ThreadPoolExecutor(1) as one:  # one trial at a time: the same study as 16 workers'
+        run_trials([path], tmp / "trials", settings, seed=0,  # type: ignore[arg-type]
+                   progress=False, executor=one)
+    promotion = promotion_of(tmp / "trials", path.stem, frames, settings)
+    promotion.cpu_s = time.process_time() - cpu
+    return promotion
+
+
+def promotion_of(out: Path, sequence: str, frames: int, settings: object) -> Promotion:
+    """p_r and the fraction of frames run of the study ``sequence`` in the trials folder ``out``:
+    a trial's frames are its trajectory's (a failed trial's: all)."""
+    from pipeline.trajectory import read_trajectory
+    from pipeline.tuning.layout import trajectory_path
+    from pipeline.tuning.pruning import rungs
+    from pipeline.tuning.smbo import study_adapter
+    from pipeline.tuning.table import read_trials, trials_path
+
+    adapter = study_adapter(settings)  # type: ignore[arg-type]
+    results = read_trials(trials_path(out, adapter.name, sequence), adapter.space)
+    ran = []
+    for r in results:
+        path = trajectory_path(out, adapter.name, sequence, r.trial)
+        ran.append(len(read_trajectory(path)) if r.status == "pruned" else frames)
+    ends = [p.frames[0] + 1 for p in rungs([frames], settings.halving)]  # type: ignore[attr-defined]
+    reached = [sum(n >= end for n in ran) for end in ends]
+    went_on = [sum(n > end for n in ran) for end in ends]
+    rates = [w / r if r else 1.0 for w, r in zip(went_on, reached, strict=True)]
+    return Promotion(rates, sum(ran) / (frames * len(ran)), len(ran), 0.0)
+
+
+def promotion_row(p: Promotion, frames: int) -> Row:
+    rates = ", ".join(f"rung {r}: {100 * x:.0f} %" for r, x in enumerate(p.rates))
+    return Row(f"successive halving, measured: NDT study of {p.trials} proposals on "
+               f"{HALVING_SEQUENCE}'s first {frames} frames (told lag of {WORKERS} workers), "
+               "fraction of frames run", 100 * p.fraction, "%",
+               f"trials going on after {rates}; the study took {p.cpu_s / 60:.1f} CPU-min")
+
+
+# -- the protocol model ------------------------------------------------------------------
+
+def frame_costs(drive: Drive, costs: dict[str, Cost], sampled: bool) -> np.ndarray:
+    """CPU seconds of every frame of ``drive`` (its environment's cost)."""
+    per = {env: (c.cpu_sampled if sampled else c.cpu_default) for env, c in costs.items()}
+    return np.array([per[env] for env in drive.environments])
+
+
+def rung_spans(drive: Drive, settings: object) -> list[tuple[int, int, bool]]:
+    """(first frame, end frame, checked at its end) of every rung of ``drive``, the last one
+    the rest of the sequence (never checked)."""
+    from pipeline.tuning.pruning import rungs
+
+    n = drive.frames
+    out, start = [], 0
+    for point in rungs([n], settings.halving):  # type: ignore[attr-defined]
+        end = point.frames[0] + 1
+        out.append((start, end, bool(drive.distance_m[end - 1] > LENGTH_M)))
+        start = end
+    out.append((start, n, False))
+    return out
+
+
+def study_cost(drives: list[Drive], costs: list[np.ndarray], rates: list[float],
+               settings: object, joint: bool) -> tuple[float, float]:
+    """(CPU seconds of one trial on average, of one whole trial) of a study over ``drives``
+    under successive halving with promotion ``rates``; rungs side by side (joint)."""
+    spans = [rung_spans(d, settings) for d in drives]
+    whole = float(sum(c.sum() for c in costs))
+    mean = 0.0
+    share = 1.0
+    for r in range(len(spans[0])):
+        mean += share * sum(float(c[s[r][0]:s[r][1]].sum()) for c, s in zip(costs, spans,
+                                                                            strict=True))
+        checked = any(s[r][2] for s in spans) if joint else spans[0][r][2]
+        if checked and r < len(rates):
+            share *= rates[r]
+    return mean, whole
+
+
+def makespan(jobs: list[float], workers: int) -> float:
+    """Longest processing time first schedule of ``jobs`` [s] on ``workers``: its length."""
+    load = [0.0] * workers
+    for job in sorted(jobs, reverse=True):
+        heapq.heapreplace(load, load[0] + job)
+    return max(load)
+
+
+@dataclass
+class Protocol:
+    """Core-seconds and wall seconds (N = WORKERS) of one way of running the protocol."""
+
+    core_s: float
+    wall_s: float
+
+
+def protocol_cost(drives: dict[str, Drive], costs: dict[str, Cost], promotion: Promotion,
+                  halving: bool, joint_iterations: int) -> Protocol:
+    """The model of the module docstring for one adapter's ``costs``."""
+    settings = halving_settings(LENGTH_M)
+    sampled = {s: frame_costs(drives[s], costs, True) for s in drives}
+    default = {s: frame_costs(drives[s], costs, False) for s in drives}
+    core = wall = 0.0
+    for s in TRAIN:
+        mean, whole = study_cost([drives[s]], [sampled[s]], promotion.rates, settings, False)
+        trial = mean if halving else whole
+        core += ITERATIONS * trial
+        wall += (ITERATIONS * trial / WORKERS + whole if halving
+                 else math.ceil(ITERATIONS / WORKERS) * whole)
+    mean, whole = study_cost([drives[s] for s in TRAIN], [sampled[s] for s in TRAIN],
+                             promotion.rates, settings, True)
+    trial = mean if halving else whole
+    core += joint_iterations * trial
+    wall += (joint_iterations * trial / WORKERS + whole if halving
+             else math.ceil(joint_iterations / WORKERS) * whole)
+    adaptive = [float(sampled[s].sum()) for s in drives]
+    evaluate = [float(default[s].sum() + sampled[s].sum()) for s in drives]
+    core += sum(adaptive) + sum(evaluate)
+    wall += makespan(adaptive, WORKERS) + makespan(evaluate, WORKERS)
+    return Protocol(core, wall)
+
+
+def protocol_rows(name: str, costs: dict[str, Cost], drives: dict[str, Drive],
+                  promotion: Promotion) -> list[Row]:
+    """The bench line of ``name`` and its preset's own budgets."""
+    whole = protocol_cost(drives, costs, promotion, False, ITERATIONS)
+    halving = protocol_cost(drives, costs, promotion, True, ITERATIONS)
+    preset = [protocol_cost(drives, costs, promotion, h, PRESET_JOINT) for h in (False, True)]
+    frames = sum(d.frames for d in drives.values())
+    return [
+        Row(f"full protocol core-hours {name}: whole {whole.core_s / 3600:.0f}, "
+            f"multi-fidelity {halving.core_s / 3600:.0f}", halving.core_s / 3600, "core-h",
+            f"{frames} frames, {ITERATIONS} + {ITERATIONS} SMBO proposals; wall on "
+            f"{WORKERS} workers: whole {whole.wall_s / 3600:.1f} h, multi-fidelity "
+            f"{halving.wall_s / 3600:.1f} h", "GICP <= 50, KISS-ICP <= 40, NDT <= 10; wall "
+            "<= 6 h"),
+        Row(f"  the preset's budgets ({ITERATIONS} per sequence, {PRESET_JOINT} joint "
+            f"warm-started), core-hours {name}: whole {preset[0].core_s / 3600:.0f}, "
+            f"multi-fidelity {preset[1].core_s / 3600:.0f}", preset[1].core_s / 3600,
+            "core-h", f"wall on {WORKERS} workers: whole {preset[0].wall_s / 3600:.1f} h, "
+            f"multi-fidelity {preset[1].wall_s / 3600:.1f} h", "-"),
+    ]

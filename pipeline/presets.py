@@ -51,7 +51,9 @@ class KittiProtocol(Section):
     slower parameter set fails with the penalty; null keeps params.yaml's); length_m: L [m];
     kitti_lengths_m: devkit lengths (null keeps params.yaml's, 100..800 m); replicas: extra
     runs of every setting with its parameters moved by at most 0.5 % (``evaluate.replicas``:
-    how far one run is from the next; null keeps params.yaml's).
+    how far one run is from the next; null keeps params.yaml's); fidelity: ``whole`` (the
+    paper's whole trials) or ``halving`` (successive halving) for the per-sequence and the joint
+    studies (``trials.fidelity``, ``fixed.fidelity``; null keeps params.yaml's).
     """
 
     source: Literal["real", "simulated"] = "real"
@@ -70,6 +72,7 @@ class KittiProtocol(Section):
     length_m: float = Field(KITTI_LENGTH_M, gt=0)
     kitti_lengths_m: list[float] | None = Field(None, min_length=1)
     replicas: int | None = Field(None, ge=0)
+    fidelity: Literal["whole", "halving"] | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> KittiProtocol:
@@ -122,6 +125,9 @@ def kitti_protocol(protocol: KittiProtocol, params: Mapping[str, Any]) -> dict[s
         data["devkit.lengths_m"] = protocol.kitti_lengths_m
     if protocol.replicas is not None:
         data["evaluate.replicas"] = protocol.replicas
+    if protocol.fidelity is not None:
+        data["trials.fidelity"] = protocol.fidelity
+        data["fixed.fidelity"] = protocol.fidelity
     check_params(apply(params, data), "the preset's params")
     return data
 

@@ -348,16 +348,23 @@ class Selector:
         """``_predict`` where every value is certified exact, inf elsewhere: (C,)."""
         return np.mean([nb.certified(U) for nb, _ in self.recent], axis=0)
 
-    def _order(self, t: NDArray[np.float64], U: NDArray[np.float64]) -> NDArray[np.intp]:
+    def _order(self, t: NDArray[np.float64], U: NDArray[np.float64],
+               first: int | None = None) -> NDArray[np.intp]:
         """Indices of U (C, P) by value t (C,), values within TIE_TOL of each other in one
         rank, ties by distance to the parameters in force (the anchor before the first
         selection), then by the parameters themselves: a rule that does not depend on the
-        order of the candidates or on rounding (step 5)."""
+        order of the candidates or on rounding (step 5). ``first``: only the first that many
+        (the same ones: those of the lowest ranks are sorted, the rest cannot precede them)."""
         ref = self.anchor_u if self.current_u is None else self.current_u
         finite = t[np.isfinite(t)]
         rank = np.floor((t - (finite.min() if len(finite) else 0.0)) / TIE_TOL)
-        keys = [U[:, j] for j in reversed(range(U.shape[1]))]
-        return np.lexsort((*keys, ((U - ref) ** 2).sum(axis=1), rank))
+        pick = np.arange(len(t))
+        if first is not None and first < len(t):
+            pick = np.flatnonzero(rank <= np.partition(rank, first - 1)[first - 1])
+        V = U[pick]
+        keys = [V[:, j] for j in reversed(range(V.shape[1]))]
+        order = pick[np.lexsort((*keys, ((V - ref) ** 2).sum(axis=1), rank[pick]))]
+        return order if first is None else order[:first]
 
     def _search(self) -> tuple[NDArray[np.float64], float, float]:
         t = np.mean([values for _, values in self.recent], axis=0)
@@ -365,7 +372,7 @@ class Selector:
         if exact_frac == 0.0:  # nothing certified: fall back to the approximate values
             t = self._predict(self.candidates)
         n = min(self.n_starts, len(t))
-        starts = self._order(t, self.candidates)[:n]
+        starts = self._order(t, self.candidates, first=n)
         best_u, best_t = self.candidates[starts].copy(), t[starts].copy()
         step = 0.5 / max(2.0, len(self.candidates) ** (1.0 / self.candidates.shape[1]))
         p = self.candidates.shape[1]

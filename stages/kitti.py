@@ -61,13 +61,16 @@ def _window(text: str) -> tuple[str, tuple[int, int]]:
 @click.option("--replicas", type=int, default=None,
               help="Extra runs of every setting with its parameters moved by at most 0.5 % "
               "(the table gives their spread) [params.yaml's evaluate.replicas].")
+@click.option("--fidelity", type=click.Choice(["whole", "halving"]), default=None,
+              help="whole: every trial runs every frame (the paper); halving: successive "
+              "halving over rungs, per-sequence and joint studies [params.yaml's].")
 @params_option
 def kitti_preset(root: Path | None, simulated: Path | None, train: str | None,
                  test: str | None, stride: int, start: int | None, end: int | None,
                  windows: tuple[str, ...], change_windows: int | None, algorithm: str | None,
                  iterations: int | None, joint_iterations: int | None,
                  time_limit_s: float | None, length_m: float, kitti_lengths_m: str | None,
-                 replicas: int | None, params_path: Path) -> None:
+                 replicas: int | None, fidelity: str | None, params_path: Path) -> None:
     """Print the `dvc exp run` arguments of the KITTI protocol, one a line.
 
     \b
@@ -88,7 +91,8 @@ def kitti_preset(root: Path | None, simulated: Path | None, train: str | None,
            "iterations": iterations,
            "joint_iterations": joint_iterations, "time_limit_s": time_limit_s,
            "length_m": length_m,
-           "kitti_lengths_m": _names(kitti_lengths_m), "replicas": replicas}
+           "kitti_lengths_m": _names(kitti_lengths_m), "replicas": replicas,
+           "fidelity": fidelity}
     protocol = validate_section(KittiProtocol, "kitti-preset",
                                 {k: v for k, v in raw.items() if v is not None})
     for arg in set_params(kitti_protocol(protocol, read_params(params_path))):

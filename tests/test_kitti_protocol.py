@@ -245,6 +245,7 @@ def test_preset_stride_and_bad_input(kitti_root: Path) -> None:
             f'split:"train"}},{{kind:"kitti",path:{root},sequences:["06"],'
             f'split:"validation"}}]') in out.splitlines()
     assert "trials.time_limit_s" not in out  # params.yaml's, unless asked
+    assert "trials.fidelity" not in out
     code, out = _preset("--root", str(kitti_root), "--train", "01", "--test", "06",
                         "--time-limit-s", "60", "--params", str(REPO / "params.yaml"))
     assert code == 0 and "--set-param=trials.time_limit_s=60.0" in out.splitlines()
@@ -252,6 +253,11 @@ def test_preset_stride_and_bad_input(kitti_root: Path) -> None:
                         "--time-limit-s", "0")
     assert (code, out) == (1, "adaptune: error: kitti-preset.time_limit_s: Input should be "
                                  "greater than 0, got 0.0\n")
+    code, out = _preset("--root", str(kitti_root), "--train", "01", "--test", "06",
+                        "--fidelity", "halving", "--params", str(REPO / "params.yaml"))
+    assert code == 0
+    assert {'--set-param=trials.fidelity="halving"',
+            '--set-param=fixed.fidelity="halving"'} <= set(out.splitlines())
     code, out = _preset("--root", str(kitti_root), "--train", "01", "--test", "06",
                         "--replicas", "-1")
     assert (code, out) == (1, "adaptune: error: kitti-preset.replicas: Input should be "

@@ -290,6 +290,52 @@ def test_refinement_and_hysteresis(model_dir: Path, kitti_root: Path) -> None:
     assert sticky.last["kept"] == "hysteresis"
 
 
+@pytest.mark.parametrize("window", [1, 5])
+@RISKS
+def test_shared_nearest_trials_give_the_same_schedule(
+    model_dir: Path, tmp_path: Path, kitti_root: Path, window: int, risk: float
+) -> None:
+    """The nearest trials of the pattern search's probes are found once for the whole window
+    (``TrialGroups.reuse``), not once per scan of it: the schedule is the one of the search
+    that finds them for every scan, bit for bit (the default refinement, no hysteresis)."""
+    from pipeline.selection import SelectionSettings
+
+    seq = tmp_path / "s.mcap"
+    write_tiny_sequence(seq, kitti_root, "10", n=10, step=2)
+    model = load_model(model_dir)
+    schedules = []
+    for reuse in (False, True):
+        sel = Selector(model, SelectionSettings(period_s=0.05, hysteresis=0.0, window=window,
+                                                  risk=risk))
+        sel.novelty_distance = float("inf")  # every scan searched
+        assert sel.search.groups is not None
+        sel.search.groups.reuse = reuse
+        with SequenceReader(seq) as reader:
+            schedules.append(sel.schedule(reader))
+    old, new = schedules
+    assert old.values.keys() == new.values.keys()
+    for name in old.values:
+        assert old.values[name].tobytes() == new.values[name].tobytes(), name
+    assert len(old.changes()) > 1  # the schedule does select (not the defaults throughout)
+
+
+def test_first_of_the_order_are_those_of_the_whole_order(model_dir: Path) -> None:
+    """``Selector._order(t, U, first=n)`` sorts only the lowest ranks: the same n indices as
+    the whole order, ties (values within TIE_TOL, equal distances) included."""
+    model = load_model(model_dir)
+    sel = Selector(model, SEL)
+    rng = np.random.default_rng(3)
+    U = sel.candidates
+    for trial in range(20):
+        t = np.round(rng.random(len(U)), 2)  # many exact ties
+        t[rng.random(len(U)) < 0.3] = np.inf  # uncertified values
+        sel.current_u = None if trial % 2 else U[trial]
+        for n in (1, 3, 7):
+            assert np.array_equal(sel._order(t, U, first=n), sel._order(t, U)[:n])
+    assert np.array_equal(sel._order(np.full(len(U), np.inf), U, first=3),
+                          sel._order(np.full(len(U), np.inf), U)[:3])
+
+
 def test_unfamiliar_scans_get_the_fallback(tmp_path: Path, kitti_root: Path) -> None:
     """Novelty guard: an environment farther than novelty_distance from every training frame
     gets the fallback (the defaults unless the manifest names parameters); a familiar one gets

@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 import math
 import numbers
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Generator, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal, Protocol, runtime_checkable
@@ -378,29 +378,33 @@ class TimeLimitedAdapter(Adapter, Protocol):
         ...
 
 
-def run_streaming(
-    make: Callable[[Params], Odometry], scans: Iterable[Scan], schedule: Schedule,
-    after_frame: Callable[[int, list[NDArray[np.float64]]], None] | None = None,
-) -> Trajectory:
-    """``run`` for in-process adapters: ``make(params)`` -> Odometry, then step every scan,
-    calling ``set_params`` only where the schedule changes. ``after_frame(i, poses)`` (the
-    tuner's pruner) sees the poses of frames 0..i after each frame and may raise to stop."""
+def run_streaming(make: Callable[[Params], Odometry], scans: Iterable[Scan],
+                  schedule: Schedule) -> Trajectory:
+    """``run`` for in-process adapters: ``make(params)`` -> Odometry, then step every scan
+    (``stream_poses``)."""
+    frames, stamps, poses = [], [], []
+    for scan, pose in stream_poses(make, scans, schedule):
+        poses.append(pose)
+        frames.append(scan.frame)
+        stamps.append(scan.stamp_ns)
+    return Trajectory(np.array(frames), np.array(stamps), np.stack(poses))
+
+
+def stream_poses(make: Callable[[Params], Odometry], scans: Iterable[Scan], schedule: Schedule
+                 ) -> Generator[tuple[Scan, NDArray[np.float64]], None, None]:
+    """(scan, T_world_lidar (4, 4)) of every scan in turn: ``make(params)`` -> Odometry on
+    the first, ``set_params`` only where the schedule changes; a caller that stops early (the
+    tuner at a checkpoint) runs no further scan. InputError when there is no scan."""
     changes = set(schedule.changes())
     odom: Odometry | None = None
-    frames, stamps, poses = [], [], []
     for i, scan in enumerate(scans):
         if odom is None:
             odom = make(schedule.at(i))
         elif i in changes:
             odom.set_params(schedule.at(i))
         if scan.time_s is not None and getattr(odom, "deskews", False):  # kiss_icp: per-point time
-            poses.append(odom.step(scan.xyz, scan.stamp_ns, time_s=scan.time_s))  # type: ignore[call-arg]
+            yield scan, odom.step(scan.xyz, scan.stamp_ns, time_s=scan.time_s)  # type: ignore[call-arg]
         else:
-            poses.append(odom.step(scan.xyz, scan.stamp_ns))
-        frames.append(scan.frame)
-        stamps.append(scan.stamp_ns)
-        if after_frame is not None:
-            after_frame(i, poses)
+            yield scan, odom.step(scan.xyz, scan.stamp_ns)
     if odom is None:
         raise InputError("no scans to run odometry on")
-    return Trajectory(np.array(frames), np.array(stamps), np.stack(poses))

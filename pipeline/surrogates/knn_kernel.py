@@ -38,6 +38,7 @@ def knn_mean(
     out = np.empty(n)
     best_d = np.empty(k)
     best_r = np.empty(k, np.int64)
+    ordered = np.empty(k)
     for c in range(n):
         best_d[:] = np.inf
         best_r[:] = 0
@@ -57,7 +58,13 @@ def knn_mean(
                         m -= 1
                     best_d[m] = d
                     best_r[m] = frame_row0[g, j] + trial_pos[c, g, a]
-        ordered = np.sort(rows_t[best_r])  # canonical: see knn_search.canonical_value
+        for m in range(k):  # the k targets in ascending order (canonical: see
+            v = rows_t[best_r[m]]  # knn_search.canonical_value), by insertion: no allocation
+            i = m
+            while i > 0 and ordered[i - 1] > v:
+                ordered[i] = ordered[i - 1]
+                i -= 1
+            ordered[i] = v
         total = 0.0
         for m in range(k):  # left to right, as canonical_value
             total += ordered[m]

@@ -141,6 +141,8 @@ class TrialGroups:
         for g, frames in enumerate(blocks):
             self.frame_table[g, : len(frames)] = frames
         self.candidates = candidates_u
+        self.reuse = True
+        self._last: tuple[bytes, tuple[NDArray[np.float64], NDArray[np.int64]]] | None = None
         self.candidate_trials = self.nearest_trials(candidates_u)
 
     @classmethod
@@ -163,7 +165,16 @@ class TrialGroups:
         self, U: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """Squared distances and block positions (n, G, k) of the k nearest trial vectors of
-        each unit point U (n, P) in every group (ascending; inf and 0 past a group's size)."""
+        each unit point U (n, P) in every group (ascending; inf and 0 past a group's size);
+        read-only.
+
+        They do not depend on the environment: a selector over a window of W scans asks for
+        the same points under each of them (the pattern search's probes, the parameters in
+        force), so the last answer is kept and given again for the same U (``reuse``; off, it
+        is computed every time: the same arrays)."""
+        key = np.ascontiguousarray(U, np.float64).tobytes()  # P is fixed: the bytes give n
+        if self.reuse and self._last is not None and self._last[0] == key:
+            return self._last[1]
         n = len(U)
         d2 = np.full((n, len(self.trees), self.k), np.inf)
         pos = np.zeros((n, len(self.trees), self.k), np.int64)
@@ -173,6 +184,8 @@ class TrialGroups:
             dist, idx = tree.query(q, k=kk)
             d2[:, g, :kk] = np.reshape(dist, (n, kk)) ** 2
             pos[:, g, :kk] = np.reshape(idx, (n, kk))
+        d2.flags.writeable = pos.flags.writeable = False
+        self._last = (key, (d2, pos))
         return d2, pos
 
     def nearest_frames(

@@ -4,9 +4,9 @@ match.
 A study's proposals and scores depend on the adapter and its options, the parameter space,
 the seed, L (``length_m``), the penalty, the jump limit, the time limit (a trial past it
 fails), TPE's start-up count, how far the proposals lag the results (``told_lag``, from the
-workers), the pruner's settings, the parameters it tries first (a warm start) and the
-sequences' content. Resuming with any of them changed
-would silently mix two studies, so ``check_fingerprint`` refuses it in one line naming every
+workers), the pruner's settings, the rungs of successive halving, the parameters it tries
+first (a warm start) and the sequences' content. Resuming with any of them changed would
+silently mix two studies, so ``check_fingerprint`` refuses it in one line naming every
 difference. What may change on a resume: ``iterations`` (a study can be extended),
 ``retries``, ``dask``.
 
@@ -29,8 +29,8 @@ VERSION = 1
 """Format of the fingerprint (a change of it refuses every older study)."""
 
 COMPARED = ("adapter", "adapter_options", "space", "seed", "length_m", "penalty_pct",
-            "jump_limit_m", "time_limit_s", "startup_trials", "told_lag", "pruning", "warm_start",
-            "sequences")
+            "jump_limit_m", "time_limit_s", "startup_trials", "told_lag", "pruning", "fidelity",
+            "warm_start", "sequences")
 """Keys that define a study, in the order differences are named."""
 
 
@@ -39,10 +39,13 @@ def study_fingerprint(*, adapter: str, adapter_options: Mapping[str, Any],
                       penalty_pct: float, jump_limit_m: float, time_limit_s: float | None,
                       startup_trials: int, told_lag: int, pruning: Mapping[str, Any],
                       sequences: list[tuple[str, str]],
+                      fidelity: Mapping[str, Any] | None = None,
                       warm_start: list[dict[str, float]] | None = None,
                       stored: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The fingerprint (plain JSON data) of a study over ``sequences`` ((name, MCAP path)).
 
+    ``fidelity``: the rungs of successive halving (``trials.halving``), None for whole trials
+    (a study stored before the rungs existed has none: whole).
     ``stored``: the fingerprint found with the table, whose digests are reused for files whose
     size and modification time did not change.
     """
@@ -61,6 +64,7 @@ def study_fingerprint(*, adapter: str, adapter_options: Mapping[str, Any],
         "startup_trials": int(startup_trials),
         "told_lag": int(told_lag),
         "pruning": dict(pruning),
+        "fidelity": None if fidelity is None else dict(fidelity),
         "warm_start": list(warm_start or []),
         "sequences": [sequence_digest(name, path, known.get(name)) for name, path in sequences],
     }

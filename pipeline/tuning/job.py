@@ -14,9 +14,10 @@ run sees the same history) and whose ``error`` is one line of text. A trial the 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
-from collections.abc import Mapping, MutableMapping
+from collections.abc import Iterable, Mapping, MutableMapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -64,8 +65,9 @@ class TrialJob:
     time_limit_s: float | None = None
     adapter_options: dict[str, Any] = field(default_factory=dict)
     space: list[dict[str, Any]] | None = None  # the study's space (ParameterSpace.to_json)
-    checkpoints: tuple[tuple[int, int], ...] = ()  # (sequence index, frame): pruning.Checkpoint
+    checkpoints: tuple[tuple[int, ...], ...] = ()  # frames per sequence: pruning.Checkpoint
     thresholds: tuple[float | None, ...] = ()  # per checkpoint: prune above it (None: no check)
+    scored_only: bool = False  # values average the sequences scored so far (pruning.value_at)
 
 
 @dataclass(frozen=True)
@@ -97,49 +99,176 @@ def evaluate_trial(job: TrialJob, adapter: Adapter,
     over sequences (a pruned trial: its value where it stopped), "rte_pct": {sequence: RTE},
     "odometry_s", "curve": values at the checkpoints, "error": why it was pruned}.
     ``pipeline.odometry.run_sequence`` checks frames, stamps, finiteness; ``check_jump`` jumps.
-    A trial is pruned only where its scans are cached and the adapter streams (``start``).
+    A trial with thresholds runs its sequences a frame at a time when the adapter streams
+    (``start``), from the cache or from the file, and passes the checkpoints in order
+    (``pipeline.tuning.pruning``); else every sequence runs whole.
     """
-    import time
+    from pipeline.tuning.pruning import Checkpoint
 
-    from pipeline.metrics.rte import mean_rte_pct
-    from pipeline.trajectory import write_trajectory
-    from pipeline.tuning.pruning import Checkpoint, Pruned, curve_of
-
-    points = [Checkpoint(s, k) for s, k in job.checkpoints]
-    rte: dict[str, float] = {}
-    gts: list[NDArray[np.float64]] = []
-    ests: list[NDArray[np.float64] | None] = []
-    odometry_s = 0.0
     truths = {} if truths is None else truths
-    for index, (name, path) in enumerate(job.sequences):
+    for _, path in job.sequences:
         if path not in truths:
             truths[path] = read_ground_truth(path, TRIALS_PURPOSE)
-        gt = truths[path]
+    gts = [truths[path] for _, path in job.sequences]
+    points = [Checkpoint(tuple(frames)) for frames in job.checkpoints]
+    streams = (getattr(adapter, "start", None) is not None
+               and not getattr(adapter, "accepts_time_limit", False))
+    if streams and any(t is not None for t in job.thresholds):
+        return _run_stepped(job, adapter, scans or {}, gts, points)
+    return _run_whole(job, adapter, scans or {}, gts, points)
+
+
+def _run_whole(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]],
+               gts: list[NDArray[np.float64]], points: list[Any]) -> dict[str, Any]:
+    """Every sequence of ``job`` run whole, one after the other (no checkpoint checked)."""
+    import time
+
+    from pipeline.odometry import check_trajectory, make_schedule, run_sequence
+    from pipeline.tuning.pruning import curve_of
+
+    rte: dict[str, float] = {}
+    ests: list[NDArray[np.float64] | None] = []
+    odometry_s = 0.0
+    for (name, path), gt in zip(job.sequences, gts, strict=True):
         t0 = time.perf_counter()
-        try:
-            traj = _run(job, adapter, index, path, (scans or {}).get(path), gt, list(rte.values()))
-        except Pruned as stop:
-            odometry_s += time.perf_counter() - t0
-            write_trajectory(trajectory_path(job.out_dir, job.algorithm, name, job.trial),
-                             stop.trajectory, _metadata(job, name))
-            return {"status": "pruned", "objective": stop.value, "rte_pct": rte,
-                    "odometry_s": odometry_s,
-                    "curve": curve_of(points, [*gts, gt], [*ests, stop.trajectory.T_world_lidar],
-                                      job.length_m),
-                    "error": f"pruned at {name} frame {stop.frames_run - 1}: running RTE "
-                             f"{stop.value:.4g} % above {stop.threshold:.4g} %"}
+        cached = scans.get(path)
+        if cached is None or getattr(adapter, "accepts_time_limit", False):
+            traj = run_sequence(adapter, path, job.params, job.time_limit_s)
+        else:
+            traj = adapter.run(cached, make_schedule(adapter, job.params, len(cached), path))
+            check_trajectory(traj, np.array([sc.stamp_ns for sc in cached]),
+                             f"{adapter.name} on {path}")
         odometry_s += time.perf_counter() - t0
-        check_jump(traj, job.jump_limit_m)
-        rte[name] = mean_rte_pct(gt, traj.T_world_lidar, job.length_m)
-        if not np.isfinite(rte[name]):
-            raise OdometryError(f"{name}: no segment of {job.length_m} m to score")
-        write_trajectory(trajectory_path(job.out_dir, job.algorithm, name, job.trial), traj,
-                         _metadata(job, name))
-        gts.append(gt)
+        rte[name] = _score(job, name, gt, traj)
         ests.append(traj.T_world_lidar)
-    objective = float(np.mean(list(rte.values())))
-    return {"status": "ok", "objective": objective, "rte_pct": rte, "odometry_s": odometry_s,
-            "curve": curve_of(points, gts, ests, job.length_m), "error": ""}
+    return {"status": "ok", "objective": float(np.mean(list(rte.values()))), "rte_pct": rte,
+            "odometry_s": odometry_s, "error": "",
+            "curve": curve_of(points, gts, ests, job.length_m, job.scored_only)}
+
+
+def _score(job: TrialJob, name: str, gt: NDArray[np.float64], traj: Trajectory) -> float:
+    """RTE [%] of a finished, checked sequence run; its trajectory written. OdometryError for a
+    jump or a run with no segment to score."""
+    from pipeline.metrics.rte import mean_rte_pct
+    from pipeline.trajectory import write_trajectory
+
+    check_jump(traj, job.jump_limit_m)
+    rte = mean_rte_pct(gt, traj.T_world_lidar, job.length_m)
+    if not np.isfinite(rte):
+        raise OdometryError(f"{name}: no segment of {job.length_m} m to score")
+    write_trajectory(trajectory_path(job.out_dir, job.algorithm, name, job.trial), traj,
+                     _metadata(job, name))
+    return rte
+
+
+class SequenceRun:
+    """One sequence of a trial, run a frame at a time by a streaming adapter (from the decoded
+    scans, or read and decoded ahead from its MCAP)."""
+
+    def __init__(self, adapter: Adapter, params: dict[str, float], path: str,
+                 cached: list[Scan] | None, stack: contextlib.ExitStack) -> None:
+        from pipeline.io_utils import prefetch
+        from pipeline.odometry import make_schedule
+        from pipeline.odometry.base import stream_poses
+        from pipeline.sequence import SequenceReader
+
+        self.path = path
+        scans: Iterable[Scan]
+        if cached is not None:
+            scans, self.stamps_ns = cached, np.array([sc.stamp_ns for sc in cached], np.int64)
+        else:
+            reader = stack.enter_context(SequenceReader(path))
+            self.stamps_ns = np.asarray(reader.stamps_ns, np.int64)
+            scans = stack.enter_context(contextlib.closing(prefetch(reader)))
+        schedule = make_schedule(adapter, params, len(self.stamps_ns), path)
+        self._steps = stream_poses(adapter.start, scans, schedule)  # type: ignore[attr-defined]
+        stack.callback(self._steps.close)
+        self.frames: list[int] = []
+        self.poses: list[NDArray[np.float64]] = []
+        self.seconds = 0.0  # wall time in the odometry (and decoding) so far
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+    @property
+    def finished(self) -> bool:
+        return len(self.poses) == len(self.stamps_ns)
+
+    def advance(self, frame: int) -> None:
+        """Run up to and including ``frame``."""
+        import time
+
+        t0 = time.perf_counter()
+        while len(self.poses) <= frame:
+            scan, pose = next(self._steps)
+            self.frames.append(scan.frame)
+            self.poses.append(pose)
+        self.seconds += time.perf_counter() - t0
+
+    def estimate(self) -> NDArray[np.float64] | None:
+        """T_world_lidar (n, 4, 4) of the frames run so far; None before the first."""
+        return np.stack(self.poses) if self.poses else None
+
+    def trajectory(self) -> Trajectory:
+        """The frames run so far as a Trajectory (at least one)."""
+        n = len(self.poses)
+        return Trajectory(np.array(self.frames, np.int32), self.stamps_ns[:n].copy(),
+                          np.stack(self.poses))
+
+
+def _run_stepped(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]],
+                 gts: list[NDArray[np.float64]], points: list[Any]) -> dict[str, Any]:
+    """``job`` run checkpoint by checkpoint: every sequence to the checkpoint's frame, then
+    the check (``pipeline.tuning.pruning.check``); a sequence that has run its last frame is
+    checked and scored at once. Pruned: the trajectories run so far are written."""
+    from pipeline.odometry import check_trajectory
+    from pipeline.trajectory import write_trajectory
+    from pipeline.tuning.pruning import Pruned, check, curve_of
+
+    rte: dict[str, float] = {}
+    with contextlib.ExitStack() as stack:
+        runs = [SequenceRun(adapter, job.params, path, scans.get(path), stack)
+                for _, path in job.sequences]
+        ends = [len(gt) - 1 for gt in gts]
+
+        def reach(frames: Sequence[int]) -> None:
+            for run, frame in zip(runs, frames, strict=True):
+                run.advance(frame)
+
+        def finish() -> None:
+            for (name, _), run, gt in zip(job.sequences, runs, gts, strict=True):
+                if run.finished and name not in rte:
+                    traj = run.trajectory()
+                    check_trajectory(traj, run.stamps_ns, f"{adapter.name} on {run.path}")
+                    rte[name] = _score(job, name, gt, traj)
+
+        try:
+            for index, (point, threshold) in enumerate(zip(points, job.thresholds,
+                                                           strict=True)):
+                reach(point.frames)
+                check(index, point, threshold, gts, [r.estimate() for r in runs],
+                      job.length_m, job.scored_only)
+                finish()
+            for s in range(len(runs)):  # the last rung: every sequence to its end, in order
+                reach([*ends[:s + 1], *(-1 for _ in ends[s + 1:])])
+                finish()
+        except Pruned as stop:
+            ests = [r.estimate() for r in runs]
+            for (name, _), run in zip(job.sequences, runs, strict=True):
+                if len(run) and name not in rte:
+                    write_trajectory(trajectory_path(job.out_dir, job.algorithm, name,
+                                                     job.trial), run.trajectory(),
+                                     _metadata(job, name))
+            return {"status": "pruned", "objective": stop.value, "rte_pct": rte,
+                    "odometry_s": sum(r.seconds for r in runs),
+                    "curve": curve_of(points, gts, ests, job.length_m, job.scored_only),
+                    "error": f"pruned at {_where(job, runs, points[stop.index])}: running RTE "
+                             f"{stop.value:.4g} % above {stop.threshold:.4g} %"}
+        ests = [r.estimate() for r in runs]
+        odometry_s = sum(r.seconds for r in runs)
+    return {"status": "ok", "objective": float(np.mean(list(rte.values()))), "rte_pct": rte,
+            "odometry_s": odometry_s, "error": "",
+            "curve": curve_of(points, gts, ests, job.length_m, job.scored_only)}
 
 
 def _metadata(job: TrialJob, sequence: str) -> dict[str, str]:
@@ -147,30 +276,16 @@ def _metadata(job: TrialJob, sequence: str) -> dict[str, str]:
             "params_json": json.dumps(job.params, sort_keys=True)}
 
 
-def _run(job: TrialJob, adapter: Adapter, index: int, path: str, cached: list[Scan] | None,
-         gt: NDArray[np.float64], done_rte: list[float]) -> Trajectory:
-    """The checked trajectory of sequence ``index`` of ``job``; pruning.Pruned when the trial
-    is pruned on it."""
-    from pipeline.odometry import check_trajectory, make_schedule, run_sequence
-    from pipeline.odometry.base import run_streaming
-    from pipeline.tuning.pruning import Checkpoint, watcher
-
-    if cached is None or getattr(adapter, "accepts_time_limit", False):
-        return run_sequence(adapter, path, job.params, job.time_limit_s)
-    schedule = make_schedule(adapter, job.params, len(cached), path)
-    checks = {k: (i, thr) for i, ((s, k), thr) in enumerate(zip(job.checkpoints, job.thresholds,
-                                                               strict=True))
-              if s == index and thr is not None}
-    start = getattr(adapter, "start", None)
-    if checks and start is not None:
-        watch = watcher(checks, [Checkpoint(s, k) for s, k in job.checkpoints], done_rte, gt,
-                        cached, job.length_m)
-        traj = run_streaming(start, cached, schedule, after_frame=watch)
-    else:
-        traj = adapter.run(cached, schedule)
-    stamps_ns = np.array([sc.stamp_ns for sc in cached])
-    check_trajectory(traj, stamps_ns, f"{adapter.name} on {path}")
-    return traj
+def _where(job: TrialJob, runs: list[SequenceRun], point: Any) -> str:
+    """Where a trial stopped: the sequences it was running ("seq_a frame 12, seq_b frame 9"),
+    or the last one it finished."""
+    running = [f"{name} frame {frame}" for (name, _), run, frame
+               in zip(job.sequences, runs, point.frames, strict=True)
+               if frame >= 0 and not run.finished]
+    if running:
+        return ", ".join(running)
+    last = max(s for s, frame in enumerate(point.frames) if frame >= 0)
+    return f"{job.sequences[last][0]} frame {point.frames[last]}"
 
 
 def check_jump(traj: Trajectory, jump_limit_m: float) -> None:

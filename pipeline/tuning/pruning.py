@@ -1,19 +1,38 @@
-"""Stop hopeless trials early: a percentile pruner over the running RTE (the idea of Optuna's
-``MedianPruner`` / ``PercentilePruner``; docs/design.md, "Stages").
+"""Stop trials early at checkpoints (docs/design.md, "Stages"): successive halving over rungs
+(``trials.fidelity: halving``; Optuna's ``SuccessiveHalvingPruner``, the asynchronous
+successive halving of Li et al.) or a percentile pruner over the running RTE (``trials.pruning``;
+Optuna's ``PercentilePruner``).
 
-A study has *checkpoints*: ``checkpoints - 1`` evenly spaced frames of each of its sequences
-(a joint study also checks at the end of every sequence but the last). A trial's value at a
-checkpoint (sequence s, frame k) is the mean of the RTE of the sequences it finished before s
-and the *running* RTE of s: the mean translational RTE [%] over the segments of length L that
-end at or before frame k. Its *curve* is its values at every checkpoint.
+A study's trial runs its sequences (one, or all of a joint study) and passes *checkpoints* in
+order. A checkpoint says how far every sequence has run by then: ``Checkpoint.frames[s]`` is
+the last frame of sequence s run (-1: not started). A trial's *value* there is the mean over
+the started sequences of their *running* RTE: the mean translational RTE [%] over the segments
+of length L that end at or before that frame (a finished sequence: its whole RTE); NaN as long
+as a started sequence has no such segment, except at the rungs, where the mean is over the
+sequences that have one (a short sequence of a joint study does not blank a rung). Its *curve*
+is its values at every checkpoint it reached.
 
-Before a trial starts, the tuner sets a threshold at every checkpoint from the trials it has
-told the search (the finished ok trials 0..t-lag, so that it is as deterministic as the
-proposals): the ``percentile``-th percentile of their values there, once ``min_trials`` of
-them have one, and only from a ``warmup`` fraction of a sequence's frames on. A trial whose
-value is above the threshold at a checkpoint stops there: it is *pruned*. Its objective (what
-the search is told, and the trials table holds) is its value at that checkpoint; the
-trajectory it ran so far is written, so the per-frame rows it earned stay.
+Rungs (successive halving): checkpoint r lets every sequence run to the fraction
+eta^(r - rungs + 1) of its frames (r = 0 .. rungs - 2; the last rung is the whole sequence), all
+sequences side by side, so that a joint trial is compared on every sequence from its first
+rung on. Before a trial starts, the tuner sets a threshold at every rung from the trials it
+has told the search (the finished trials 0..t-lag that reached the rung, ok or stopped, as
+deterministic as the proposals): with V their values at the rung, the trial goes on when its
+own value is among the best 1 / eta of V and itself (Optuna's rule: the (|V| + 1) // eta-th
+smallest, at least the smallest), else it stops there. The search is told a stopped trial's
+failure (the penalty, ``told_loss``): TPE's good set holds whole trials only, and the RTE of a
+prefix is never ranked against a whole sequence's.
+
+Percentile: ``checkpoints - 1`` evenly spaced frames of each sequence, the sequences one after
+another (a joint study also checks at the end of every sequence but the last); the threshold
+is the ``percentile``-th percentile of the told *ok* trials' values there, once ``min_trials``
+of them have one and from a ``warmup`` fraction of the first sequence's frames on. The search
+is told a stopped trial's value.
+
+A trial whose value is above the threshold at a checkpoint stops there: it is *pruned*. Its
+objective (what the trials table holds) is its value at that checkpoint; the trajectories it
+ran so far are written, so the per-frame rows it earned stay. A NaN value (no segment has
+ended yet) never stops a trial.
 """
 
 from __future__ import annotations
@@ -21,7 +40,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +49,9 @@ from pydantic import Field
 from pipeline.config import Section
 
 F64 = NDArray[np.float64]
+Fidelity = Literal["whole", "halving"]
+"""How long a study's trials run: ``whole`` (every frame of every sequence, the paper; the
+percentile pruner may stop them) or ``halving`` (rungs: successive halving)."""
 
 
 class PruningSection(Section):
@@ -42,54 +64,160 @@ class PruningSection(Section):
     min_trials: int = Field(5, ge=1)
 
 
+class HalvingSection(Section):
+    """params.yaml ``trials.halving``: the rungs of ``fidelity: halving``.
+
+    eta: about one in eta of a rung's trials runs on to the next (Optuna's
+    ``reduction_factor``); rungs: how many fidelities, the last the whole sequence: the first
+    runs eta^-(rungs - 1) of every sequence's frames (3 and 3: 1/9, 1/3, all).
+    """
+
+    eta: int = Field(3, ge=2, le=100)
+    rungs: int = Field(3, ge=2, le=10)
+
+    def fractions(self) -> list[float]:
+        """The fraction of the frames every rung but the last runs, ascending."""
+        return [float(self.eta) ** (r - self.rungs + 1) for r in range(self.rungs - 1)]
+
+
 @dataclass(frozen=True)
 class Checkpoint:
-    """Frame ``frame`` of the study's sequence number ``sequence`` (0-based)."""
+    """How far every sequence of a study has run: ``frames[s]`` is the last frame of sequence
+    s run (its count - 1 when finished, -1 when not started)."""
 
-    sequence: int
-    frame: int
+    frames: tuple[int, ...]
 
 
-class Pruned(Exception):  # noqa: N818 - control flow inside a trial, never shown
-    """Raised inside a trial at the checkpoint where it is pruned."""
+@dataclass(frozen=True)
+class StoppingRule:
+    """How a study stops trials: ``kind`` ("whole": never; "percentile"; "halving") and its
+    settings (``pruning`` or ``halving``)."""
 
-    def __init__(self, index: int, value: float, threshold: float, trajectory: Any) -> None:
-        super().__init__(f"value {value:.4g} above {threshold:.4g}")
-        self.index = index
-        self.value = value
-        self.threshold = threshold
-        self.trajectory = trajectory  # Trajectory of the frames run (0..frames_run-1)
-        self.frames_run = len(trajectory)
+    kind: Literal["whole", "percentile", "halving"]
+    pruning: PruningSection | None = None
+    halving: HalvingSection | None = None
+
+    @classmethod
+    def of(cls, fidelity: Fidelity, pruning: PruningSection,
+           halving: HalvingSection) -> StoppingRule:
+        """The rule of a study with these settings: halving's rungs, else the percentile
+        pruner when its percentile is set, else none."""
+        if fidelity == "halving":
+            return cls("halving", halving=halving)
+        if pruning.percentile is not None:
+            return cls("percentile", pruning=pruning)
+        return cls("whole")
+
+    @property
+    def scored_only(self) -> bool:
+        """Whether a value averages only the sequences on which a segment has ended (the
+        rungs: a joint study's short sequences do not blank its first rung) or is NaN until
+        every started one has (the percentile pruner)."""
+        return self.kind == "halving"
+
+    def describe(self) -> dict[str, Any]:
+        """The rule as it enters the study fingerprint."""
+        out: dict[str, Any] = {"kind": self.kind}
+        for part in (self.pruning, self.halving):
+            if part is not None:
+                out |= part.model_dump()
+        return out
+
+    def checkpoints(self, frame_counts: Sequence[int]) -> list[Checkpoint]:
+        """The checkpoints of a study over sequences of ``frame_counts`` frames, in run order."""
+        if self.halving is not None:
+            return rungs(frame_counts, self.halving)
+        if self.pruning is not None:
+            return checkpoints(frame_counts, self.pruning)
+        return []
+
+    def thresholds(self, points: Sequence[Checkpoint], frame_counts: Sequence[int],
+                   reference: Sequence[Sequence[float]]) -> tuple[float | None, ...]:
+        """The threshold at every checkpoint (None: no check) from the ``reference`` curves."""
+        if self.halving is not None:
+            return rung_thresholds(points, reference, self.halving.eta)
+        if self.pruning is not None:
+            return thresholds(points, frame_counts, reference, self.pruning)
+        return tuple(None for _ in points)
+
+    def reference_curves(self, done: Mapping[int, Any], tid: int,
+                         lag: int) -> list[Sequence[float]]:
+        """Curves of the trials told to the search for ``tid`` (0..tid-lag) that set the
+        thresholds: ok ones for the percentile pruner; ok and stopped ones for the rungs (a
+        trial stopped at rung r has its value there)."""
+        statuses = ("ok", "pruned") if self.kind == "halving" else ("ok",)
+        return [done[t].curve for t in range(tid - lag + 1)
+                if t in done and done[t].status in statuses and done[t].curve]
+
+    def told_loss(self, status: str, objective: float, penalty_pct: float) -> float:
+        """The loss TPE is told for a finished trial: its objective; a trial stopped at a rung
+        counts as failed (the penalty; module docstring)."""
+        return penalty_pct if self.kind == "halving" and status == "pruned" else objective
 
 
 def checkpoints(frame_counts: Sequence[int], settings: PruningSection) -> list[Checkpoint]:
-    """The checkpoints of a study over sequences of ``frame_counts`` frames, in run order."""
+    """The percentile pruner's checkpoints over sequences of ``frame_counts`` frames, in run
+    order (module docstring)."""
     c = settings.checkpoints
     out = []
     for s, n in enumerate(frame_counts):
         frames = sorted({max(0, math.ceil(n * i / c) - 1) for i in range(1, c)})
         if s < len(frame_counts) - 1:
             frames.append(n - 1)  # a joint study: the end of every sequence but the last
-        out += [Checkpoint(s, k) for k in frames if k < n - 1 or s < len(frame_counts) - 1]
+        done = tuple(m - 1 for m in frame_counts[:s])
+        rest = (-1,) * (len(frame_counts) - s - 1)
+        out += [Checkpoint((*done, k, *rest)) for k in frames
+                if k < n - 1 or s < len(frame_counts) - 1]
+    return out
+
+
+def rungs(frame_counts: Sequence[int], settings: HalvingSection) -> list[Checkpoint]:
+    """The rungs but the last (the whole sequences) over sequences of ``frame_counts`` frames:
+    every sequence to ceil(fraction * count) - 1, side by side; a rung that would run no
+    sequence further than the one before is left out."""
+    out: list[Checkpoint] = []
+    for fraction in settings.fractions():
+        frames = tuple(min(max(0, math.ceil(n * fraction) - 1), n - 1) for n in frame_counts)
+        if frames == tuple(n - 1 for n in frame_counts) or (out and frames == out[-1].frames):
+            continue
+        out.append(Checkpoint(frames))
     return out
 
 
 def thresholds(points: Sequence[Checkpoint], frame_counts: Sequence[int],
                reference: Sequence[Sequence[float]], settings: PruningSection
                ) -> tuple[float | None, ...]:
-    """The threshold at every checkpoint (None: no check there) from the ``reference`` curves
-    (the told ok trials')."""
+    """The percentile pruner's threshold at every checkpoint (None: no check there) from the
+    ``reference`` curves (the told ok trials')."""
     if settings.percentile is None:
         return tuple(None for _ in points)
     out: list[float | None] = []
     for i, point in enumerate(points):
-        warm = point.sequence > 0 or (point.frame + 1) >= settings.warmup * frame_counts[0]
+        warm = (len(point.frames) > 1 and point.frames[1] >= 0) or \
+            (point.frames[0] + 1) >= settings.warmup * frame_counts[0]
         values = [float(curve[i]) for curve in reference
                   if len(curve) > i and math.isfinite(curve[i])]
         if warm and len(values) >= settings.min_trials:
             out.append(float(np.percentile(values, settings.percentile)))
         else:
             out.append(None)
+    return tuple(out)
+
+
+def rung_thresholds(points: Sequence[Checkpoint], reference: Sequence[Sequence[float]],
+                    eta: int) -> tuple[float | None, ...]:
+    """Successive halving's threshold at every rung from the ``reference`` curves (the told
+    trials that reached it): a value goes on when it is among the best ``1 / eta`` of the
+    reference values and itself, i.e. at most the ((|V| + 1) // eta)-th smallest of V (at
+    least the smallest); None when no told trial reached the rung."""
+    out: list[float | None] = []
+    for i in range(len(points)):
+        values = sorted(float(curve[i]) for curve in reference
+                        if len(curve) > i and math.isfinite(curve[i]))
+        if not values:
+            out.append(None)
+            continue
+        out.append(values[max((len(values) + 1) // eta - 1, 0)])
     return tuple(out)
 
 
@@ -103,91 +231,89 @@ def running_rte(gt: F64, est: F64, frame: int, length_m: float) -> float:
     return float(valid.mean()) if len(valid) else math.nan
 
 
-def value_at(point: Checkpoint, done_rte: Sequence[float], gt: F64, est: F64,
-             length_m: float) -> float:
-    """A trial's value at ``point``: the mean of the finished sequences' RTE (``done_rte``)
-    and the running RTE of the current one."""
-    current = running_rte(gt, est, point.frame, length_m)
-    values = [*done_rte, current]
+def value_at(point: Checkpoint, gts: Sequence[F64], ests: Sequence[F64 | None],
+             length_m: float, known: dict[int, float] | None = None,
+             scored_only: bool = False) -> float:
+    """A trial's value at ``point``: the mean of the running RTE of every started sequence
+    (``ests[s]`` has run at least to ``point.frames[s]``); NaN when one is NaN, or with
+    ``scored_only`` (the rungs) the mean of those on which a segment has ended (NaN when
+    none has). ``known``: values of finished sequences already computed, by sequence, filled
+    in."""
+    values = []
+    for s, frame in enumerate(point.frames):
+        if frame < 0:
+            continue
+        finished = frame == len(gts[s]) - 1
+        if known is not None and finished and s in known:
+            values.append(known[s])
+            continue
+        est = ests[s]
+        assert est is not None, "the trial did not run this far"
+        values.append(running_rte(gts[s], est, frame, length_m))
+        if known is not None and finished:
+            known[s] = values[-1]
+    if scored_only:
+        values = [v for v in values if math.isfinite(v)]
+        return float(np.mean(values)) if values else math.nan
     return float(np.mean(values)) if all(map(math.isfinite, values)) else math.nan
 
 
-def curve_of(points: Sequence[Checkpoint], gts: Sequence[F64], ests: Sequence[F64 | None],
-             length_m: float) -> tuple[float, ...]:
-    """Values at ``points`` of a trial whose trajectory of sequence s is ``ests[s]`` (possibly
-    partial: frames 0..len-1; None when not run); stops at the first point not reached."""
-    from pipeline.metrics.rte import mean_rte_pct
+def reached(point: Checkpoint, ests: Sequence[F64 | None]) -> bool:
+    """True when the trajectories ``ests`` (partial or None) run as far as ``point``."""
+    return all(frame < 0 or (est is not None and len(est) > frame)
+               for frame, est in zip(point.frames, ests, strict=True))
 
-    full: dict[int, float] = {}
+
+def curve_of(points: Sequence[Checkpoint], gts: Sequence[F64], ests: Sequence[F64 | None],
+             length_m: float, scored_only: bool = False) -> tuple[float, ...]:
+    """Values at ``points`` of a trial whose trajectory of sequence s is ``ests[s]`` (possibly
+    partial: frames 0..len-1; None when not run); stops at the first point not reached.
+    ``scored_only``: as ``value_at``."""
+    known: dict[int, float] = {}
     out = []
     for point in points:
-        est = ests[point.sequence]
-        if est is None or len(est) <= point.frame:
+        if not reached(point, ests):
             break
-        done = []
-        for s in range(point.sequence):
-            if s not in full:
-                other = ests[s]
-                full[s] = (mean_rte_pct(gts[s], other, length_m)
-                           if other is not None and len(other) == len(gts[s]) else math.nan)
-            done.append(full[s])
-        out.append(value_at(point, done, gts[point.sequence], est, length_m))
+        out.append(value_at(point, gts, ests, length_m, known, scored_only))
     return tuple(out)
 
 
-def watcher(checks: Mapping[int, tuple[int, float]], points: Sequence[Checkpoint],
-            done_rte: Sequence[float], gt: F64, scans: Sequence[Any], length_m: float
-            ) -> Callable[[int, list[F64]], None]:
-    """``run_streaming``'s ``after_frame`` for one sequence: at a checked frame (``checks``:
-    frame -> (checkpoint index, threshold)) raise Pruned when the value is above the
-    threshold (a NaN value never prunes)."""
-    from pipeline.trajectory import Trajectory
+class Pruned(Exception):  # noqa: N818 - control flow inside a trial, never shown
+    """Raised inside a trial at the checkpoint where it stops."""
 
-    def after_frame(i: int, poses: list[F64]) -> None:
-        hit = checks.get(i)
-        if hit is None:
-            return
-        index, threshold = hit
-        est = np.stack(poses)
-        value = value_at(points[index], done_rte, gt, est, length_m)
-        if value > threshold:
-            run = scans[:i + 1]
-            raise Pruned(index, value, threshold, Trajectory(
-                np.array([s.frame for s in run], np.int32),
-                np.array([s.stamp_ns for s in run], np.int64), est))
-
-    return after_frame
+    def __init__(self, index: int, value: float, threshold: float) -> None:
+        super().__init__(f"value {value:.4g} above {threshold:.4g}")
+        self.index = index
+        self.value = value
+        self.threshold = threshold
 
 
-def describe(settings: PruningSection) -> dict[str, Any]:
-    """The settings as they enter the study fingerprint."""
-    return settings.model_dump()
-
-
-def reference_curves(done: Mapping[int, Any], tid: int, lag: int) -> list[Sequence[float]]:
-    """Curves of the ok trials among 0..tid-lag (the ones told to the search for ``tid``)."""
-    return [done[t].curve for t in range(tid - lag + 1)
-            if t in done and done[t].status == "ok" and done[t].curve]
+def check(index: int, point: Checkpoint, threshold: float | None, gts: Sequence[F64],
+          ests: Sequence[F64 | None], length_m: float, scored_only: bool = False) -> None:
+    """Raise Pruned when the value at checkpoint ``index`` is above its threshold (a NaN value
+    never is); ``scored_only``: as ``value_at``."""
+    if threshold is None:
+        return
+    value = value_at(point, gts, ests, length_m, scored_only=scored_only)
+    if value > threshold:
+        raise Pruned(index, value, threshold)
 
 
 class StudyPruner:
-    """The pruner of one study: its checkpoints over the study's sequences (ground truths
-    ``gts``), the curves of trials an earlier run finished, and each new trial's thresholds.
-    It reads and writes nothing: the study hands it the ground truths and the stored
-    trajectories."""
+    """The stopping rule of one study: its checkpoints over the study's sequences (ground
+    truths ``gts``), the curves of trials an earlier run finished, and each new trial's
+    thresholds. It reads and writes nothing: the study hands it the ground truths and the
+    stored trajectories."""
 
-    def __init__(self, gts: Sequence[F64], settings: PruningSection, length_m: float) -> None:
-        self.settings = settings
+    def __init__(self, gts: Sequence[F64], rule: StoppingRule, length_m: float) -> None:
+        self.rule = rule
         self.length_m = length_m
-        self.gts: list[F64] = []
-        self.points: list[Checkpoint] = []
-        if settings.percentile is not None:
-            self.gts = list(gts)
-            self.points = checkpoints([len(g) for g in self.gts], settings)
+        self.gts = list(gts) if rule.kind != "whole" else []
+        self.points = rule.checkpoints([len(g) for g in self.gts])
 
     @property
     def active(self) -> bool:
-        """True when the study prunes (``percentile`` set)."""
+        """True when the study stops trials early."""
         return bool(self.points)
 
     def restore(self, results: Mapping[int, Any],
@@ -203,7 +329,7 @@ class StudyPruner:
         for tid, r in results.items():
             if r.status in ("ok", "pruned"):
                 r = replace(r, curve=curve_of(self.points, self.gts, trajectories(tid),
-                                              self.length_m))
+                                              self.length_m, self.rule.scored_only))
             out[tid] = r
         return out
 
@@ -211,7 +337,7 @@ class StudyPruner:
         """``checkpoints`` and ``thresholds`` of the TrialJob of trial ``tid``."""
         if not self.points:
             return {}
-        limits = thresholds(self.points, [len(g) for g in self.gts],
-                            reference_curves(done, tid, lag), self.settings)
-        return {"checkpoints": tuple((p.sequence, p.frame) for p in self.points),
-                "thresholds": limits}
+        limits = self.rule.thresholds(self.points, [len(g) for g in self.gts],
+                                      self.rule.reference_curves(done, tid, lag))
+        return {"checkpoints": tuple(p.frames for p in self.points), "thresholds": limits,
+                "scored_only": self.rule.scored_only}

@@ -42,7 +42,13 @@ from pipeline.tuning.fingerprint import check_fingerprint, study_fingerprint
 from pipeline.tuning.job import TrialJob, TrialResult, one_line
 from pipeline.tuning.layout import read_trial_trajectories
 from pipeline.tuning.progress import StudyProgress
-from pipeline.tuning.pruning import PruningSection, StudyPruner
+from pipeline.tuning.pruning import (
+    Fidelity,
+    HalvingSection,
+    PruningSection,
+    StoppingRule,
+    StudyPruner,
+)
 from pipeline.tuning.table import JOINT, read_study, read_trials, trials_path, write_trials
 from pipeline.tuning.tpe import TpeSearch, trial_seed
 from pipeline.tuning.worker import run_trial
@@ -69,8 +75,12 @@ class TrialsSection(Section):
     startup_trials: random proposals before TPE (hyperopt's n_startup_jobs).
     retries: times a lost trial (process killed from outside, executor broken) is run again
     before the run gives up on it (a resume runs it again).
-    pruning: stop hopeless trials early (``pipeline.tuning.pruning``; ``percentile: null``
-    turns it off).
+    fidelity: ``whole`` (every trial runs every frame of its sequences, the paper's protocol;
+    ``pruning`` may stop hopeless ones) or ``halving`` (successive halving over the rungs of
+    ``halving``: a trial runs on to the next fraction of its sequences only when it is among
+    the best 1/eta there; ``pipeline.tuning.pruning``). docs/design.md, "Stages".
+    pruning: with ``fidelity: whole``, stop hopeless trials early (``percentile: null`` turns it
+    off).
     space: search ranges that replace the adapter's built-in ones, by parameter name
     (``{resolution: {low: 0.5, high: 8}}``; ``adaptune params ALGO`` lists them). The space a
     study used is stored with its trials table, where the later stages read it.
@@ -91,7 +101,14 @@ class TrialsSection(Section):
     split: str = "train"
     adapter_options: dict[str, Any] = Field(default_factory=dict)
     space: dict[str, SpaceRange] = Field(default_factory=dict)
+    fidelity: Fidelity = "whole"
+    halving: HalvingSection = Field(default_factory=lambda: HalvingSection.model_validate({}))
     pruning: PruningSection = Field(default_factory=lambda: PruningSection.model_validate({}))
+
+    @property
+    def stopping(self) -> StoppingRule:
+        """How the study stops trials (``pipeline.tuning.pruning.StoppingRule``)."""
+        return StoppingRule.of(self.fidelity, self.pruning, self.halving)
 
     @field_validator("dask")
     @classmethod
@@ -122,6 +139,7 @@ class FixedSection(Section):
     sequences together (``pipeline.tuning.warm_start``), not random ones; 0 = off.
     pruning: the joint study's own pruner settings (null = ``trials.pruning``): its trials run
     every training sequence, and its rows do not train the surrogate.
+    fidelity, halving: the joint study's own (null = ``trials.fidelity`` / ``trials.halving``).
     """
 
     iterations: int | None = Field(64, ge=1)
@@ -129,6 +147,8 @@ class FixedSection(Section):
     warm_start: int = Field(4, ge=0)
     pruning: PruningSection | None = Field(
         default_factory=lambda: PruningSection.model_validate({"percentile": 50.0}))
+    fidelity: Fidelity | None = None
+    halving: HalvingSection | None = None
 
 
 @dataclass
@@ -219,13 +239,14 @@ def make_studies(sequence_paths: Sequence[str | Path], joint: bool) -> list[Stud
 
 
 def study_pruner(study: Study, settings: TrialsSection) -> StudyPruner:
-    """The study's pruner, with its sequences' ground truths when it prunes."""
+    """The study's stopping rule, with its sequences' ground truths when it stops trials."""
     from pipeline.sequence import read_ground_truth
     from pipeline.tuning.job import TRIALS_PURPOSE
 
-    on = settings.pruning.percentile is not None
+    rule = settings.stopping
+    on = rule.kind != "whole"
     gts = [read_ground_truth(path, TRIALS_PURPOSE) for _, path in study.sequences] if on else []
-    return StudyPruner(gts, settings.pruning, settings.length_m)
+    return StudyPruner(gts, rule, settings.length_m)
 
 
 def check_scorable(path: str | Path, length_m: float) -> None:
@@ -263,6 +284,10 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
                  len(done), settings.iterations)
     lag = told_lag(settings.workers)
     search = TpeSearch(space, seed, settings.startup_trials)
+
+    def told_loss(r: TrialResult) -> float:
+        return pruner.rule.told_loss(r.status, r.objective, settings.penalty_pct)
+
     attempts: dict[int, int] = {}
     with StudyProgress(f"trials {adapter.name} {study.name}", settings.iterations, len(done),
                        progress) as shown:
@@ -272,7 +297,7 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
                    and all(t in done for t in range(todo[0] - lag + 1))):
                 tid = todo.pop(0)
                 proposed[tid] = (first[tid - 1] if 0 < tid <= len(first)
-                                 else propose(search, tid, done, proposed, lag))
+                                 else propose(search, tid, done, proposed, lag, told_loss))
                 job = make_job(study, adapter, tid, trial_seed(seed, tid), proposed[tid],
                                out_dir, settings, **pruner.job_fields(tid, done, lag))
                 in_flight[pool.submit(job)] = job
@@ -314,6 +339,7 @@ def study_of(study: Study, adapter: Adapter, settings: TrialsSection, seed: int,
         penalty_pct=settings.penalty_pct, jump_limit_m=settings.jump_limit_m,
         time_limit_s=settings.time_limit_s, startup_trials=settings.startup_trials,
         told_lag=told_lag(settings.workers), pruning=settings.pruning.model_dump(),
+        fidelity=(settings.halving.model_dump() if settings.fidelity == "halving" else None),
         warm_start=[dict(p) for p in warm_start], sequences=list(study.sequences),
         stored=stored)
 
@@ -328,13 +354,15 @@ def told_lag(workers: int) -> int:
 
 
 def propose(search: TpeSearch, tid: int, done: dict[int, TrialResult],
-            proposed: dict[int, Params], lag: int) -> Params:
+            proposed: dict[int, Params], lag: int,
+            loss: Callable[[TrialResult], float] = lambda r: r.objective) -> Params:
     """Parameters of trial ``tid``: the baseline (defaults) for trial 0, else a TPE proposal
-    from exactly the finished trials 0..tid-lag and the pending tid-lag+1..tid-1 (as in an
-    uninterrupted run, whatever a resumed one found finished beyond them)."""
+    from exactly the finished trials 0..tid-lag (told ``loss(result)``: the study's
+    ``StoppingRule.told_loss``) and the pending tid-lag+1..tid-1 (as in an uninterrupted run,
+    whatever a resumed one found finished beyond them)."""
     if tid == 0:
         return search.space.defaults()
-    search.reset(told={t: (done[t].params, done[t].objective) for t in range(tid - lag + 1)},
+    search.reset(told={t: (done[t].params, loss(done[t])) for t in range(tid - lag + 1)},
                  pending={t: proposed[t] for t in range(max(0, tid - lag + 1), tid)})
     return search.ask(tid)
 

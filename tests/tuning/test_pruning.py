@@ -46,9 +46,9 @@ def running_rte_by_loop(gt: np.ndarray, est: np.ndarray, last: int, length_m: fl
 
 def test_checkpoints_and_thresholds() -> None:
     s = PruningSection(**PRUNING)
-    assert checkpoints([30], s) == [Checkpoint(0, k) for k in (5, 11, 17, 23)]
-    assert checkpoints([10, 20], s) == [*(Checkpoint(0, k) for k in (1, 3, 5, 7, 9)),
-                                        *(Checkpoint(1, k) for k in (3, 7, 11, 15))]
+    assert checkpoints([30], s) == [Checkpoint((k,)) for k in (5, 11, 17, 23)]
+    assert checkpoints([10, 20], s) == [*(Checkpoint((k, -1)) for k in (1, 3, 5, 7, 9)),
+                                        *(Checkpoint((9, k)) for k in (3, 7, 11, 15))]
     points = checkpoints([30], s)
     curves = [(1.0, 2.0, 3.0, 4.0), (3.0, 4.0, 5.0, 6.0), (2.0, 3.0, 4.0, 5.0)]
     assert thresholds(points, [30], curves, s) == (2.0, 3.0, 4.0, 5.0)  # the medians
