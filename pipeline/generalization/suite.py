@@ -121,11 +121,18 @@ def world_of(section: GeneralizeSection, suite: str, i: int) -> SuiteWorld:
     """World ``i`` of ``suite``: from (the suite's seed root, i) alone."""
     rng = np.random.default_rng([section.seed_roots[suite], i])
     n = int(rng.integers(section.segments[0], section.segments[1] + 1))
-    labels = [str(rng.choice(section.labels))]
-    while len(labels) < n:
-        labels.append(str(rng.choice([lab for lab in section.labels if lab != labels[-1]])))
+    labels = draw_labels(rng, n, section.labels)
     frames = n * int(rng.integers(section.segment_frames[0], section.segment_frames[1] + 1))
     seed = int(rng.integers(2**31 - 1))
     sensor = section.sensors[i % len(section.sensors)]
     return SuiteWorld(f"{suite}_{i:02d}", SimSpec("composite", seed, frames, sensor,
-                                                  tuple(labels)))
+                                                  labels))
+
+
+def draw_labels(rng: np.random.Generator, n: int, labels: tuple[str, ...]) -> tuple[str, ...]:
+    """``n`` segment labels drawn from ``labels``, never the same one twice in a row (the
+    composite worlds of every suite: this one and ``pipeline.verdict.worlds``)."""
+    out = [str(rng.choice(labels))]
+    while len(out) < n:
+        out.append(str(rng.choice([lab for lab in labels if lab != out[-1]])))
+    return tuple(out)
