@@ -2,7 +2,9 @@
 
 A page that quotes figures of a run is generated, never typed, so it cannot drift from what the
 pipeline measured: docs/results/toy.md from metrics/evaluation.json, metrics/surrogate.json and
-metrics/generalization.json, and the README's result between its two markers. Provenance comes
+metrics/generalization.json, the README's result between its two markers, and, once a run of
+the coverage pipeline is recorded, docs/results/verdict.md from verdict/metrics/*.json
+(``pipeline.report.verdict_page``). Provenance comes
 from two files: dvc.lock (the md5 of every metrics file and the params of every stage that led
 to them) and docs/results/runs.yaml (the commit, date and command of the run, and the md5s of the
 metrics it wrote). Pages are rendered only when the metrics files, dvc.lock and the run record
@@ -14,8 +16,6 @@ from __future__ import annotations
 import datetime
 import hashlib
 import json
-import math
-import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -31,12 +31,21 @@ from pipeline.generalization.summary import (
     TARGET_WIN_RATE,
     TARGET_WORST,
 )
+from pipeline.report.markdown import fill as _fill
+from pipeline.report.markdown import number as _f
+from pipeline.report.markdown import percent as _pct
+from pipeline.report.markdown import row as _row
+from pipeline.report.markdown import table as _table
+from pipeline.report.markdown import values as _values
+from pipeline.report.markdown import wrap as _wrap
 from pipeline.report.table2 import table2_json, table2_markdown
 
 RUNS = Path("docs/results/runs.yaml")
 LOCK = Path("dvc.lock")
 README = Path("README.md")
 TOY_PAGE = Path("docs/results/toy.md")
+VERDICT_PAGE = Path("docs/results/verdict.md")
+VERDICT_LOCK = Path("verdict/dvc.lock")
 EVALUATION = "metrics/evaluation.json"
 SURROGATE = "metrics/surrogate.json"
 GENERALIZATION = "metrics/generalization.json"
@@ -69,8 +78,27 @@ def render_docs(repo: Path) -> dict[Path, str]:
                for name in (EVALUATION, SURROGATE, GENERALIZATION)}
     params = stage_params(lock, metrics)
     readme = (repo / README).read_text(encoding="utf-8")
-    return {TOY_PAGE: toy_page(metrics, run, params),
-            README: with_block(readme, readme_block(metrics, run))}
+    pages = {TOY_PAGE: toy_page(metrics, run, params),
+             README: with_block(readme, readme_block(metrics, run))}
+    if "verdict" in (_load_yaml(repo / RUNS) or {}):
+        pages[VERDICT_PAGE] = verdict_docs(repo)
+    return pages
+
+
+def verdict_docs(repo: Path) -> str:
+    """docs/results/verdict.md from the coverage pipeline's metrics (``verdict_page``), once a
+    run of it is recorded in docs/results/runs.yaml (``verdict``; its metrics named from the
+    repository root, e.g. verdict/metrics/id.json)."""
+    from pipeline.report.verdict_page import HEADROOM, METRICS, verdict_page
+
+    run = read_run(repo, "verdict")
+    lock = _load_yaml(repo / VERDICT_LOCK)
+    names = [n for n in METRICS if n in run.metrics or n != HEADROOM]
+    metrics = {n: read_metrics(repo, n, run, lock, VERDICT_LOCK.parent.as_posix())
+               for n in names}
+    folder = VERDICT_LOCK.parent.as_posix() + "/"
+    params = stage_params(lock, {n.removeprefix(folder): m for n, m in metrics.items()})
+    return verdict_page(metrics, _provenance(run, list(metrics)), params)
 
 
 def stale_files(repo: Path) -> list[Path]:
@@ -103,11 +131,13 @@ def read_run(repo: Path, name: str) -> RunRecord:
     return validate_section(RunRecord, f"{RUNS}: {name}", runs[name])
 
 
-def read_metrics(repo: Path, name: str, run: RunRecord, lock: Mapping[str, Any]
-                 ) -> dict[str, Any]:
+def read_metrics(repo: Path, name: str, run: RunRecord, lock: Mapping[str, Any],
+                 folder: str = "") -> dict[str, Any]:
     """The metrics file ``name`` (relative to ``repo``); InputError unless its md5 is the one
-    dvc.lock records for it and the one the run record names."""
+    ``lock`` (the dvc.lock of the pipeline in ``folder``, whose paths are relative to it)
+    records for it and the one the run record names."""
     path = repo / name
+    locked_name = name.removeprefix(folder + "/") if folder else name
     try:
         data = path.read_bytes()
     except FileNotFoundError:
@@ -115,9 +145,9 @@ def read_metrics(repo: Path, name: str, run: RunRecord, lock: Mapping[str, Any]
     md5 = hashlib.md5(data).hexdigest()
     locked = {out["path"]: out.get("md5") for stage in (lock.get("stages") or {}).values()
               for out in stage.get("outs") or []}
-    if locked.get(name) != md5:
+    if locked.get(locked_name) != md5:
         raise InputError(f"{path}: md5 {md5} is not the one dvc.lock records "
-                         f"({locked.get(name)}): run `dvc repro` or `dvc commit` first")
+                         f"({locked.get(locked_name)}): run `dvc repro` or `dvc commit` first")
     if run.metrics.get(name) != md5:
         raise InputError(f"{path}: md5 {md5} is not the one {RUNS} records for the run of "
                          f"commit {run.commit} ({run.metrics.get(name)}): record the commit, "
@@ -151,44 +181,6 @@ def stage_params(lock: Mapping[str, Any], metrics: Mapping[str, Any]) -> dict[st
 
 
 # ---------------------------------------------------------------- rendering
-
-
-def _f(v: float | None, digits: int = 3) -> str:
-    return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}f}"
-
-
-def _pct(v: float | None) -> str:
-    return "-" if v is None else f"{100 * v:.0f} %"
-
-
-def _values(p: Mapping[str, float]) -> str:
-    return ", ".join(f"{k} {v:.3g}" for k, v in p.items())
-
-
-def _wrap(text: str, prefix: str = "") -> str:
-    """``text`` as lines of at most 96 characters, each starting with ``prefix``."""
-    return textwrap.fill(text, 96, initial_indent=prefix, subsequent_indent=prefix,
-                         break_long_words=False, break_on_hyphens=False)
-
-
-def _fill(text: str) -> str:
-    """``text`` with its prose lines wrapped by ``_wrap``: tables, headings, quotes, HTML and
-    fenced code as they are."""
-    out, fenced = [], False
-    for line in text.split("\n"):
-        if line.startswith("```"):
-            fenced = not fenced
-        keep = fenced or line.startswith(("```", "|", "#", ">", "<")) or len(line) <= 96
-        out.append(line if keep else _wrap(line))
-    return "\n".join(out)
-
-
-def _row(cells: Sequence[object]) -> str:
-    return "| " + " | ".join(str(c) for c in cells) + " |"
-
-
-def _table(head: Sequence[str], rows: Sequence[Sequence[object]]) -> list[str]:
-    return [_row(head), "|" + "---|" * len(head), *(_row(r) for r in rows)]
 
 
 def _provenance(run: RunRecord, names: Sequence[str]) -> list[str]:
