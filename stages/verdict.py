@@ -10,32 +10,10 @@ oracle's candidate set and the oracles on the in-distribution suite and writes t
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import click
 
 from stages.common import dir_option, file_option, params_option
-
-
-def _settings(params_path: Path | None) -> tuple[Any, Any]:
-    """The ``verdict`` section and what the stages take from the other sections."""
-    from pipeline.config import BaseSection, SelectSection, load_section
-    from pipeline.sim.dataset import SimulateSection
-    from pipeline.tuning.smbo import FixedSection, TrialsSection
-    from pipeline.verdict.report import RunSettings
-    from pipeline.verdict.section import VerdictSection
-    from pipeline.verdict.worlds import sensor_template
-
-    section = load_section(params_path, "verdict", VerdictSection)
-    trials = load_section(params_path, "trials", TrialsSection)
-    fixed = load_section(params_path, "fixed", FixedSection)
-    base = load_section(params_path, "base", BaseSection)
-    simulate = load_section(params_path, "simulate", SimulateSection)
-    selection = load_section(params_path, "select", SelectSection).settings()
-    iterations = trials.iterations if fixed.iterations is None else fixed.iterations
-    settings = RunSettings(dict(trials.adapter_options), trials.penalty_pct, iterations,
-                           fixed.warm_start, selection, sensor_template(simulate, base.seed))
-    return section, settings
 
 
 @click.command()
@@ -51,9 +29,9 @@ def _settings(params_path: Path | None) -> tuple[Any, Any]:
 def verdict(params_path: Path, family: str, model_dir: Path, fixed_dir: Path, runs_dir: Path,
             metrics_path: Path, plots_path: Path, figure_path: Path) -> None:
     """Score baseline, fixed and adaptive on a family's suite of worlds never trained on."""
-    from pipeline.verdict.report import VerdictPaths, run_verdict
+    from pipeline.verdict.report import VerdictPaths, load_settings, run_verdict
 
-    section, settings = _settings(params_path)
+    section, settings = load_settings(params_path)
     paths = VerdictPaths(model_dir, fixed_dir, runs_dir, metrics_path, plots_path, figure_path)
     m = run_verdict(paths, family, section, settings)
     parts = []
@@ -79,9 +57,9 @@ def _num(v: float | None) -> str:
 def headroom(params_path: Path, fixed_dir: Path, suite_dir: Path, runs_dir: Path,
              metrics_path: Path, figure_path: Path) -> None:
     """The oracles of the in-distribution suite against SBS, and the gap adaptive closes."""
-    from pipeline.verdict.report import HeadroomPaths, run_headroom_study
+    from pipeline.verdict.report import HeadroomPaths, load_settings, run_headroom_study
 
-    section, settings = _settings(params_path)
+    section, settings = load_settings(params_path)
     m = run_headroom_study(HeadroomPaths(fixed_dir, suite_dir, runs_dir, metrics_path,
                                          figure_path), section, settings)
     o, gap = m["ratios"]["oracle_vs_sbs"], m["closed_gap"]["oracle"]

@@ -12,7 +12,7 @@ world and ratio, the geometric mean, its interval and the targets).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +21,7 @@ import numpy as np
 from pipeline.errors import ConfigError, InputError
 from pipeline.selection import SelectionSettings
 from pipeline.sim.simulate import SimSpec
-from pipeline.verdict.runs import SuiteInputs, WorldResult
+from pipeline.verdict.runs import AdaptiveSetting, SuiteInputs, WorldResult
 from pipeline.verdict.section import VerdictSection
 from pipeline.verdict.summary import RATIOS, TARGETS
 
@@ -51,6 +51,24 @@ class RunSettings:
     fixed_warm_start: int
     selection: SelectionSettings
     template: SimSpec
+
+
+def load_settings(params_path: Path | None) -> tuple[VerdictSection, RunSettings]:
+    """The ``verdict`` section of the params file and what the stages take from the others."""
+    from pipeline.config import BaseSection, SelectSection, load_section
+    from pipeline.sim.dataset import SimulateSection
+    from pipeline.tuning.smbo import FixedSection, TrialsSection
+    from pipeline.verdict.worlds import sensor_template
+
+    section = load_section(params_path, "verdict", VerdictSection)
+    trials = load_section(params_path, "trials", TrialsSection)
+    fixed = load_section(params_path, "fixed", FixedSection)
+    base = load_section(params_path, "base", BaseSection)
+    simulate = load_section(params_path, "simulate", SimulateSection)
+    selection = load_section(params_path, "select", SelectSection).settings()
+    iterations = trials.iterations if fixed.iterations is None else fixed.iterations
+    return section, RunSettings(dict(trials.adapter_options), trials.penalty_pct, iterations,
+                                fixed.warm_start, selection, sensor_template(simulate, base.seed))
 
 
 def run_verdict(paths: VerdictPaths, family: str, section: VerdictSection,
@@ -101,7 +119,6 @@ def run_headroom_study(paths: HeadroomPaths, section: VerdictSection,
 
     worlds = suite_worlds(section, "id", settings.template)
     inputs, study = suite_inputs(None, paths.fixed, section, settings)
-    inputs = replace(inputs, selections={})
     candidates = candidate_set(section.oracle, inputs.baseline, inputs.fixed, inputs.space)
     _, oracles = run_headroom(worlds, inputs, candidates, settings.selection.period_s,
                               paths.runs, section.workers)
@@ -176,9 +193,10 @@ def suite_inputs(model: Path | None, fixed_dir: Path, section: VerdictSection,
     if study["trials"] < section.fixed_trials:
         raise InputError(f"{fixed_dir}: the joint study ran {study['trials']} trials, the "
                          f"frozen budget is {section.fixed_trials} (run the fixed stage)")
-    inputs = SuiteInputs(model, algorithm, space, baseline, fixed, settings.adapter_options,
+    adaptive = {} if model is None else {"adaptive": AdaptiveSetting(model, settings.selection)}
+    inputs = SuiteInputs(algorithm, space, baseline, fixed, settings.adapter_options,
                          section.length_m, section.replicas, section.replica_scale,
-                         settings.penalty_pct, {"adaptive": settings.selection})
+                         settings.penalty_pct, adaptive)
     return inputs, study
 
 

@@ -45,13 +45,20 @@ SCRATCH = "worlds"
 
 
 @dataclass(frozen=True)
-class SuiteInputs:
-    """What every world is run with: the artifact, the algorithm and the parameter space the
-    studies searched, the baseline and fixed parameters, the adapter's untuned options, L [m],
-    the replicas, the failure penalty [%] and the adaptive settings to run (name -> the
-    selector's runtime settings; the stage runs one, ``adaptive``)."""
+class AdaptiveSetting:
+    """An adaptive setting: the artifact and the selector's runtime settings it runs with."""
 
-    model_dir: Path | None  # None: no adaptive setting (the headroom study)
+    model_dir: Path
+    selection: SelectionSettings = field(default_factory=SelectionSettings)
+
+
+@dataclass(frozen=True)
+class SuiteInputs:
+    """What every world is run with: the algorithm and the parameter space the studies
+    searched, the baseline and fixed parameters, the adapter's untuned options, L [m], the
+    replicas, the failure penalty [%] and the adaptive settings to run by name (the stage runs
+    one, ``adaptive``; a dev study of selector variants several; the headroom study none)."""
+
     algorithm: str
     space: Any
     baseline: dict[str, float]
@@ -61,8 +68,7 @@ class SuiteInputs:
     replicas: int
     replica_scale: float
     penalty_pct: float
-    selections: dict[str, SelectionSettings] = field(
-        default_factory=lambda: {"adaptive": SelectionSettings()})
+    adaptive: dict[str, AdaptiveSetting] = field(default_factory=dict)
 
 
 @dataclass
@@ -146,10 +152,8 @@ def score_world(world: VerdictWorld, inputs: SuiteInputs, out_dir: Path) -> Worl
 
     nominal: dict[str, Any] = {"baseline": inputs.baseline, "fixed": inputs.fixed}
     selection = {}
-    for name, settings in inputs.selections.items():
-        assert inputs.model_dir is not None, "an adaptive setting needs a model"
-        model = loaded_model(inputs.model_dir)
-        chosen = loaded.select(model, settings)
+    for name, adaptive in inputs.adaptive.items():
+        chosen = loaded.select(loaded_model(adaptive.model_dir), adaptive.selection)
         nominal[name] = chosen.schedule
         selection[name] = {"changes": chosen.changes, "novel_share": chosen.novel_share,
                            "edge_share": chosen.edge_share}
