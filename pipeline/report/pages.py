@@ -273,6 +273,20 @@ def _suite(gen: Mapping[str, Any]) -> list[str]:
              f"{TARGET_MEDIAN:g}, worst <= {TARGET_WORST:g}, win rate >= "
              f"{_pct(TARGET_WIN_RATE)}) are {' and '.join(verdicts)}. Why they are out of reach "
              "of any selector on six worlds: [noise-floor.md](noise-floor.md)."]
+    geometric = gen.get("geometric")
+    if geometric:
+        lines += ["", f"As the verdict reports a suite ([verdict-protocol.md](verdict-protocol.md)"
+                  f"): geometric means of the per-world ratios "
+                  f"({'medians of ' + str(runs) + ' runs' if runs > 1 else 'one run'}) with "
+                  "their 95 % bootstrap intervals, and win rates with their Wilson intervals; "
+                  f"{gen['worlds']} worlds cannot separate much:", "",
+                  *_table(["ratio", "geometric mean", "95 % interval", "win rate",
+                           "Wilson 95 %"],
+                          [[RATIO_TITLES[k], _f(g["value"], 2),
+                            f"{_f(g['low'], 2)}-{_f(g['high'], 2)}",
+                            _pct(g["win_rate"]["value"]),
+                            f"{_pct(g['win_rate']['low'])}-{_pct(g['win_rate']['high'])}"]
+                           for k, g in geometric.items()])]
     noise = gen.get("noise")
     if noise:
         cvs = noise["cv_median"]
