@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from helpers.verdict_data import world
 
 from pipeline.config import load_params, validate_section
 from pipeline.errors import ConfigError, InputError
@@ -99,15 +100,6 @@ def test_another_world_generator_is_refused() -> None:
     with pytest.raises(ConfigError, match=r"frozen with world generator 2, this code "
                                           r"simulates version 1"):
         check_generator(VerdictSection(world_generator=2))
-
-
-def world(name: str, runs: dict[str, list[list[float]]], labels: list[str],
-          failed: dict[str, list[bool]] | None = None) -> WorldResult:
-    t = {s: np.array(v, np.float64) for s, v in runs.items()}
-    return WorldResult(name, "id", ("cave", "street"), "hdl32", len(labels), 7, labels, t,
-                       failed or {s: [False] * len(v) for s, v in runs.items()},
-                       {"adaptive": {"changes": 3, "novel_share": 0.25, "edge_share": 0.0}},
-                       1.0)
 
 
 LABELS = ["cave", "cave", "street", "street"]
