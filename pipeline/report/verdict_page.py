@@ -66,6 +66,8 @@ def verdict_page(metrics: Mapping[str, Mapping[str, Any]], provenance: Sequence[
 
 
 def _interval(s: Mapping[str, Any], digits: int = 2) -> str:
+    if s["low"] is None or s["high"] is None:
+        return f"{_f(s['geomean'], digits)} (no interval)"
     return f"{_f(s['geomean'], digits)} ({_f(s['low'], digits)}-{_f(s['high'], digits)})"
 
 
