@@ -30,6 +30,7 @@ VARIANTS: dict[str, tuple[dict[str, Any], dict[str, Any]]] = {
     # name: (surrogate section changes: a refit; select settings changes)
     "default": ({}, {}),
     "paper": ({"k": 5}, {"window": 1}),
+    "k_80": ({"k": 80}, {}),  # ISAC-like: the mean over many more neighbours, near clusters
     "fallback_fixed": ({"novelty_fallback": "fixed"}, {}),
     "trust_0.25": ({}, {"trust_radius": 0.25}),
     "fallback_fixed_trust_0.25": ({"novelty_fallback": "fixed"}, {"trust_radius": 0.25}),
