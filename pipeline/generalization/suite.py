@@ -55,28 +55,17 @@ class GeneralizeSection(Section):
     @field_validator("seed_roots")
     @classmethod
     def _roots(cls, v: dict[str, int]) -> dict[str, int]:
-        missing = [s for s in SUITES if s not in v]
-        if missing or set(v) - set(SUITES):
-            raise ValueError(f"needs exactly the suites {', '.join(SUITES)}, got {sorted(v)}")
-        if v["dev"] == v["test"]:
-            raise ValueError(f"the dev and test roots must differ, got {v['dev']} for both")
-        return v
+        return seed_roots_rule(v)
 
     @field_validator("segments", "segment_frames")
     @classmethod
     def _range(cls, v: tuple[int, int]) -> tuple[int, int]:
-        if not 1 <= v[0] <= v[1]:
-            raise ValueError(f"must be (min, max) with 1 <= min <= max, got {list(v)}")
-        return v
+        return range_rule(v)
 
     @field_validator("labels")
     @classmethod
     def _labels(cls, v: tuple[str, ...]) -> tuple[str, ...]:
-        bad = [s for s in v if s not in LABELS]
-        if bad or len(set(v)) < 2:
-            raise ValueError(f"must be at least two distinct labels of {', '.join(LABELS)}, "
-                             f"got {list(v)}")
-        return v
+        return labels_rule(v)
 
     @field_validator("sensors")
     @classmethod
@@ -97,6 +86,32 @@ class GeneralizeSection(Section):
     def root(self) -> int:
         """The seed root of the chosen suite."""
         return self.seed_roots[self.suite]
+
+
+def seed_roots_rule(v: dict[str, int]) -> dict[str, int]:
+    """``v`` unless it is not one root for each of the suites ``SUITES``, all different."""
+    missing = [s for s in SUITES if s not in v]
+    if missing or set(v) - set(SUITES):
+        raise ValueError(f"needs exactly the suites {', '.join(SUITES)}, got {sorted(v)}")
+    if v["dev"] == v["test"]:
+        raise ValueError(f"the dev and test roots must differ, got {v['dev']} for both")
+    return v
+
+
+def range_rule(v: tuple[int, int]) -> tuple[int, int]:
+    """``v`` unless it is not a (min, max) range with 1 <= min <= max."""
+    if not 1 <= v[0] <= v[1]:
+        raise ValueError(f"must be (min, max) with 1 <= min <= max, got {list(v)}")
+    return v
+
+
+def labels_rule(v: tuple[str, ...]) -> tuple[str, ...]:
+    """``v`` unless it is not at least two distinct environment labels."""
+    bad = [s for s in v if s not in LABELS]
+    if bad or len(set(v)) < 2:
+        raise ValueError(f"must be at least two distinct labels of {', '.join(LABELS)}, "
+                         f"got {list(v)}")
+    return v
 
 
 @dataclass(frozen=True)

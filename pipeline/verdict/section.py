@@ -14,10 +14,10 @@ from typing import Literal
 from pydantic import Field, field_validator, model_validator
 
 from pipeline.config import Section
+from pipeline.generalization.suite import labels_rule, range_rule, seed_roots_rule
 from pipeline.sim.route import LABELS
 from pipeline.sim.sensors import SensorName
 
-SUITE_ROLES = ("dev", "test")
 FAMILIES = ("id", "ood")
 """The coverage model's two suite families: in distribution (the environments and sensors it
 trained on) and out of distribution (the sensor kept out of training)."""
@@ -42,27 +42,17 @@ class SuiteDraw(Section):
     @field_validator("seed_roots")
     @classmethod
     def _roots(cls, v: dict[str, int]) -> dict[str, int]:
-        if set(v) != set(SUITE_ROLES):
-            raise ValueError(f"needs exactly the suites {', '.join(SUITE_ROLES)}, got {sorted(v)}")
-        if v["dev"] == v["test"]:
-            raise ValueError(f"the dev and test roots must differ, got {v['dev']} for both")
-        return v
+        return seed_roots_rule(v)
 
     @field_validator("labels")
     @classmethod
     def _labels(cls, v: tuple[str, ...]) -> tuple[str, ...]:
-        bad = [s for s in v if s not in LABELS]
-        if bad or len(set(v)) < 2:
-            raise ValueError(f"must be at least two distinct labels of {', '.join(LABELS)}, "
-                             f"got {list(v)}")
-        return v
+        return labels_rule(v)
 
     @field_validator("segments", "frames")
     @classmethod
     def _range(cls, v: tuple[int, int]) -> tuple[int, int]:
-        if not 1 <= v[0] <= v[1]:
-            raise ValueError(f"must be (min, max) with 1 <= min <= max, got {list(v)}")
-        return v
+        return range_rule(v)
 
     @model_validator(mode="after")
     def _frames(self) -> SuiteDraw:
