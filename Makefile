@@ -4,7 +4,7 @@ PY := $(VENV)/bin/python
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test fuzz lint deps bench repro docs kitti clean
+.PHONY: setup test fuzz lint deps bench repro verdict verdict-headroom docs kitti clean
 
 setup: $(STAMP)
 
@@ -45,6 +45,19 @@ bench: setup
 # dvc runs the stages' `adaptune ...` commands: the venv's bin must be on PATH
 repro: setup
 	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro
+
+# The coverage model's verdict (issue 29; docs/results/verdict-protocol.md): the second pipeline,
+# verdict/dvc.yaml with verdict/params.yaml. `make verdict` trains the coverage model (every
+# environment class, HDL-32E and HDL-64E) and scores both test suites (in distribution, out of
+# distribution: the VLP-16); `make verdict-headroom` adds the oracles and the closed gap on the
+# in-distribution suite. A dev suite: `dvc exp run verdict/dvc.yaml:verdict_id -S
+# verdict/params.yaml:verdict.suite=dev`.
+verdict: setup
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro verdict/dvc.yaml:verdict_id \
+		verdict/dvc.yaml:verdict_ood
+
+verdict-headroom: setup
+	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro verdict/dvc.yaml:headroom
 
 # the docs pages that quote metrics/*.json (docs/results/toy.md, the README's result), rendered
 # from the committed metrics, dvc.lock and docs/results/runs.yaml; a test checks they are current

@@ -53,6 +53,7 @@ FROM_BASE: dict[str, tuple[str, ...]] = {
     "trials": ("length_m",),
     "evaluate": ("length_m",),
     "generalize": ("length_m",),
+    "verdict": ("length_m",),
 }
 """Keys that a section takes from ``base``: set once there (dvc.yaml lists ``base.length_m`` as
 a param of these stages, so ``dvc exp run -S base.length_m=100`` re-runs them); a section that
@@ -97,6 +98,7 @@ SECTIONS: dict[str, str] = {
     "select": "pipeline.config:SelectSection",
     "evaluate": "pipeline.evaluate.section:EvaluateSection",
     "generalize": "pipeline.generalization.suite:GeneralizeSection",
+    "verdict": "pipeline.verdict.section:VerdictSection",
 }
 """Every params.yaml section: name -> ``module:Model``, in the order of params.yaml."""
 

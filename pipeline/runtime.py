@@ -37,7 +37,11 @@ artifact's, so changing one refits nothing:
 5. argmin over the (certified) candidates (the artifact's candidate set: every distinct trial
    parameter vector plus a Sobol set), then a pattern search (``refine_iters`` rounds, step
    halving, moves accepted only to certified points that are better by more than TIE_TOL)
-   around the best few. Values within TIE_TOL are equal: the kNN surface is piecewise
+   around the best few. Trust region (``trust_radius``, null: off): only the candidates and
+   pattern-search points within ``trust_radius`` of the fallback parameters in every
+   coordinate of the unit cube (and the fallback itself), so that a surrogate whose
+   neighbours are bimodal cannot send the odometry to a lucky corner far from the set it
+   falls back on. Values within TIE_TOL are equal: the kNN surface is piecewise
    constant, so many candidates share their value exactly (their neighbours are the same,
    ``knn_search.canonical_value``); among them the one nearest the parameters in force wins,
    then the smallest parameters, whatever the candidates' order or the last bits of E_t.
@@ -205,6 +209,16 @@ def load_model(path: str | Path, expected_algorithm: str | None = None) -> Model
                  surrogate, list(manifest["parameter_space"]))
 
 
+def trust_box(anchor_u: NDArray[np.float64],
+              radius: float | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(low, high) (P,) of the unit-cube box the selector searches (step 5): within ``radius``
+    of the fallback parameters ``anchor_u`` in every coordinate, inside [0, 1]; the whole
+    cube for None."""
+    if radius is None:
+        return np.zeros_like(anchor_u), np.ones_like(anchor_u)
+    return np.clip(anchor_u - radius, 0.0, 1.0), np.clip(anchor_u + radius, 0.0, 1.0)
+
+
 TIE_TOL = 1e-9
 """Predicted values (target units) closer than this are equal for the selector (step 5)."""
 
@@ -237,11 +251,16 @@ class Selector:
         novelty = model.novelty_distance
         self.novelty_distance = math.inf if novelty is None else novelty
         self.n_starts = n_starts
-        self.candidates = np.unique(model.snap(model.candidates_u), axis=0)
+        self.anchor_u = self._unit(model.fallback())
+        self.box = trust_box(self.anchor_u, settings.trust_radius)
+        candidates = model.snap(model.candidates_u)
+        if settings.trust_radius is not None:  # step 5: only the candidates inside the box
+            inside = ((candidates >= self.box[0]) & (candidates <= self.box[1])).all(axis=1)
+            candidates = np.vstack([candidates[inside], model.snap(self.anchor_u[None])])
+        self.candidates = np.unique(candidates, axis=0)
         self.search = model.surrogate.search(
             self.candidates, model.x_scale,
             {"subset_rows": self.subset_rows, "grouped": grouped, "risk": self.risk})
-        self.anchor_u = self._unit(model.fallback())
         # per_scan fallback: the two sets an unfamiliar scan chooses between (step 3)
         self.fallback_u = (np.stack([self._unit(model.defaults()), self.anchor_u])
                            if model.per_scan_fallback else self.anchor_u[None])
@@ -378,7 +397,8 @@ class Selector:
         p = self.candidates.shape[1]
         eye = np.vstack([np.eye(p), -np.eye(p)])
         for _ in range(self.refine_iters):
-            probes = self.model.snap((best_u[:, None, :] + step * eye[None]).reshape(-1, p))
+            probes = self.model.snap(np.clip((best_u[:, None, :] + step * eye[None])
+                                             .reshape(-1, p), *self.box))
             pt = self._certified(probes).reshape(n, 2 * p)
             j = np.argmin(pt, axis=1)
             better = pt[np.arange(n), j] < best_t - TIE_TOL  # a real improvement, not rounding

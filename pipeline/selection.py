@@ -68,7 +68,8 @@ class SelectionSettings:
     window: the mean of S over the last W familiar scans (the paper: 1, the newest only);
     anchor_margin: keep the fallback parameters unless the best is predicted better by more
     than this (target units; None: no anchor); risk: minimise mean + risk * std of the k
-    neighbours' targets (kNN only; 0: the plain mean).
+    neighbours' targets (kNN only; 0: the plain mean); trust_radius: search only within this
+    distance of the fallback parameters in every unit-cube coordinate (None: the whole range).
     """
 
     period_s: Annotated[float, Bound(0.0, strict=True)] = 1.0
@@ -79,6 +80,7 @@ class SelectionSettings:
     window: Annotated[int, Bound(1, MAX_WINDOW)] = 5
     anchor_margin: Annotated[float | None, Bound(0.0)] = None
     risk: Annotated[float, Bound(0.0)] = 0.0
+    trust_radius: Annotated[float | None, Bound(0.0, 1.0, strict=True)] = None
 
     def __post_init__(self) -> None:
         for name, (bound, integer, optional) in _rules().items():

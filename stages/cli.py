@@ -59,6 +59,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "stages.generalize:generalize",
         "Baseline vs fixed vs adaptive on unseen worlds (dvc stage).",
     ),
+    "verdict": (
+        "stages.verdict:verdict",
+        "The coverage model on a suite of unseen worlds (verdict/dvc.yaml stage).",
+    ),
+    "headroom": (
+        "stages.verdict:headroom",
+        "Oracles and the closed gap of the in-distribution suite (verdict/dvc.yaml stage).",
+    ),
     "ingest-set": (
         "stages.ingest:ingest_set",
         "Ingest the recordings of params.yaml's data section (dvc stage).",

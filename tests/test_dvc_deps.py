@@ -9,25 +9,30 @@ from pathlib import Path
 
 import pytest
 import yaml
-from helpers.dvc_deps import REPO, files_of_command, generated, stage_commands
+from helpers.dvc_deps import DVC_FILES, REPO, files_of_command, generated, stage_commands
 
-DVC_YAML = (REPO / "dvc.yaml").read_text(encoding="utf-8")
-
-
-def test_dvc_yaml_deps_are_the_generated_ones() -> None:
-    assert generated(DVC_YAML) == DVC_YAML, "dvc.yaml's code deps are stale: run `make deps`"
+TEXTS = {name: (REPO / name).read_text(encoding="utf-8") for name in DVC_FILES}
 
 
-@pytest.mark.parametrize("stage", list(stage_commands(DVC_YAML)))
-def test_every_module_a_stage_runs_is_a_dependency(stage: str) -> None:
-    module = stage_commands(DVC_YAML)[stage]
-    deps = yaml.safe_load(DVC_YAML)["stages"][stage].get("deps", [])
-    covered = [REPO / d for d in deps if "${" not in d]
+@pytest.mark.parametrize("name", list(DVC_FILES))
+def test_dvc_yaml_deps_are_the_generated_ones(name: str) -> None:
+    text = TEXTS[name]
+    assert generated(text, DVC_FILES[name]) == text, \
+        f"{name}'s code deps are stale: run `make deps`"
+
+
+@pytest.mark.parametrize(("name", "stage"), [(name, stage) for name in DVC_FILES
+                                             for stage in stage_commands(TEXTS[name])])
+def test_every_module_a_stage_runs_is_a_dependency(name: str, stage: str) -> None:
+    module = stage_commands(TEXTS[name])[stage]
+    deps = yaml.safe_load(TEXTS[name])["stages"][stage].get("deps", [])
+    stage_dir = (REPO / name).parent
+    covered = [(stage_dir / d).resolve() for d in deps if "${" not in d]
     missing = sorted(
         str(f.relative_to(REPO)) for f in files_of_command(module)
         if not any(f == d or d in f.parents for d in covered)
     )
-    assert not missing, f"dvc.yaml stage {stage!r} runs {missing} but does not depend on them"
+    assert not missing, f"{name} stage {stage!r} runs {missing} but does not depend on them"
 
 
 def test_the_import_graph_sees_lazy_imports() -> None:

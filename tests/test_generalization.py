@@ -194,3 +194,21 @@ def test_a_suite_of_no_world_writes_outputs_that_say_so(tmp_path: Path) -> None:
         "adaptive_vs_baseline,adaptive_vs_fixed"]
     assert paths.figure.read_bytes()[:4] == b"\x89PNG"
     assert (paths.runs / "not_run.txt").read_text().startswith("generalize.worlds is 0")
+
+
+def test_the_small_suite_reports_the_verdicts_statistics() -> None:
+    """The geometric block: geometric means of the per-world ratios (over the runs' medians
+    with replicas) with their 95 % intervals and Wilson win rates (pipeline.verdict)."""
+    from pipeline.generalization.summary import suite_metrics
+
+    def score(name: str, adaptive: float, replicas: list[float]) -> WorldScore:
+        return WorldScore(name, ("cave",), "hdl32", 10, 1, {"baseline": 2.0, "fixed": 1.0,
+                          "adaptive": adaptive}, {}, 0, 0.0,
+                          {"baseline": [2.0, 2.0], "fixed": [1.0, 1.0], "adaptive": replicas})
+
+    scores = [score("a", 0.5, [0.5, 9.0]), score("b", 2.0, [2.0, 2.0]),
+              score("c", 0.25, [0.25, 0.25])]
+    g = suite_metrics(scores, "dev", 1, 200, "ndt", 25.0)["geometric"]["adaptive_vs_fixed"]
+    assert g["value"] == pytest.approx((0.5 * 2.0 * 0.25) ** (1 / 3))  # medians 0.5, 2, 0.25
+    assert g["low"] < g["value"] < g["high"]
+    assert g["win_rate"]["value"] == pytest.approx(2 / 3) and g["worlds"] == 3

@@ -217,6 +217,25 @@ def test_the_anchor_is_left_only_for_a_predicted_gain(model: Model, kitti_root: 
     assert anchored.last["kept"] == "anchor"
 
 
+def test_the_trust_region_keeps_every_choice_near_the_fallback(model: Model,
+                                                               kitti_root: Path) -> None:
+    """With ``trust_radius`` r every selection lies within r of the fallback parameters in
+    every unit-cube coordinate; without it the same scans go farther."""
+    envs = drive(model, kitti_root)
+    anchor = model.to_unit(np.array([[model.fallback()[n] for n in model.names]]))[0]
+
+    def farthest(sel: Selector) -> float:
+        chosen = [sel.select_environment(e) for e in envs]
+        units = model.to_unit(np.array([[c[n] for n in model.names] for c in chosen]))
+        return float(np.abs(units - anchor).max())
+
+    assert farthest(Selector(model, SEL)) > 0.2
+    assert farthest(Selector(model, SEL.replace(trust_radius=0.2))) <= 0.2 + 1e-9
+    tight = Selector(model, SEL.replace(trust_radius=1e-6))
+    assert all(tight.select_environment(e) == tight.model.params_of(tight.anchor_u)
+               for e in envs)
+
+
 ONE_SCAN = SelectionSettings(window=1)
 """The default selector on the newest scan only (the per-scan fallback's tests)."""
 

@@ -56,28 +56,17 @@ class GeneralizeSection(Section):
     @field_validator("seed_roots")
     @classmethod
     def _roots(cls, v: dict[str, int]) -> dict[str, int]:
-        missing = [s for s in SUITES if s not in v]
-        if missing or set(v) - set(SUITES):
-            raise ValueError(f"needs exactly the suites {', '.join(SUITES)}, got {sorted(v)}")
-        if v["dev"] == v["test"]:
-            raise ValueError(f"the dev and test roots must differ, got {v['dev']} for both")
-        return v
+        return seed_roots_rule(v)
 
     @field_validator("segments", "segment_frames")
     @classmethod
     def _range(cls, v: tuple[int, int]) -> tuple[int, int]:
-        if not 1 <= v[0] <= v[1]:
-            raise ValueError(f"must be (min, max) with 1 <= min <= max, got {list(v)}")
-        return v
+        return range_rule(v)
 
     @field_validator("labels")
     @classmethod
     def _labels(cls, v: tuple[str, ...]) -> tuple[str, ...]:
-        bad = [s for s in v if s not in LABELS]
-        if bad or len(set(v)) < 2:
-            raise ValueError(f"must be at least two distinct labels of {', '.join(LABELS)}, "
-                             f"got {list(v)}")
-        return v
+        return labels_rule(v)
 
     @field_validator("sensors")
     @classmethod
@@ -98,6 +87,32 @@ class GeneralizeSection(Section):
     def root(self) -> int:
         """The seed root of the chosen suite."""
         return self.seed_roots[self.suite]
+
+
+def seed_roots_rule(v: dict[str, int]) -> dict[str, int]:
+    """``v`` unless it is not one root for each of the suites ``SUITES``, all different."""
+    missing = [s for s in SUITES if s not in v]
+    if missing or set(v) - set(SUITES):
+        raise ValueError(f"needs exactly the suites {', '.join(SUITES)}, got {sorted(v)}")
+    if v["dev"] == v["test"]:
+        raise ValueError(f"the dev and test roots must differ, got {v['dev']} for both")
+    return v
+
+
+def range_rule(v: tuple[int, int]) -> tuple[int, int]:
+    """``v`` unless it is not a (min, max) range with 1 <= min <= max."""
+    if not 1 <= v[0] <= v[1]:
+        raise ValueError(f"must be (min, max) with 1 <= min <= max, got {list(v)}")
+    return v
+
+
+def labels_rule(v: tuple[str, ...]) -> tuple[str, ...]:
+    """``v`` unless it is not at least two distinct environment labels."""
+    bad = [s for s in v if s not in LABELS]
+    if bad or len(set(v)) < 2:
+        raise ValueError(f"must be at least two distinct labels of {', '.join(LABELS)}, "
+                         f"got {list(v)}")
+    return v
 
 
 @dataclass(frozen=True)
@@ -122,11 +137,18 @@ def world_of(section: GeneralizeSection, suite: str, i: int) -> SuiteWorld:
     """World ``i`` of ``suite``: from (the suite's seed root, i) alone."""
     rng = np.random.default_rng([section.seed_roots[suite], i])
     n = int(rng.integers(section.segments[0], section.segments[1] + 1))
-    labels = [str(rng.choice(section.labels))]
-    while len(labels) < n:
-        labels.append(str(rng.choice([lab for lab in section.labels if lab != labels[-1]])))
+    labels = draw_labels(rng, n, section.labels)
     frames = n * int(rng.integers(section.segment_frames[0], section.segment_frames[1] + 1))
     seed = int(rng.integers(2**31 - 1))
     sensor = section.sensors[i % len(section.sensors)]
     return SuiteWorld(f"{suite}_{i:02d}", SimSpec("composite", seed, frames, sensor,
-                                                  tuple(labels)))
+                                                  labels))
+
+
+def draw_labels(rng: np.random.Generator, n: int, labels: tuple[str, ...]) -> tuple[str, ...]:
+    """``n`` segment labels drawn from ``labels``, never the same one twice in a row (the
+    composite worlds of every suite: this one and ``pipeline.verdict.worlds``)."""
+    out = [str(rng.choice(labels))]
+    while len(out) < n:
+        out.append(str(rng.choice([lab for lab in labels if lab != out[-1]])))
+    return tuple(out)

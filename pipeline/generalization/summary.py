@@ -7,6 +7,10 @@ A ratio below 1 means adaptive beat the other setting on that world (lower RTE);
 is the fraction of worlds whose ratio is below 1. The interval is the percentile bootstrap
 (worlds resampled with replacement, ``resamples`` times, seeded) of the median ratio.
 
+``geometric``: the verdict's statistics of every ratio (the ratios of the settings' medians
+over their runs with replicas): geometric mean with its 95 % BCa bootstrap interval, win rate
+with its Wilson interval (``pipeline.verdict.statistics``; docs/results/verdict-protocol.md).
+
 With replicas (``pipeline.evaluate.replicas``) two more blocks: ``replica_summary``, the
 same figures of the ratios of every setting's median over its runs, and ``noise``, how far
 runs of one setting are from each other on a world: per setting the median over worlds of the
@@ -87,7 +91,8 @@ def suite_metrics(scores: Sequence[WorldScore], suite: str, root: int, resamples
         "frames": sum(s.frames for s in scores),
         "summary": summary,
     }
-    if any(s.replicas_rte_pct for s in scores):
+    replicas = any(s.replicas_rte_pct for s in scores)
+    if replicas:
         out["replicas"] = max(len(v) for s in scores for v in s.replicas_rte_pct.values())
         out["replica_summary"] = {
             k: ratio_summary(names, [s.replica_ratios()[k] for s in scores], resamples, root)
@@ -95,8 +100,23 @@ def suite_metrics(scores: Sequence[WorldScore], suite: str, root: int, resamples
         best = out["replica_summary"]["adaptive_vs_best"]
         best["targets_met"] = meets_targets(best)
         out["noise"] = noise_summary(scores)
+    out["geometric"] = {k: geometric_summary([(s.replica_ratios() if replicas
+                                               else s.ratios())[k] for s in scores], root)
+                        for k in RATIOS}
     out["per_world"] = {s.name: s.to_json() for s in scores}
     return out
+
+
+def geometric_summary(ratios: Sequence[float], seed: int) -> dict[str, Any]:
+    """The verdict's figures of one ratio over the worlds (``pipeline.verdict.statistics``):
+    the geometric mean with its 95 % BCa bootstrap interval and the win rate with its Wilson
+    interval, so that the small suite reports how little it can tell."""
+    from pipeline.verdict.statistics import ratio_estimate, wilson
+
+    r = np.asarray(ratios, np.float64)
+    r = r[np.isfinite(r) & (r > 0)]
+    return {**ratio_estimate(r, seed=seed).to_json(),
+            "win_rate": wilson(int((r < 1).sum()), len(r)).to_json(), "worlds": len(r)}
 
 
 def noise_summary(scores: Sequence[WorldScore]) -> dict[str, Any]:

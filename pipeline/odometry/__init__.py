@@ -24,7 +24,8 @@ from pipeline.progress import progress
 from pipeline.sequence import Scan, SequenceReader
 from pipeline.trajectory import Trajectory
 
-__all__ = ["adapter_names", "check_trajectory", "get_adapter", "make_schedule", "run_sequence"]
+__all__ = ["adapter_names", "check_trajectory", "get_adapter", "make_schedule", "run_scans",
+           "run_sequence"]
 
 
 def run_sequence(adapter: Adapter, sequence_path: str | Path,
@@ -53,15 +54,31 @@ def run_sequence(adapter: Adapter, sequence_path: str | Path,
                                                  f"{reader.info.name}", enabled=show_progress)
                 if time_limit_s is not None:
                     scans = _with_deadline(scans, time_limit_s, adapter.name)
-                try:
-                    traj = adapter.run(scans, schedule)
-                except (OdometryError, TrialTimeout):
-                    raise
-                except (ArithmeticError, ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
-                    raise OdometryError(f"{adapter.name} on {path}: failed "
-                                        f"({type(exc).__name__}: {exc})") from exc
+                traj = _run_adapter(adapter, scans, schedule, str(path))
         check_trajectory(traj, reader.stamps_ns, f"{adapter.name} on {path}")
     return traj
+
+
+def run_scans(adapter: Adapter, scans: list[Scan], stamps_ns: np.ndarray,
+              params_or_schedule: Mapping[str, float] | Schedule, what: str) -> Trajectory:
+    """``run_sequence`` over scans already decoded (``stamps_ns`` (N,) theirs; ``what`` names
+    them in errors): a checked Trajectory, OdometryError for a failed run."""
+    schedule = make_schedule(adapter, params_or_schedule, len(scans), what)
+    traj = _run_adapter(adapter, scans, schedule, what)
+    check_trajectory(traj, stamps_ns, f"{adapter.name} on {what}")
+    return traj
+
+
+def _run_adapter(adapter: Adapter, scans: Iterable[Scan], schedule: Schedule,
+                 what: str) -> Trajectory:
+    """``adapter.run``, the numeric failures of an odometry as OdometryError."""
+    try:
+        return adapter.run(scans, schedule)
+    except (OdometryError, TrialTimeout):
+        raise
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
+        raise OdometryError(f"{adapter.name} on {what}: failed "
+                            f"({type(exc).__name__}: {exc})") from exc
 
 
 def make_schedule(adapter: Adapter, params_or_schedule: Mapping[str, float] | Schedule,

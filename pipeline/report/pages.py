@@ -3,11 +3,13 @@
 A page that quotes figures of a run is generated, never typed, so it cannot drift from what the
 pipeline measured: docs/results/toy.md from the summaries of the evaluate, surrogate and
 generalize stages (each its metrics/NAME.json and records/NAME.json,
-``pipeline.report.outputs.write_metrics``), and the README's result between its two markers.
-Provenance comes from two files: dvc.lock (the md5 of every output file and the params of every
-stage that led to them) and docs/results/runs.yaml (the commit, date and command of the run,
-and the md5s of the files it wrote). Pages are rendered only when those files, dvc.lock and the
-run record agree, so a new run cannot leave an old commit on a page.
+``pipeline.report.outputs.write_metrics``), the README's result between its two markers, and,
+once a run of the coverage pipeline is recorded, docs/results/verdict.md from
+verdict/metrics/*.json (``pipeline.report.verdict_page``). Provenance comes from two files:
+dvc.lock (the md5 of every output file and the params of every stage that led to them) and
+docs/results/runs.yaml (the commit, date and command of the run, and the md5s of the files it
+wrote). Pages are rendered only when those files, dvc.lock and the run record agree, so a new
+run cannot leave an old commit on a page.
 """
 
 from __future__ import annotations
@@ -15,8 +17,6 @@ from __future__ import annotations
 import datetime
 import hashlib
 import json
-import math
-import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -33,6 +33,13 @@ from pipeline.generalization.summary import (
     TARGET_WORST,
     meets_targets,
 )
+from pipeline.report.markdown import fill as _fill
+from pipeline.report.markdown import number as _f
+from pipeline.report.markdown import percent as _pct
+from pipeline.report.markdown import row as _row
+from pipeline.report.markdown import table as _table
+from pipeline.report.markdown import values as _values
+from pipeline.report.markdown import wrap as _wrap
 from pipeline.report.outputs import merge_leaves, record_beside
 from pipeline.report.table2 import table2_json, table2_markdown
 
@@ -40,6 +47,8 @@ RUNS = Path("docs/results/runs.yaml")
 LOCK = Path("dvc.lock")
 README = Path("README.md")
 TOY_PAGE = Path("docs/results/toy.md")
+VERDICT_PAGE = Path("docs/results/verdict.md")
+VERDICT_LOCK = Path("verdict/dvc.lock")
 EVALUATION = "metrics/evaluation.json"
 SURROGATE = "metrics/surrogate.json"
 GENERALIZATION = "metrics/generalization.json"
@@ -76,8 +85,27 @@ def render_docs(repo: Path) -> dict[Path, str]:
                for name, record in SUMMARIES.items()}
     params = stage_params(lock, metrics)
     readme = (repo / README).read_text(encoding="utf-8")
-    return {TOY_PAGE: toy_page(metrics, run, params),
-            README: with_block(readme, readme_block(metrics, run))}
+    pages = {TOY_PAGE: toy_page(metrics, run, params),
+             README: with_block(readme, readme_block(metrics, run))}
+    if "verdict" in (_load_yaml(repo / RUNS) or {}):
+        pages[VERDICT_PAGE] = verdict_docs(repo)
+    return pages
+
+
+def verdict_docs(repo: Path) -> str:
+    """docs/results/verdict.md from the coverage pipeline's metrics (``verdict_page``), once a
+    run of it is recorded in docs/results/runs.yaml (``verdict``; its metrics named from the
+    repository root, e.g. verdict/metrics/id.json)."""
+    from pipeline.report.verdict_page import HEADROOM, METRICS, verdict_page
+
+    run = read_run(repo, "verdict")
+    lock = _load_yaml(repo / VERDICT_LOCK)
+    names = [n for n in METRICS if n in run.outputs or n != HEADROOM]
+    metrics = {n: read_metrics(repo, n, run, lock, VERDICT_LOCK.parent.as_posix())
+               for n in names}
+    folder = VERDICT_LOCK.parent.as_posix() + "/"
+    params = stage_params(lock, {n.removeprefix(folder): m for n, m in metrics.items()})
+    return verdict_page(metrics, _provenance(run, list(metrics)), params)
 
 
 def stale_files(repo: Path) -> list[Path]:
@@ -110,11 +138,13 @@ def read_run(repo: Path, name: str) -> RunRecord:
     return validate_section(RunRecord, f"{RUNS}: {name}", runs[name])
 
 
-def read_metrics(repo: Path, name: str, run: RunRecord, lock: Mapping[str, Any]
-                 ) -> dict[str, Any]:
+def read_metrics(repo: Path, name: str, run: RunRecord, lock: Mapping[str, Any],
+                 folder: str = "") -> dict[str, Any]:
     """The metrics or record file ``name`` (relative to ``repo``); InputError unless its md5 is
-    the one dvc.lock records for it and the one the run record names."""
+    the one ``lock`` (the dvc.lock of the pipeline in ``folder``, whose paths are relative to
+    it) records for it and the one the run record names."""
     path = repo / name
+    locked_name = name.removeprefix(folder + "/") if folder else name
     try:
         data = path.read_bytes()
     except FileNotFoundError:
@@ -122,9 +152,9 @@ def read_metrics(repo: Path, name: str, run: RunRecord, lock: Mapping[str, Any]
     md5 = hashlib.md5(data).hexdigest()
     locked = {out["path"]: out.get("md5") for stage in (lock.get("stages") or {}).values()
               for out in stage.get("outs") or []}
-    if locked.get(name) != md5:
+    if locked.get(locked_name) != md5:
         raise InputError(f"{path}: md5 {md5} is not the one dvc.lock records "
-                         f"({locked.get(name)}): run `dvc repro` or `dvc commit` first")
+                         f"({locked.get(locked_name)}): run `dvc repro` or `dvc commit` first")
     if run.outputs.get(name) != md5:
         raise InputError(f"{path}: md5 {md5} is not the one {RUNS} records for the run of "
                          f"commit {run.commit} ({run.outputs.get(name)}): record the commit, "
@@ -158,44 +188,6 @@ def stage_params(lock: Mapping[str, Any], metrics: Mapping[str, Any]) -> dict[st
 
 
 # ---------------------------------------------------------------- rendering
-
-
-def _f(v: float | None, digits: int = 3) -> str:
-    return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}f}"
-
-
-def _pct(v: float | None) -> str:
-    return "-" if v is None else f"{100 * v:.0f} %"
-
-
-def _values(p: Mapping[str, float]) -> str:
-    return ", ".join(f"{k} {v:.3g}" for k, v in p.items())
-
-
-def _wrap(text: str, prefix: str = "") -> str:
-    """``text`` as lines of at most 96 characters, each starting with ``prefix``."""
-    return textwrap.fill(text, 96, initial_indent=prefix, subsequent_indent=prefix,
-                         break_long_words=False, break_on_hyphens=False)
-
-
-def _fill(text: str) -> str:
-    """``text`` with its prose lines wrapped by ``_wrap``: tables, headings, quotes, HTML and
-    fenced code as they are."""
-    out, fenced = [], False
-    for line in text.split("\n"):
-        if line.startswith("```"):
-            fenced = not fenced
-        keep = fenced or line.startswith(("```", "|", "#", ">", "<")) or len(line) <= 96
-        out.append(line if keep else _wrap(line))
-    return "\n".join(out)
-
-
-def _row(cells: Sequence[object]) -> str:
-    return "| " + " | ".join(str(c) for c in cells) + " |"
-
-
-def _table(head: Sequence[str], rows: Sequence[Sequence[object]]) -> list[str]:
-    return [_row(head), "|" + "---|" * len(head), *(_row(r) for r in rows)]
 
 
 def _provenance(run: RunRecord, names: Sequence[str]) -> list[str]:
@@ -290,6 +282,20 @@ def _suite(gen: Mapping[str, Any]) -> list[str]:
              f"{TARGET_MEDIAN:g}, worst <= {TARGET_WORST:g}, win rate >= "
              f"{_pct(TARGET_WIN_RATE)}) are {' and '.join(verdicts)}. Why they are out of reach "
              "of any selector on six worlds: [noise-floor.md](noise-floor.md)."]
+    geometric = gen.get("geometric")
+    if geometric:
+        lines += ["", f"As the verdict reports a suite ([verdict-protocol.md](verdict-protocol.md)"
+                  f"): geometric means of the per-world ratios "
+                  f"({'medians of ' + str(runs) + ' runs' if runs > 1 else 'one run'}) with "
+                  "their 95 % bootstrap intervals, and win rates with their Wilson intervals; "
+                  f"{gen['worlds']} worlds cannot separate much:", "",
+                  *_table(["ratio", "geometric mean", "95 % interval", "win rate",
+                           "Wilson 95 %"],
+                          [[RATIO_TITLES[k], _f(g["value"], 2),
+                            f"{_f(g['low'], 2)}-{_f(g['high'], 2)}",
+                            _pct(g["win_rate"]["value"]),
+                            f"{_pct(g['win_rate']['low'])}-{_pct(g['win_rate']['high'])}"]
+                           for k, g in geometric.items()])]
     noise = gen.get("noise")
     if noise:
         cvs = noise["cv_median"]

@@ -7,8 +7,9 @@ blocks left out; a package's ``__init__.py`` counts for each module imported fro
 schema file a module names (``"tables.sql"``, or a folder of them: ``f"ros2/{name}.msg"``)
 counts too. A folder whose every file is needed is listed as the folder.
 
-``python tests/helpers/dvc_deps.py`` rewrites the ``deps:`` of every stage in dvc.yaml (its data
-dependencies first, as written, then the code); ``--check`` exits 1 when dvc.yaml differs
+``python tests/helpers/dvc_deps.py`` rewrites the ``deps:`` of every stage in dvc.yaml and
+verdict/dvc.yaml (``DVC_FILES``; its data dependencies first, as written, then the code);
+``--check`` exits 1 when one differs
 (``make deps`` / ``make lint``; tests/test_dvc_deps.py checks it in the suite).
 """
 
@@ -173,15 +174,18 @@ def _flow(items: list[str], indent: int) -> str:
     return "[" + ("\n" + " " * indent).join(lines)
 
 
-def generated(dvc_yaml: str) -> str:
-    """``dvc_yaml`` with every stage's deps: its data deps as written, then its code."""
+def generated(dvc_yaml: str, prefix: str = "") -> str:
+    """``dvc_yaml`` with every stage's deps: its data deps as written, then its code (paths
+    relative to the repository, with ``prefix`` in front: ``../`` for a dvc.yaml one folder
+    down, whose stages run there)."""
     import yaml
 
     specs = yaml.safe_load(dvc_yaml)["stages"]
     commands = stage_commands(dvc_yaml)
+    roots = tuple(prefix + root for root in CODE_ROOTS)
     for stage, module in commands.items():
-        data = [str(d) for d in specs[stage].get("deps", []) if not str(d).startswith(CODE_ROOTS)]
-        deps = data + cover(files_of_command(module))
+        data = [str(d) for d in specs[stage].get("deps", []) if not str(d).startswith(roots)]
+        deps = data + [prefix + path for path in cover(files_of_command(module))]
         block = re.compile(rf"(\n  {re.escape(stage)}:[^\n]*\n(?:    [^\n]*\n)*?    deps: )"
                            r"\[[^\]]*\]")
         if not block.search(dvc_yaml):
@@ -191,17 +195,24 @@ def generated(dvc_yaml: str) -> str:
     return dvc_yaml
 
 
+DVC_FILES = {"dvc.yaml": "", "verdict/dvc.yaml": "../"}
+"""Every pipeline of the repository: its dvc.yaml -> the prefix of a repository path seen from
+its stages' folder."""
+
+
 def main(argv: list[str]) -> int:
-    path = REPO / "dvc.yaml"
-    text = path.read_text(encoding="utf-8")
-    new = generated(text)
-    if "--check" in argv:
+    stale = []
+    for name, prefix in DVC_FILES.items():
+        path = REPO / name
+        text = path.read_text(encoding="utf-8")
+        new = generated(text, prefix)
         if new != text:
-            print("dvc.yaml: code deps are stale; run `make deps`", file=sys.stderr)
-            return 1
-        return 0
-    if new != text:
-        path.write_text(new, encoding="utf-8")
+            stale.append(name)
+            if "--check" not in argv:
+                path.write_text(new, encoding="utf-8")
+    if stale and "--check" in argv:
+        print(f"{', '.join(stale)}: code deps are stale; run `make deps`", file=sys.stderr)
+        return 1
     return 0
 
 

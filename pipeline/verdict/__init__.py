@@ -1,0 +1,1 @@
+"""The coverage model's verdict (issue 29)."""

@@ -1,0 +1,233 @@
+"""Baseline, fixed and adaptive on every world of a suite, each on every replica
+(docs/results/verdict.md, "Protocol").
+
+For every world (``pipeline.verdict.worlds``), ``score_world``
+1. simulates it into a scratch MCAP and decodes it once (``LoadedWorld``), then deletes the MCAP;
+2. computes the schedule of every adaptive setting (the model's selector with that setting's
+   ``select`` settings: ``adaptive`` in the stage, more in a dev study of selector variants);
+3. runs baseline (the frozen defaults), fixed (the joint study's best) and every adaptive
+   schedule on the nominal parameters and on replicas 1..R;
+4. writes ``<out>/<world>/``: ``rte.parquet`` (frame, label, one column ``<setting>/<r>`` per
+   run: per-start-frame RTE [%], NaN where no sub-trajectory starts), ``world.json`` (the
+   world, the runs that failed, what each selector did, the wall time) and
+   ``<setting>.schedule.parquet`` per adaptive setting.
+
+``run_suite`` does that for every world, ``workers`` worlds at a time (spawned processes), and
+writes ``<out>`` atomically; ``read_results`` reads it back (the summary and the headroom study
+start from it).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.selection import SelectionSettings
+from pipeline.verdict.statistics import median_over_runs
+from pipeline.verdict.worlds import VerdictWorld
+
+log = logging.getLogger(__name__)
+PROGRESS = logging.getLogger("pipeline.progress")  # shown at any CLI verbosity (stages/cli.py)
+
+F64 = NDArray[np.float64]
+FIXED_SETTINGS = ("baseline", "fixed")
+SCRATCH = "worlds"
+"""The folder of the worlds' MCAPs while they are decoded (removed at the end)."""
+
+
+@dataclass(frozen=True)
+class AdaptiveSetting:
+    """An adaptive setting: the artifact and the selector's runtime settings it runs with."""
+
+    model_dir: Path
+    selection: SelectionSettings = field(default_factory=SelectionSettings)
+
+
+@dataclass(frozen=True)
+class SuiteInputs:
+    """What every world is run with: the algorithm and the parameter space the studies
+    searched, the baseline and fixed parameters, the adapter's untuned options, L [m], the
+    replicas, the failure penalty [%] and the adaptive settings to run by name (the stage runs
+    one, ``adaptive``; a dev study of selector variants several; the headroom study none)."""
+
+    algorithm: str
+    space: Any
+    baseline: dict[str, float]
+    fixed: dict[str, float]
+    adapter_options: dict[str, Any]
+    length_m: float
+    replicas: int
+    replica_scale: float
+    penalty_pct: float
+    adaptive: dict[str, AdaptiveSetting] = field(default_factory=dict)
+
+
+@dataclass
+class WorldResult:
+    """One world's runs: per setting, the per-start-frame RTE (R + 1, N) [%] of its nominal run
+    and replicas, which of them failed, and per adaptive setting what its selector did."""
+
+    name: str
+    family: str
+    segments: tuple[str, ...]
+    sensor: str
+    frames: int
+    seed: int
+    labels: list[str]
+    t_err_pct: dict[str, F64]
+    failed: dict[str, list[bool]]
+    selection: dict[str, dict[str, float]]
+    wall_time_s: float
+
+    @property
+    def settings(self) -> list[str]:
+        return list(self.t_err_pct)
+
+    def run_rte(self, setting: str, label: str | None = None) -> F64:
+        """Mean RTE [%] of every run of ``setting`` (R + 1,), over the sub-trajectories that
+        start in ``label`` (None: all)."""
+        t = self.t_err_pct[setting]
+        if label is not None:
+            t = t[:, np.array(self.labels) == label]
+        with np.errstate(invalid="ignore"):
+            return np.array([np.nanmean(r) if np.isfinite(r).any() else np.nan for r in t])
+
+    def median(self, setting: str, label: str | None = None) -> float:
+        """The world's RTE [%] of ``setting``: the median over its runs."""
+        return median_over_runs(self.run_rte(setting, label))
+
+    def ratio(self, setting: str, other: str) -> float:
+        """median(setting) / median(other) on this world (``min`` as ``other``: the smaller
+        of the baseline's and the fixed set's medians)."""
+        den = (min(self.median(s) for s in FIXED_SETTINGS) if other == "min"
+               else self.median(other))
+        return self.median(setting) / den if den > 0 else float("nan")
+
+    def to_json(self) -> dict[str, Any]:
+        return {"name": self.name, "family": self.family, "segments": list(self.segments),
+                "sensor": self.sensor, "frames": self.frames, "seed": self.seed,
+                "failed": self.failed, "selection": self.selection,
+                "wall_time_s": self.wall_time_s}
+
+
+def run_suite(worlds: Sequence[VerdictWorld], inputs: SuiteInputs, out_dir: Path,
+              workers: int) -> list[WorldResult]:
+    """Score every world (module docstring); ``out_dir`` is written atomically."""
+    from pipeline.executor import map_in_processes
+    from pipeline.io_utils import atomic_dir
+
+    PROGRESS.info("%d worlds (%d frames), %d replicas, %d workers", len(worlds),
+                  sum(w.spec.frames for w in worlds), inputs.replicas, workers)
+    t0 = time.monotonic()
+    with atomic_dir(out_dir) as tmp:
+        results = map_in_processes(score_world, [(w, inputs, tmp) for w in worlds], workers,
+                                   on_done=lambda i, r: _logged(r, i, len(worlds), t0))
+        shutil.rmtree(tmp / SCRATCH, ignore_errors=True)
+        return results
+
+
+def _logged(result: WorldResult, i: int, n: int, t0: float) -> WorldResult:
+    m = {s: result.median(s) for s in result.settings}
+    PROGRESS.info("[%d/%d] %s (%s, %s, %d frames): %s; %.0f s (%.0f s in all)", i + 1, n,
+                  result.name, "-".join(result.segments), result.sensor, result.frames,
+                  ", ".join(f"{s} {v:.3f} %" for s, v in m.items()), result.wall_time_s,
+                  time.monotonic() - t0)
+    return result
+
+
+def score_world(world: VerdictWorld, inputs: SuiteInputs, out_dir: Path) -> WorldResult:
+    """Simulate ``world``, run every setting on every replica, write and return its runs."""
+    t0 = time.perf_counter()
+    loaded = load_world(world, inputs, out_dir / SCRATCH)
+    from pipeline.adaptive import loaded_model
+
+    nominal: dict[str, Any] = {"baseline": inputs.baseline, "fixed": inputs.fixed}
+    selection = {}
+    for name, adaptive in inputs.adaptive.items():
+        chosen = loaded.select(loaded_model(adaptive.model_dir), adaptive.selection)
+        nominal[name] = chosen.schedule
+        selection[name] = {"changes": chosen.changes, "novel_share": chosen.novel_share,
+                           "edge_share": chosen.edge_share}
+        chosen.schedule.write(out_dir / world.name / f"{name}.schedule.parquet")
+    t_err, failed = {}, {}
+    for name, setting in nominal.items():
+        runs = [loaded.run(setting, r, inputs.replica_scale) for r in range(inputs.replicas + 1)]
+        t_err[name] = np.stack([t for t, _ in runs])
+        failed[name] = [f for _, f in runs]
+    result = WorldResult(world.name, world.family, world.spec.segments, world.spec.sensor,
+                         world.spec.frames, world.spec.seed, loaded.labels, t_err, failed,
+                         selection, time.perf_counter() - t0)
+    write_world(out_dir / world.name, result)
+    return result
+
+
+def load_world(world: VerdictWorld, inputs: SuiteInputs, scratch: Path) -> Any:
+    """Simulate ``world`` into ``scratch``, decode it (``LoadedWorld``), delete the MCAP."""
+    from pipeline.sim.simulate import simulate_sequence
+    from pipeline.verdict.world import LoadedWorld
+
+    scratch.mkdir(parents=True, exist_ok=True)
+    path = scratch / f"{world.name}.mcap"
+    try:
+        simulate_sequence(world.spec, path, name=world.name)
+        return LoadedWorld(path, inputs.algorithm, inputs.adapter_options, inputs.space,
+                           inputs.length_m, inputs.penalty_pct)
+    finally:
+        path.unlink(missing_ok=True)
+
+
+def write_world(folder: Path, result: WorldResult) -> None:
+    """``rte.parquet`` and ``world.json`` of one world (module docstring)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from pipeline.io_utils import atomic_path, atomic_write_text
+
+    columns: dict[str, Any] = {"frame": np.arange(result.frames, dtype=np.int32),
+                               "label": result.labels}
+    for setting, t in result.t_err_pct.items():
+        for r, row in enumerate(t):
+            columns[f"{setting}/{r}"] = row
+    folder.mkdir(parents=True, exist_ok=True)
+    with atomic_path(folder / "rte.parquet") as tmp:
+        pq.write_table(pa.table(columns), tmp)
+    atomic_write_text(folder / "world.json", json.dumps(result.to_json(), indent=2) + "\n")
+
+
+def read_results(out_dir: Path) -> list[WorldResult]:
+    """Every world ``run_suite`` wrote under ``out_dir``, by name."""
+    import pyarrow.parquet as pq
+
+    out = []
+    for meta_path in sorted(out_dir.glob("*/world.json")):
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        table = pq.read_table(meta_path.parent / "rte.parquet").to_pydict()
+        runs: dict[str, list[tuple[int, list[float]]]] = {}
+        for column, values in table.items():
+            if "/" in column:
+                setting, r = column.rsplit("/", 1)
+                runs.setdefault(setting, []).append((int(r), values))
+        t_err = {s: np.array([v for _, v in sorted(rs)], np.float64) for s, rs in runs.items()}
+        out.append(WorldResult(meta["name"], meta["family"], tuple(meta["segments"]),
+                               meta["sensor"], int(meta["frames"]), int(meta["seed"]),
+                               list(table["label"]), t_err, meta["failed"], meta["selection"],
+                               float(meta["wall_time_s"])))
+    return out
+
+
+def world_failures(results: Sequence[WorldResult]) -> Mapping[str, int]:
+    """Failed runs per setting over the suite."""
+    out: dict[str, int] = {}
+    for r in results:
+        for s, f in r.failed.items():
+            out[s] = out.get(s, 0) + sum(f)
+    return out

@@ -1,0 +1,56 @@
+"""docs/results/verdict.md as rendered from a run's metrics (pipeline/report/verdict_page.py):
+every target with its figure, interval and verdict; the power from the suite's own spread."""
+
+from __future__ import annotations
+
+import numpy as np
+from helpers.verdict_data import world
+
+from pipeline.report.verdict_page import HEADROOM, ID, OOD, SURROGATE, verdict_page
+from pipeline.verdict.headroom import headroom_metrics
+from pipeline.verdict.runs import WorldResult
+from pipeline.verdict.summary import suite_metrics
+
+HEADER = {"algorithm": "ndt", "suite": "test", "seed_root": 1, "world_generator": 1,
+          "length_m": 25.0, "replicas": 0, "replica_scale": 0.005,
+          "baseline": {"resolution": 4.0, "keyframe_interval": 4.0},
+          "fixed": {"resolution": 2.0, "keyframe_interval": 7.0},
+          "fixed_study": {"trials": 64, "pruned": 50}}
+
+
+def suite(family: str, ratio: float, n: int) -> tuple[dict[str, object], list[WorldResult]]:
+    rng = np.random.default_rng(len(family))
+    worlds = [world(f"{family}_test_{i:02d}",
+                    {"baseline": [[2.0, 2.0]], "fixed": [[1.0, 1.0]],
+                     "adaptive": [[r, r]]}, ["cave", "street"])
+              for i, r in enumerate(ratio * np.exp(rng.normal(0, 0.05, n)))]
+    return suite_metrics(worlds, {**HEADER, "family": family}, 10.0, 0.95, 999, 0), worlds
+
+
+def test_the_page_gives_every_target_its_figure_and_verdict() -> None:
+    ids, worlds = suite("id", 0.6, 12)
+    ood, _ = suite("ood", 1.2, 6)
+    oracles = [WorldResult(w.name, "id", w.segments, w.sensor, w.frames, w.seed, w.labels,
+                           {"oracle": np.full((1, 2), 0.5), "class_oracle": np.full((1, 2), 0.9)},
+                           {"oracle": [False], "class_oracle": [False]},
+                           {"oracle": {"choice": {}}, "class_oracle": {"choice": {}}}, 0.0)
+               for w in worlds]
+    head = headroom_metrics(worlds, oracles, [HEADER["baseline"]], {**HEADER, "family": "id"},
+                            0.95, 999, 0)
+    cv = {"algorithm": "ndt", "folds": 12, "mae": 1.0, "rmse": 2.0, "regret_mean": 0.5}
+    page = verdict_page({ID: ids, OOD: ood, HEADROOM: head, SURROGATE: cv},
+                        ["> provenance"], {"verdict": {"suite": "test"}})
+    targets = page.split("## The targets (issue 29)")[1].split("\n## ")[0]
+    rows = [line for line in targets.splitlines() if line.startswith("| id") or
+            line.startswith("| ood")]
+    assert len(rows) == 6  # id: 2 ratios, closed gap, headroom; ood: 2 ratios
+    assert all(" met |" in r for r in rows if r.startswith("| id test: adaptive"))
+    ood_rows = {r.split("|")[1].strip(): r for r in rows if r.startswith("| ood")}
+    assert ood_rows["ood test: adaptive / fixed"].endswith("**not met** |")  # 1.2 / 1
+    assert ood_rows["ood test: adaptive / baseline"].endswith(" met |")  # 1.2 / 2
+    gap = next(r for r in rows if "closed gap" in r)
+    value = head["closed_gap"]["oracle"]["value"]  # about log(1 / 0.6) / log(1 / 0.5) = 0.74
+    assert 0.6 < value < 0.9 and f"| {100 * value:.0f} % (" in gap and gap.endswith(" met |")
+    assert "| id test: headroom" in targets and "| headroom |" in targets
+    assert "Power: with the spread of its per-world log ratios, this suite of 12 worlds" in page
+    assert "verdict: {suite: test}" in page or "suite: test" in page
