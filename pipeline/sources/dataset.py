@@ -129,6 +129,13 @@ class KittiEntry(_Entry):
     start: int | None = Field(None, ge=0)
     end: int | None = Field(None, ge=0)
 
+    @field_validator("sequences")
+    @classmethod
+    def _plain(cls, sequences: list[str]) -> list[str]:
+        for seq in sequences:  # each names ROOT/sequences/<seq> and the MCAP <seq>.mcap
+            check_plain_name(seq, "a KITTI sequence", ValueError)
+        return sequences
+
     @model_validator(mode="after")
     def _consistent(self) -> KittiEntry:
         if self.start is not None and self.end is not None and self.end < self.start:
@@ -174,7 +181,6 @@ def ingest_data_set(section: DataSection, out_dir: str | Path,
     """Ingest every recording of ``section`` into ``out_dir`` (module docstring); relative
     paths are relative to ``base_dir``. ConfigError when two recordings have one name."""
     out_dir = Path(out_dir)
-    output_folder(out_dir)
     if not section.sources:
         log.info("ingest: no data sources configured, writing an empty data set")
     opened = [(entry, source) for entry in section.resolved(base_dir).sources
@@ -189,6 +195,7 @@ def ingest_data_set(section: DataSection, out_dir: str | Path,
                               f"{entry.path}); give one of them a name")
         where[name] = entry.path
         splits.setdefault(entry.split, []).append(name)
+    output_folder(out_dir)  # once every recording opened and every name is checked
     reports = []
     for i, (entry, source) in enumerate(opened, 1):
         name = source.sequence_info().name

@@ -227,19 +227,21 @@ def files_under(root: Path) -> set[Path]:
 
 
 def test_names_that_would_leave_the_output_folder_are_refused(tmp_path: Path) -> None:
-    """Case 3: `ingest: {train: ["../../kr/sequences/04"]}` wrote next to the KITTI root and
-    index.json recorded the `..` path; `ingest --name` and `simulate --name` took `..` and `/`.
-    One path guard (pipeline.io_utils.check_plain_name) for every name that becomes a file."""
+    """Case 3: `ingest: {train: ["../../kr/sequences/04"]}` (today a kitti source of the data
+    section) wrote next to the KITTI root and index.json recorded the `..` path; `ingest --name`
+    and `simulate --name` took `..` and `/`. One path guard (pipeline.io_utils.check_plain_name)
+    for every name that becomes a file; no folder is made before it passed."""
     from test_fuzz_cli import kitti_layout
 
     kitti_layout(tmp_path / "kr")
     before = files_under(tmp_path)
     params = tmp_path / "p.yaml"
-    params.write_text(f'ingest: {{kitti_root: "{tmp_path / "kr"}", '
-                      'train: ["../../kr/sequences/00"]}\n')
+    params.write_text(f'data: {{sources: [{{kind: kitti, path: "{tmp_path / "kr"}", '
+                      'sequences: ["../../kr/sequences/00"], split: train}]}\n')
     out = tmp_path / "a" / "b" / "out"
-    fails(["ingest-set", "--params", params, "--out", out], "train entry",
+    fails(["ingest-set", "--params", params, "--out", out], "KITTI sequence",
           "plain file name", "../../kr/sequences/00")
+    assert not (tmp_path / "a").exists()
     assert files_under(tmp_path) == before | {params}, "a file was written"
     fails(["ingest", "kitti", tmp_path / "kr", "00", "--name", "../x", "--out",
            tmp_path / "x.mcap"], "sequence name", "'../x'")
@@ -255,12 +257,16 @@ def test_names_that_would_leave_the_output_folder_are_refused(tmp_path: Path) ->
 
 def test_a_split_without_its_source_is_refused(tmp_path: Path) -> None:
     """Case 6: `ingest: {kitti_root: null, train: ["04"]}` wrote an index with no file behind
-    it."""
-    params = tmp_path / "p.yaml"
-    params.write_text('ingest: {kitti_root: null, train: ["04"]}\n')
-    fails(["ingest-set", "--params", params, "--out", tmp_path / "out"], "kitti_root",
-          "no file would be behind the index")
-    assert not (tmp_path / "out" / "index.json").exists()
+    it. In the data section a split is a property of a source: a KITTI source without its root,
+    or a split list without sources, is refused before any folder is made."""
+    for text, needle in [
+            ('data: {sources: [{kind: kitti, path: null, sequences: ["04"], split: train}]}',
+             "data.sources.0.kitti.path"),
+            ('data: {splits: {train: ["04"]}}', "data.splits: unknown parameter")]:
+        params = tmp_path / "p.yaml"
+        params.write_text(text + "\n")
+        fails(["ingest-set", "--params", params, "--out", tmp_path / "out"], needle)
+        assert not (tmp_path / "out").exists()
 
 
 def test_a_surrogate_k_beyond_the_rows_is_refused_when_fitting(kitti_root: Path) -> None:
