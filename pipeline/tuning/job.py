@@ -17,8 +17,10 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 from collections.abc import Iterable, Mapping, MutableMapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -156,8 +158,8 @@ def _score(job: TrialJob, name: str, gt: NDArray[np.float64], traj: Trajectory) 
     rte = mean_rte_pct(gt, traj.T_world_lidar, job.length_m)
     if not np.isfinite(rte):
         raise OdometryError(f"{name}: no segment of {job.length_m} m to score")
-    write_trajectory(trajectory_path(job.out_dir, job.algorithm, name, job.trial), traj,
-                     _metadata(job, name))
+    out = trajectory_path(job.out_dir, job.algorithm, name, job.trial)
+    write_trajectory(out, traj, _metadata(job, name, out))
     return rte
 
 
@@ -256,9 +258,8 @@ def _run_stepped(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]
             ests = [r.estimate() for r in runs]
             for (name, _), run in zip(job.sequences, runs, strict=True):
                 if len(run) and name not in rte:
-                    write_trajectory(trajectory_path(job.out_dir, job.algorithm, name,
-                                                     job.trial), run.trajectory(),
-                                     _metadata(job, name))
+                    out = trajectory_path(job.out_dir, job.algorithm, name, job.trial)
+                    write_trajectory(out, run.trajectory(), _metadata(job, name, out))
             return {"status": "pruned", "objective": stop.value, "rte_pct": rte,
                     "odometry_s": sum(r.seconds for r in runs),
                     "curve": curve_of(points, gts, ests, job.length_m, job.scored_only),
@@ -271,9 +272,14 @@ def _run_stepped(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]
             "curve": curve_of(points, gts, ests, job.length_m, job.scored_only)}
 
 
-def _metadata(job: TrialJob, sequence: str) -> dict[str, str]:
-    return {"algorithm": job.algorithm, "sequence": sequence, "trial": str(job.trial),
-            "params_json": json.dumps(job.params, sort_keys=True)}
+def _metadata(job: TrialJob, name: str, out: Path) -> dict[str, str]:
+    """The footer of the trajectory ``out`` of sequence ``name``: its sequence MCAP by a path
+    relative to the trajectory's folder (``adaptune export`` finds it from anywhere), the trial
+    and its parameters."""
+    path = dict(job.sequences)[name]
+    return {"algorithm": job.algorithm,
+            "sequence": os.path.relpath(Path(path).resolve(), Path(out).resolve().parent),
+            "trial": str(job.trial), "params_json": json.dumps(job.params, sort_keys=True)}
 
 
 def _where(job: TrialJob, runs: list[SequenceRun], point: Any) -> str:

@@ -184,3 +184,27 @@ def test_export_finds_the_sequence_from_anywhere(synthetic_seq: Seq, tmp_path: P
                                     "--out", "traj.tum"])
     assert res.exit_code == 0, res.output
     assert len((tmp_path / "b" / "traj.tum").read_text().splitlines()) == len(synthetic_seq)
+
+
+def test_a_trial_trajectory_exports_from_anywhere(synthetic_seq: Seq, tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """A trial's trajectory names its sequence relative to its own folder (it named the
+    sequence alone before: `export` then needed --sequence): the project can move and `export`
+    runs from any folder (issue 34, item 5)."""
+    import shutil
+
+    from pipeline.tuning.layout import trajectory_path
+
+    (tmp_path / "project").mkdir()
+    (tmp_path / "elsewhere").mkdir()
+    shutil.copy(synthetic_seq.path, tmp_path / "project" / "seq.mcap")
+    monkeypatch.chdir(tmp_path / "project")
+    res = CliRunner().invoke(main, ["trials", "seq.mcap", "-a", "ndt", "--iterations", "1",
+                                    "--length-m", "1", "--out", "trials"])
+    assert res.exit_code == 0, res.output
+    shutil.move(tmp_path / "project", tmp_path / "moved")
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    traj = trajectory_path(tmp_path / "moved" / "trials", "ndt", "seq", 0)
+    res = CliRunner().invoke(main, ["export", str(traj), "--format", "tum", "--out", "t.tum"])
+    assert res.exit_code == 0, res.output
+    assert len((tmp_path / "elsewhere" / "t.tum").read_text().splitlines()) == len(synthetic_seq)
