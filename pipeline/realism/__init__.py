@@ -1,5 +1,5 @@
 """Sim-to-real comparison: real KITTI slices against simulated KITTI along the same poses
-(docs/simulator.md, "Calibration against real KITTI").
+(docs/design.md, "The sim-to-real comparison").
 
 ``compare.run_realism`` is the entry: it reads real slices (``slices``), simulates the same
 frames, and compares scan statistics (``statistics``) and the frame-to-frame registration error

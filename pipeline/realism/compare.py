@@ -1,4 +1,4 @@
-"""The sim-to-real comparison (docs/simulator.md, "Calibration against real KITTI").
+"""The sim-to-real comparison (docs/design.md, "The sim-to-real comparison").
 
 For every slice (a KITTI sequence's frames ``first`` .. ``last``): the real scans, and
 ``replicas`` simulations of the same frames (simulated KITTI, world seed ``derive_seed(r, NN)``
@@ -10,18 +10,17 @@ spread), and the 90th percentile over every slice's steps pooled.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.errors import ConfigError
+from pipeline.io_utils import check_plain_name
+from pipeline.progress import PROGRESS, progress
 from pipeline.realism.statistics import ScanStatistics, scan_statistics
 from pipeline.sim.kitti_dataset import SimulateKittiSection
-
-log = logging.getLogger(__name__)
-PROGRESS = logging.getLogger("pipeline.progress")
 
 SLICES = (("01", 0, 9), ("04", 0, 9), ("06", 0, 9), ("10", 0, 9))
 """(sequence, first, last frame) of the real slices (../shared/data/kitti_mini)."""
@@ -98,9 +97,8 @@ class RealismResult:
 
 
 def parse_slice(text: str) -> tuple[str, int, int]:
-    """``"04:0:9"`` -> ("04", 0, 9); ConfigError naming the text otherwise."""
-    from pipeline.errors import ConfigError
-
+    """``"04:0:9"`` -> ("04", 0, 9); ConfigError naming the text and the rule otherwise (NN a
+    plain name: it becomes the file names NN.txt, sequences/NN)."""
     parts = text.split(":")
     try:
         seq, first, last = parts[0], int(parts[1]), int(parts[2])
@@ -108,7 +106,7 @@ def parse_slice(text: str) -> tuple[str, int, int]:
         raise ConfigError(f"a slice is NN:FIRST:LAST, e.g. 04:0:9, got {text!r}") from None
     if len(parts) != 3 or not 0 <= first < last:
         raise ConfigError(f"a slice is NN:FIRST:LAST with 0 <= FIRST < LAST, got {text!r}")
-    return seq, first, last
+    return check_plain_name(seq, f"the sequence of slice {text!r}"), first, last
 
 
 def run_realism(kitti_root: str | Path, trajectories: str | Path,
@@ -117,15 +115,19 @@ def run_realism(kitti_root: str | Path, trajectories: str | Path,
                 algorithms: tuple[str, ...] = ALGORITHMS) -> RealismResult:
     """Compare the real ``slices`` under ``kitti_root`` with ``replicas`` simulations of each
     (module docstring); the simulated side follows ``trajectories``/NN.txt and ``section``."""
-    from pipeline.errors import ConfigError
     from pipeline.sim.kitti_dataset import kitti_sensor
+    from pipeline.sim.kitti_world import frame_environments
 
     if replicas < 1:
         raise ConfigError(f"replicas must be >= 1, got {replicas}")
+    if not slices:
+        raise ConfigError("realism needs at least one slice")
+    for seq, _, last in slices:  # an unknown sequence fails here, before any odometry runs
+        frame_environments(check_plain_name(seq, "a slice's sequence"), last + 1)
     sensor = kitti_sensor(section)
     done = [_compare_slice(Path(kitti_root), Path(trajectories), section, seq, a, b, replicas,
                            algorithms, sensor.beams, sensor.beams * sensor.azimuths)
-            for seq, a, b in slices]
+            for seq, a, b in progress(slices, len(slices), "realism", unit="slice")]
     return RealismResult(done, tuple(algorithms), replicas, section.sensor,
                          section.model_dump(mode="json"))
 
@@ -140,7 +142,8 @@ def _compare_slice(kitti_root: Path, trajectories: Path, section: SimulateKittiS
     from pipeline.sim.simulate import derive_seed
 
     real = real_slice(kitti_root, sequence, first, last)
-    real_err = {a: _side([odometry_step_errors(a, real)]) for a in algorithms}
+    real_err = {a: _side([odometry_step_errors(a, real, f"real {sequence} {first}-{last}")])
+                for a in algorithms}
     sim_points: list[NDArray[np.float32]] = []
     runs: dict[str, list[tuple[NDArray[np.float64], NDArray[np.float64]]]] = {
         a: [] for a in algorithms}
@@ -149,7 +152,8 @@ def _compare_slice(kitti_root: Path, trajectories: Path, section: SimulateKittiS
                                 derive_seed(r, sequence))
         sim_points += [s.points_lidar for s in scans]
         for a in algorithms:
-            runs[a].append(odometry_step_errors(a, scans))
+            runs[a].append(odometry_step_errors(
+                a, scans, f"simulated {sequence} {first}-{last}, replica {r}"))
     env = frame_environments(sequence, last + 1)[first]
     result = SliceResult(sequence, first, last, env,
                          scan_statistics([s.points_lidar for s in real], beams, firings),

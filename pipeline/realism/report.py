@@ -1,30 +1,30 @@
 """The comparison's outputs: ``realism.json`` (everything), ``realism.md`` (the tables) and
-``realism.png`` (real and simulated side by side)."""
+``realism.png`` (real and simulated side by side); docs/design.md, "The sim-to-real
+comparison"."""
 
 from __future__ import annotations
 
 import itertools
-import json
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pipeline.io_utils import atomic_path
+from pipeline.io_utils import atomic_write_text, output_folder
 from pipeline.realism.compare import TARGET_RATIO, RealismResult
 from pipeline.realism.statistics import RANGE_EDGES_M
 
 
 def write_realism(result: RealismResult, out_dir: str | Path) -> list[Path]:
-    """Write the three outputs into ``out_dir`` (atomically each); their paths."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    """Write the three outputs into ``out_dir`` (created when missing; each file atomically);
+    their paths."""
+    from pipeline.report.outputs import write_json
+
+    out = output_folder(out_dir)
     paths = [out / "realism.json", out / "realism.md", out / "realism.png"]
-    with atomic_path(paths[0]) as tmp:
-        tmp.write_text(json.dumps(summary(result), indent=1) + "\n")
-    with atomic_path(paths[1]) as tmp:
-        tmp.write_text(markdown(result))
+    write_json(paths[0], summary(result))
+    atomic_write_text(paths[1], markdown(result))
     figure(result, paths[2])
     return paths
 
@@ -87,14 +87,18 @@ def figure(result: RealismResult, out_png: Path) -> None:
     """Top row: per slice the median step errors (t, r) of each algorithm, real against
     simulated (bars: the replicas' range). Bottom row: range histogram, returns per ring and
     points a scan, real against simulated (all slices)."""
-    import matplotlib
+    from pipeline.report.outputs import figure as report_figure
 
-    matplotlib.use("Agg")
+    algos = result.algorithms
+    with report_figure(out_png, 2, 2 * len(algos), (4.2 * 2 * len(algos), 8)) as (_, axes):
+        _draw(result, axes)
+
+
+def _draw(result: RealismResult, axes: Any) -> None:
+    """The panels of ``figure`` on its (2, 2 * algorithms) ``axes``."""
     import matplotlib.pyplot as plt
 
     algos = result.algorithms
-    fig, axes = plt.subplots(2, 2 * len(algos), figsize=(4.2 * 2 * len(algos), 8), dpi=100,
-                             layout="constrained", squeeze=False)
     names = [s.sequence for s in result.slices]
     x = np.arange(len(names))
     for i, a in enumerate(algos):
@@ -143,6 +147,3 @@ def figure(result: RealismResult, out_png: Path) -> None:
                    color="tab:red", label="simulated")
             ax.set_xticks(x, names)
             ax.set_title("lost returns [%]")
-    with atomic_path(out_png) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)

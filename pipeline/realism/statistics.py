@@ -1,5 +1,5 @@
 """Scan statistics of a spinning LiDAR: points per scan, range histogram, returns per ring, lost
-returns (docs/simulator.md, "Calibration against real KITTI").
+returns (docs/design.md, "The sim-to-real comparison").
 
 Rings are recovered from the points' order, as KITTI stores them and the simulator writes them:
 ring after ring (beam-major), each ring one revolution in ascending azimuth. The unwrapped
