@@ -65,12 +65,13 @@ class SliceResult:
 
 @dataclass
 class RealismResult:
-    """Every slice, and the settings that made it."""
+    """Every slice, and the settings that made it (``beams``: the sensor's rings)."""
 
     slices: list[SliceResult]
     algorithms: tuple[str, ...]
     replicas: int
     sensor: str
+    beams: int
     settings: dict[str, object]
 
     def pooled_p90(self, algorithm: str, side: str, what: str) -> float:
@@ -128,7 +129,7 @@ def run_realism(kitti_root: str | Path, trajectories: str | Path,
     done = [_compare_slice(Path(kitti_root), Path(trajectories), section, seq, a, b, replicas,
                            algorithms, sensor.beams, sensor.beams * sensor.azimuths)
             for seq, a, b in progress(slices, len(slices), "realism", unit="slice")]
-    return RealismResult(done, tuple(algorithms), replicas, section.sensor,
+    return RealismResult(done, tuple(algorithms), replicas, section.sensor, sensor.beams,
                          section.model_dump(mode="json"))
 
 

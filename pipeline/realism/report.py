@@ -13,7 +13,7 @@ import numpy as np
 
 from pipeline.io_utils import atomic_write_text, output_folder
 from pipeline.realism.compare import TARGET_RATIO, RealismResult
-from pipeline.realism.statistics import RANGE_EDGES_M
+from pipeline.realism.statistics import RANGE_EDGES_M, ScanStatistics
 
 
 def write_realism(result: RealismResult, out_dir: str | Path) -> list[Path]:
@@ -34,7 +34,8 @@ def summary(result: RealismResult) -> dict[str, Any]:
     percentiles, the ratios simulated / real and whether each is within the target."""
     pooled = {a: {side: {what: result.pooled_p90(a, side, what) for what in ("t_cm", "r_deg")}
                   for side in ("real", "sim")} for a in result.algorithms}
-    return {"replicas": result.replicas, "sensor": result.sensor, "settings": result.settings,
+    return {"replicas": result.replicas, "sensor": result.sensor, "beams": result.beams,
+            "settings": result.settings,
             "target_ratio": TARGET_RATIO,
             "slices": [asdict(s) for s in result.slices], "pooled_p90": pooled,
             "ratios": result.ratios(), "within_target": result.within_target()}
@@ -68,19 +69,44 @@ def markdown(result: RealismResult) -> str:
         rr, sr = result.pooled_p90(a, "real", "r_deg"), result.pooled_p90(a, "sim", "r_deg")
         lines.append(f"| all, p90 | | {a} | {rt:.2f} | {st:.2f} | {_ratio(st, rt)} | {rr:.3f} "
                      f"| {sr:.3f} | {_ratio(sr, rr)} |")
-    bins = [f"{a:g}-{b:g}" for a, b in itertools.pairwise(RANGE_EDGES_M)]
-    lines += ["", "Scan statistics (real / simulated): points a scan, lost returns, share of "
-              f"points by range [m] ({', '.join(bins)}).", "",
-              "| slice | points | lost | range shares [%] |", "|---|---|---|---|"]
-    for s in result.slices:
-        shares = " ".join(f"{100 * r:.0f}/{100 * m:.0f}" for r, m in
-                          zip(s.real_stats.range_share, s.sim_stats.range_share, strict=True))
-        lines.append(f"| {s.sequence} | {s.real_stats.points:.0f} / {s.sim_stats.points:.0f} "
-                     f"| {100 * s.real_stats.lost_share:.1f} / {100 * s.sim_stats.lost_share:.1f}"
-                     f" % | {shares} |")
     within = result.within_target()
-    lines += ["", f"Within x{TARGET_RATIO:g}: {sum(within.values())} of {len(within)} figures."]
-    return "\n".join(lines) + "\n"
+    return "\n".join([*lines, "", *_scan_table(result), "",
+                      f"Within x{TARGET_RATIO:g}: {sum(within.values())} of {len(within)} "
+                      "figures."]) + "\n"
+
+
+RING_GROUPS = 4
+"""The returns per ring are shown as the mean over this many equal groups of rings."""
+
+
+def _scan_table(result: RealismResult) -> list[str]:
+    """The scan statistics table's lines (``markdown``)."""
+    bins = [f"{a:g}-{b:g}" for a, b in itertools.pairwise(RANGE_EDGES_M)]
+    lines = ["Scan statistics (real / simulated): points a scan, lost returns, share of points "
+             f"by range [m] ({', '.join(bins)}), rings recovered from the points' order (the "
+             f"fewest in a scan; ! fewer than the sensor's {result.beams}: the returns a ring "
+             f"are then off), returns a ring and scan, mean over {RING_GROUPS} groups of rings "
+             "(top first).", "",
+             "| slice | points | lost | range shares [%] | rings | returns a ring |",
+             "|---|---|---|---|---|---|"]
+    for s in result.slices:
+        re, si = s.real_stats, s.sim_stats
+        shares = " ".join(f"{100 * r:.0f}/{100 * m:.0f}" for r, m in
+                          zip(re.range_share, si.range_share, strict=True))
+        rings = " / ".join(f"{x.rings_found}{'' if x.rings_found == result.beams else ' !'}"
+                           for x in (re, si))
+        groups = " ".join(f"{r:.0f}/{m:.0f}" for r, m in
+                          zip(_ring_groups(re), _ring_groups(si), strict=True))
+        lines.append(f"| {s.sequence} | {re.points:.0f} / {si.points:.0f} "
+                     f"| {100 * re.lost_share:.1f} / {100 * si.lost_share:.1f} % | {shares} "
+                     f"| {rings} | {groups} |")
+    return lines
+
+
+def _ring_groups(stats: ScanStatistics) -> list[float]:
+    """Mean returns a ring and scan over each of ``RING_GROUPS`` equal groups of rings."""
+    return [float(np.mean(g)) for g in np.array_split(np.array(stats.ring_returns),
+                                                       RING_GROUPS)]
 
 
 def figure(result: RealismResult, out_png: Path) -> None:
