@@ -26,7 +26,7 @@ def realism(params_path: Path | None, kitti_root: Path, trajectories: Path, repl
     defaults) of real KITTI slices with the same frames simulated (params section
     ``simulate_kitti``)."""
     from pipeline.config import load_section
-    from pipeline.realism.compare import SLICES, parse_slice, run_realism
+    from pipeline.realism.compare import SLICES, TARGET_RATIO, parse_slice, run_realism
     from pipeline.realism.report import write_realism
     from pipeline.sim.kitti_dataset import SimulateKittiSection
 
@@ -35,5 +35,5 @@ def realism(params_path: Path | None, kitti_root: Path, trajectories: Path, repl
     result = run_realism(kitti_root, trajectories, section, replicas, chosen)
     paths = write_realism(result, out)
     within = result.within_target()
-    click.echo(f"{paths[1]}: {sum(within.values())} of {len(within)} figures within x1.5 "
-               f"(simulated / real)", err=True)
+    click.echo(f"{paths[1]}: {sum(within.values())} of {len(within)} figures within "
+               f"x{TARGET_RATIO:g} (simulated / real)", err=True)
