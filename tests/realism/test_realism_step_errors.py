@@ -74,3 +74,14 @@ def test_stacks_that_do_not_pair_are_refused() -> None:
         step_errors(chain([pose(), pose()]), chain([pose()]))
     with pytest.raises(InputError, match="at least 2 poses, got 1"):
         step_errors(np.eye(4)[None], np.eye(4)[None])
+
+
+def test_a_small_rotation_error_survives_ground_truth_orthonormal_to_2_5e_7() -> None:
+    """KITTI's ground-truth rotations are orthonormal to about 2.5e-7 (their 12 printed
+    digits): scaled by 1 + 2.5e-7 here. A 0.01 deg step error must still read 0.01 deg (the
+    arccos of E's trace reads 0 deg for it)."""
+    G = chain([pose(5.0, (1.0, 0, 0)), pose(5.0, (1.0, 0, 0))])
+    G[:, :3, :3] *= 1.0 + 2.5e-7
+    P = chain([pose(5.01, (1.0, 0, 0)), pose(5.0, (1.0, 0, 0))])
+    _, r_deg = step_errors(G, P)
+    assert r_deg == pytest.approx([0.01, 0.0], abs=1e-4)
