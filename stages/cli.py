@@ -88,6 +88,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "Simulate KITTI along its ground-truth trajectories (dvc stage).",
     ),
     "docs": ("stages.docs:docs", "Render the docs pages that quote the committed metrics."),
+    "realism": (
+        "stages.realism:realism",
+        "Real KITTI slices against simulated KITTI: scan statistics, odometry errors.",
+    ),
     "plot-world": (
         "stages.simulate:plot_world",
         "Top-down PNG of a world, its trajectory and one scan.",

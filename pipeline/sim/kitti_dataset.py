@@ -20,7 +20,7 @@ from pipeline.io_utils import output_folder
 from pipeline.sequence_index import check_split, write_index
 from pipeline.sim.dataset import simulate_all
 from pipeline.sim.kitti_world import SCHEDULES
-from pipeline.sim.sensors import SensorName
+from pipeline.sim.sensors import SensorModel, SensorName, get_sensor
 from pipeline.sim.simulate import SimSummary, derive_seed
 
 log = logging.getLogger(__name__)
@@ -110,7 +110,6 @@ def simulate_kitti_sequence(section: SimulateKittiSection, name: str, base_seed:
     """One simulated KITTI sequence (its window) into ``out_path``."""
     from pipeline.sim.kitti import kitti_lidar_poses
     from pipeline.sim.kitti_world import build_kitti_world
-    from pipeline.sim.sensors import get_sensor
     from pipeline.sim.simulate import write_world
 
     assert section.trajectories is not None
@@ -119,7 +118,7 @@ def simulate_kitti_sequence(section: SimulateKittiSection, name: str, base_seed:
     first, last = section.window(name, frames)
     seed = derive_seed(base_seed if section.seed is None else section.seed, name)
     world = build_kitti_world(trajectory, name, seed, first, last)
-    sensor = get_sensor(section.sensor).with_noise(section.range_noise_m, section.dropout)
+    sensor = kitti_sensor(section)
     extra = {"world": "kitti", "kitti_sequence": name, "first_frame": str(first),
              "last_frame": str(last), "seed": str(seed), "sensor_model": section.sensor,
              "range_noise_m": str(sensor.range_noise_m), "dropout": str(sensor.dropout),
@@ -134,3 +133,8 @@ def simulate_kitti_sequence(section: SimulateKittiSection, name: str, base_seed:
     log.info("%s: frames %d-%d, %.0f m, %s", name, first, last, summary.length_m,
              ", ".join(f"{x.label} {x.start}-{x.end}" for x in summary.labels))
     return summary
+
+
+def kitti_sensor(section: SimulateKittiSection) -> SensorModel:
+    """The sensor model the section configures."""
+    return get_sensor(section.sensor).with_noise(section.range_noise_m, section.dropout)

@@ -1,0 +1,173 @@
+"""The sim-to-real comparison (docs/design.md, "The sim-to-real comparison").
+
+For every slice (a KITTI sequence's frames ``first`` .. ``last``): the real scans, and
+``replicas`` simulations of the same frames (simulated KITTI, world seed ``derive_seed(r, NN)``
+for replica r, the ``simulate_kitti`` section's sensor). Each side gets its scan statistics and
+the frame-to-frame errors of every algorithm at its defaults: per slice the median over the
+slice's steps (simulated: over all replicas' steps, and each replica's own median for the
+spread), and the 90th percentile over every slice's steps pooled.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.errors import ConfigError
+from pipeline.io_utils import check_plain_name
+from pipeline.progress import PROGRESS, progress
+from pipeline.realism.statistics import ScanStatistics, scan_statistics
+from pipeline.sim.kitti_dataset import SimulateKittiSection
+
+SLICES = (("01", 0, 9), ("04", 0, 9), ("06", 0, 9), ("10", 0, 9))
+"""(sequence, first, last frame) of the real slices (../shared/data/kitti_mini)."""
+ALGORITHMS = ("gicp", "kiss_icp")
+TARGET_RATIO = 1.5
+"""Calibration target: simulated / real within [1 / TARGET_RATIO, TARGET_RATIO]."""
+
+
+@dataclass
+class SideErrors:
+    """Step errors of one algorithm on one side of one slice: translational [cm] and rotational
+    [deg] errors of every step (all replicas' steps on the simulated side), and each replica's
+    median translational / rotational error (one entry on the real side)."""
+
+    t_cm: list[float]
+    r_deg: list[float]
+    replica_t_cm: list[float] = field(default_factory=list)
+    replica_r_deg: list[float] = field(default_factory=list)
+
+    @property
+    def median_t_cm(self) -> float:
+        return float(np.median(self.t_cm))
+
+    @property
+    def median_r_deg(self) -> float:
+        return float(np.median(self.r_deg))
+
+
+@dataclass
+class SliceResult:
+    """One slice: statistics and errors (algorithm -> side) of the real and simulated scans."""
+
+    sequence: str
+    first: int
+    last: int
+    environment: str
+    real_stats: ScanStatistics
+    sim_stats: ScanStatistics
+    real: dict[str, SideErrors]
+    sim: dict[str, SideErrors]
+
+
+@dataclass
+class RealismResult:
+    """Every slice, and the settings that made it (``beams``: the sensor's rings)."""
+
+    slices: list[SliceResult]
+    algorithms: tuple[str, ...]
+    replicas: int
+    sensor: str
+    beams: int
+    settings: dict[str, object]
+
+    def pooled_p90(self, algorithm: str, side: str, what: str) -> float:
+        """90th percentile of ``what`` ("t_cm" | "r_deg") over every slice's steps."""
+        vals = [v for s in self.slices for v in getattr(getattr(s, side)[algorithm], what)]
+        return float(np.percentile(vals, 90))
+
+    def ratios(self) -> dict[str, float]:
+        """Simulated / real of every calibrated figure: ``<algo> <slice> median t``, ...,
+        ``<algo> pooled p90 t``, ...; the target is every ratio in [1 / 1.5, 1.5]."""
+        out: dict[str, float] = {}
+        for a in self.algorithms:
+            for s in self.slices:
+                out[f"{a} {s.sequence} median t"] = s.sim[a].median_t_cm / s.real[a].median_t_cm
+                out[f"{a} {s.sequence} median r"] = (s.sim[a].median_r_deg
+                                                     / s.real[a].median_r_deg)
+            for what, key in (("t_cm", "t"), ("r_deg", "r")):
+                out[f"{a} pooled p90 {key}"] = (self.pooled_p90(a, "sim", what)
+                                                / self.pooled_p90(a, "real", what))
+        return out
+
+    def within_target(self) -> dict[str, bool]:
+        return {k: 1.0 / TARGET_RATIO <= v <= TARGET_RATIO for k, v in self.ratios().items()}
+
+
+def parse_slice(text: str) -> tuple[str, int, int]:
+    """``"04:0:9"`` -> ("04", 0, 9); ConfigError naming the text and the rule otherwise (NN a
+    plain name: it becomes the file names NN.txt, sequences/NN)."""
+    parts = text.split(":")
+    try:
+        seq, first, last = parts[0], int(parts[1]), int(parts[2])
+    except (IndexError, ValueError):
+        raise ConfigError(f"a slice is NN:FIRST:LAST, e.g. 04:0:9, got {text!r}") from None
+    if len(parts) != 3 or not 0 <= first < last:
+        raise ConfigError(f"a slice is NN:FIRST:LAST with 0 <= FIRST < LAST, got {text!r}")
+    return check_plain_name(seq, f"the sequence of slice {text!r}"), first, last
+
+
+def run_realism(kitti_root: str | Path, trajectories: str | Path,
+                section: SimulateKittiSection, replicas: int = 3,
+                slices: tuple[tuple[str, int, int], ...] = SLICES,
+                algorithms: tuple[str, ...] = ALGORITHMS) -> RealismResult:
+    """Compare the real ``slices`` under ``kitti_root`` with ``replicas`` simulations of each
+    (module docstring); the simulated side follows ``trajectories``/NN.txt and ``section``."""
+    from pipeline.sim.kitti_dataset import kitti_sensor
+    from pipeline.sim.kitti_world import frame_environments
+
+    if replicas < 1:
+        raise ConfigError(f"replicas must be >= 1, got {replicas}")
+    if not slices:
+        raise ConfigError("realism needs at least one slice")
+    for seq, _, last in slices:  # an unknown sequence fails here, before any odometry runs
+        frame_environments(check_plain_name(seq, "a slice's sequence"), last + 1)
+    sensor = kitti_sensor(section)
+    done = [_compare_slice(Path(kitti_root), Path(trajectories), section, seq, a, b, replicas,
+                           algorithms, sensor.beams, sensor.beams * sensor.azimuths)
+            for seq, a, b in progress(slices, len(slices), "realism", unit="slice")]
+    return RealismResult(done, tuple(algorithms), replicas, section.sensor, sensor.beams,
+                         section.model_dump(mode="json"))
+
+
+def _compare_slice(kitti_root: Path, trajectories: Path, section: SimulateKittiSection,
+                   sequence: str, first: int, last: int, replicas: int,
+                   algorithms: tuple[str, ...], beams: int, firings: int) -> SliceResult:
+    """Real and simulated statistics and step errors of one slice."""
+    from pipeline.realism.registration import odometry_step_errors
+    from pipeline.realism.slices import real_slice, simulated_slice
+    from pipeline.sim.kitti_world import frame_environments
+    from pipeline.sim.simulate import derive_seed
+
+    real = real_slice(kitti_root, sequence, first, last)
+    real_err = {a: _side([odometry_step_errors(a, real, f"real {sequence} {first}-{last}")])
+                for a in algorithms}
+    sim_points: list[NDArray[np.float32]] = []
+    runs: dict[str, list[tuple[NDArray[np.float64], NDArray[np.float64]]]] = {
+        a: [] for a in algorithms}
+    for r in range(replicas):
+        scans = simulated_slice(trajectories, sequence, first, last, section,
+                                derive_seed(r, sequence))
+        sim_points += [s.points_lidar for s in scans]
+        for a in algorithms:
+            runs[a].append(odometry_step_errors(
+                a, scans, f"simulated {sequence} {first}-{last}, replica {r}"))
+    env = frame_environments(sequence, last + 1)[first]
+    result = SliceResult(sequence, first, last, env,
+                         scan_statistics([s.points_lidar for s in real], beams, firings),
+                         scan_statistics(sim_points, beams, firings), real_err,
+                         {a: _side(runs[a]) for a in algorithms})
+    PROGRESS.info("realism %s (%s): %s", sequence, env, ", ".join(
+        f"{a} t {result.real[a].median_t_cm:.2f} / {result.sim[a].median_t_cm:.2f} cm"
+        for a in algorithms))
+    return result
+
+
+def _side(runs: list[tuple[NDArray[np.float64], NDArray[np.float64]]]) -> SideErrors:
+    return SideErrors([float(v) for t, _ in runs for v in t],
+                      [float(v) for _, r in runs for v in r],
+                      [float(np.median(t)) for t, _ in runs],
+                      [float(np.median(r)) for _, r in runs])
