@@ -45,9 +45,12 @@ def test_the_generated_pages_are_what_the_committed_metrics_give() -> None:
 
 
 def _copy(tmp: Path) -> Path:
-    """What the generator reads, in a scratch repository ``tmp``."""
+    """What the generator reads, in a scratch repository ``tmp``: the toy's run and, once one
+    is recorded, the verdict's."""
+    verdict = (yaml.safe_load((REPO / RUNS).read_text()) or {}).get("verdict")
+    verdict_files = ["verdict/dvc.lock", *verdict["outputs"]] if verdict else []
     for name in ("README.md", "dvc.lock", str(RUNS), EVALUATION, SURROGATE, GENERALIZATION,
-                 *SUMMARIES.values()):
+                 *SUMMARIES.values(), *verdict_files):
         (tmp / name).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(REPO / name, tmp / name)
     return tmp
