@@ -79,10 +79,11 @@ def run_query(db_path: str | Path, sql: str,
         raise ConfigError(f"--time-limit-s must be a finite number of seconds > 0, got "
                           f"{time_limit_s!r}")
     db_path = input_file(db_path, "database", " (build it with `adaptune rte`)")
-    con = open_sandbox(db_path, tables or {})
-    stopper = _Stopper(con, time_limit_s)
+    stopper = _Stopper(time_limit_s)
+    con = None
     try:
-        with stopper:
+        with stopper:  # from before the sandbox's own statements: a signal then stops them too
+            con = stopper.con = open_sandbox(db_path, tables or {})
             rel = con.sql(sql)
             return rel.to_arrow_table() if rel is not None else pa.table({})
     except duckdb.InterruptException:
@@ -95,7 +96,8 @@ def run_query(db_path: str | Path, sql: str,
     except duckdb.Error as exc:
         raise QueryError(f"{db_path}: {_first_line(exc)}") from None
     finally:
-        con.close()
+        if con is not None:
+            con.close()
 
 
 class _Stopper:
@@ -103,13 +105,14 @@ class _Stopper:
     or when SIGINT, SIGTERM or SIGHUP arrive (main thread only; an ignored signal stays
     ignored), whose handler then runs once the statement has stopped. Once asked to stop it
     interrupts the connection every ``REPEAT_S`` until the block ends: an interrupt that comes
-    before DuckDB has started executing (while it binds) would be lost."""
+    before DuckDB has started executing (while it binds) would be lost. ``con``, the connection
+    to interrupt, is set once open: a signal before that stops its first statement."""
 
     SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
     REPEAT_S = 0.05
 
-    def __init__(self, con: duckdb.DuckDBPyConnection, time_limit_s: float) -> None:
-        self.con = con
+    def __init__(self, time_limit_s: float) -> None:
+        self.con: duckdb.DuckDBPyConnection | None = None
         self.timed_out = False
         self.received: int | None = None
         self.timer = threading.Timer(time_limit_s, self._time_out)
@@ -133,7 +136,8 @@ class _Stopper:
 
     def _interrupt_until_done(self) -> None:
         while True:
-            self.con.interrupt()
+            if self.con is not None:
+                self.con.interrupt()
             if self.done.wait(self.REPEAT_S):
                 return
 
