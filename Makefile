@@ -17,8 +17,9 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 # the suite in TEST_WORKERS processes (pytest-xdist), a test file per process so that a file's
-# module fixtures (the DVC projects of tests/test_pipeline_dvc.py) are built once
-TEST_WORKERS ?= 2
+# module fixtures (the DVC projects of tests/test_pipeline_dvc.py) are built once; 3 on 2 cores
+# (the DVC tests wait on their subprocesses): 9 min 39 s idle against 10 min 01 s with 2
+TEST_WORKERS ?= 3
 test: setup
 	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile
 

@@ -40,10 +40,7 @@ def tcp_cluster(folder: Path, n_workers: int = 2
     procs = [start(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                     "--scheduler-file", str(info)], folder / "scheduler.log")]
     try:
-        deadline = time.monotonic() + 30
-        while not info.is_file() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        address = json.loads(info.read_text())["address"]
+        address = _scheduler_address(info, time.monotonic() + 30)
         assert address.startswith("tcp://127.0.0.1:")
         workers = [start(["worker", address, "--nworkers", "1", "--nthreads", "1",
                           "--no-dashboard", "--name", f"w{i}", "--local-directory",
@@ -58,3 +55,14 @@ def tcp_cluster(folder: Path, n_workers: int = 2
     finally:
         for proc in procs:
             stop(proc)
+
+
+def _scheduler_address(info: Path, deadline: float) -> str:
+    """The address in the scheduler file ``info``, once the scheduler has written it whole (the
+    file appears before its text: an empty or partial file is read again)."""
+    while True:
+        try:
+            return str(json.loads(info.read_text())["address"])
+        except (FileNotFoundError, json.JSONDecodeError, KeyError):
+            assert time.monotonic() < deadline, f"{info}: no scheduler address in 30 s"
+            time.sleep(0.1)
