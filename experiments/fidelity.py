@@ -1,4 +1,4 @@
-"""Whole trials against successive halving on a reduced run (issue 33; docs/design.md, the trials stage).
+"""Whole trials against successive halving on a reduced run (issue 33; docs/kitti.md).
 
 Reads one or more finished runs of the pipeline (folders holding results/trials, results/fixed,
 results/adaptune.duckdb, metrics/surrogate.json, data/kitti_sim or another sequence folder, and

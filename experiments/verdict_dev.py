@@ -1,4 +1,4 @@
-"""Selector variants on the coverage model's dev suites (issue 29; docs/results/verdict-protocol.md, "How to run").
+"""Selector variants on the coverage model's dev suites (issue 29; verdict-protocol.md).
 
 Not a `make bench` module (tens of minutes): ``python experiments/verdict_dev.py --project verdict
 [--family id] [--worlds N] [--variants default,paper,...]``, after the coverage model's training
