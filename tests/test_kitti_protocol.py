@@ -164,40 +164,29 @@ def test_table2_lays_out_every_algorithm(protocol: Path, tmp_path: Path) -> None
     assert not (tmp_path / "u").exists()
 
 
-def _without_wall_times(node: Any) -> Any:
-    """``node`` (parsed JSON) without its ``wall_time_s`` entries, the only values of a record
-    a rerun may change."""
-    if isinstance(node, dict):
-        return {k: _without_wall_times(v) for k, v in node.items() if k != "wall_time_s"}
-    return node
-
-
 def test_a_second_run_gives_the_same_numbers(protocol: Path, tmp_path: Path) -> None:
-    """Determinism (issue 15): the protocol run again from scratch in a copy of the project
-    (`dvc repro -f`: every stage again, the KITTI ingest included) gives the same metrics
-    (`dvc metrics diff` of the two runs shows nothing: wall times are no metric), the same
-    records but the wall times, the same trials tables and the same trajectories of every
-    trial and setting."""
+    """Determinism (issue 15): the SMBO studies of the protocol (trials and the joint study,
+    the stages with parallel workers and a search that reacts to what it was told) run again
+    from scratch in a copy of the project (`dvc repro -f -s`) give the same trials tables, but
+    the wall times, and the same trajectory of every trial. The stages after them are
+    deterministic given their inputs (tests/test_adaptive_evaluate.py: any number of workers
+    gives the same results); `dvc metrics diff` shows no wall time (test_pipeline_dvc.py)."""
     import pyarrow.parquet as pq
 
     again = tmp_path / "again"
     shutil.copytree(protocol, again, symlinks=True)
     git(again, "add", "-A")
     git(again, "commit", "-qm", "the first run")
-    log = dvc(again, "repro", "-f", "evaluate")
-    for stage in ("ingest", "trials", "fixed", "surrogate", "adaptive", "evaluate"):
+    log = dvc(again, "repro", "-f", "-s", "trials", "fixed")
+    for stage in ("trials", "fixed"):
         assert f"Running stage '{stage}'" in log
-    assert json.loads(dvc(again, "metrics", "diff", "--json")) == {}
-    for name in ("metrics/evaluation.json", "metrics/surrogate.json"):
-        assert (again / name).read_text() == (protocol / name).read_text()
-    first, second = (json.loads((root / "records/evaluation.json").read_text())
-                     for root in (protocol, again))
-    assert _without_wall_times(second) == _without_wall_times(first)
-    assert second["trials"]["trials"]["wall_time_s"] > 0
-    tables = sorted(p.relative_to(protocol) for p in protocol.glob("results/**/*.parquet"))
-    assert sorted(p.relative_to(again) for p in again.glob("results/**/*.parquet")) == tables
+    assert "Running stage 'evaluate'" not in log
+    tables = sorted(p.relative_to(protocol) for p in protocol.glob("results/*/**/*.parquet")
+                    if p.relative_to(protocol).parts[1] in ("trials", "fixed"))
+    assert sorted(p.relative_to(again) for p in again.glob("results/*/**/*.parquet")
+                  if p.relative_to(again).parts[1] in ("trials", "fixed")) == tables
     assert any(p.name == "trials.parquet" for p in tables)
-    assert any(p.parts[:2] == ("results", "adaptive") for p in tables)
+    assert any(p.parts[1] == "fixed" for p in tables)
     for path in tables:
         a, b = (pq.read_table(root / path) for root in (protocol, again))
         keep = [c for c in a.column_names if c != "wall_time_s"]
