@@ -17,9 +17,9 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 # the suite in TEST_WORKERS processes (pytest-xdist), a test file per process so that a file's
-# module fixtures (the DVC projects of tests/test_pipeline_dvc.py) are built once; 3 on 2 cores
-# (the DVC tests wait on their subprocesses): 9 min 39 s idle against 10 min 01 s with 2
-TEST_WORKERS ?= 3
+# module fixtures (the DVC projects of tests/test_pipeline_dvc.py) are built once; 2 on 2 cores
+# (3 measured 9:39, 10:20 and 10:34 idle, 2 measured 10:01: no better, and more CPU)
+TEST_WORKERS ?= 2
 test: setup
 	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile
 
