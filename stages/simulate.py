@@ -11,8 +11,9 @@ import click
 
 from stages.common import compose, dir_option, file_option, params_option
 
-WORLDS = ("cave", "open", "street", "composite")
+WORLDS = ("cave", "open", "street", "composite", "kitti")
 SENSORS = ("hdl32", "hdl64", "vlp16")
+MOTIONS = ("none", "sweep", "compensated")
 
 
 def _choice(flag: str, choices: tuple[str, ...], help: str):  # type: ignore[no-untyped-def]
@@ -21,46 +22,64 @@ def _choice(flag: str, choices: tuple[str, ...], help: str):  # type: ignore[no-
 
 
 _world_options = compose(
-    _choice("--world", WORLDS, "World to generate (street with --kitti-trajectory)."),
+    params_option,
+    _choice("--world", WORLDS, "World to generate; kitti: the simulated-KITTI world of "
+            "--kitti-trajectory."),
     click.option("--seed", type=int, default=0, show_default=True,
                  help="Seed of world, route and sensor noise: same seed, same bytes."),
     click.option("--frames", type=int, default=300, show_default=True,
-                 help="Frames (10 Hz)."),
-    _choice("--sensor", SENSORS, "hdl32 = Velodyne HDL-32E, hdl64 = HDL-64E (KITTI), "
-            "vlp16 = VLP-16."),
+                 help="Frames (10 Hz; kitti: KITTI's stamps)."),
+    click.option("--sensor", type=click.Choice(SENSORS), default=None,
+                 help="hdl32 = Velodyne HDL-32E, hdl64 = HDL-64E (KITTI's) [default: the "
+                 "params section's: simulate.sensor, or simulate_kitti.sensor for kitti]."),
     click.option("--segments", default="cave,open,street", show_default=True,
                  help="Composite world: comma-separated segments in driving order."),
     file_option("--kitti-trajectory", required=False,
-                help="Drive along a KITTI ground-truth pose file (NN.txt, camera frame) "
-                "through a street world generated along it."),
+                help="--world kitti: a KITTI ground-truth pose file NN.txt (camera frame; "
+                "NN_times.txt beside it gives the stamps); the world of sequence NN."),
+    click.option("--start", type=int, default=0, show_default=True,
+                 help="--world kitti: frame k of the output is frame START + k of the file."),
+    click.option("--motion", type=click.Choice(MOTIONS), default=None,
+                 help="none: instantaneous scans; sweep: swept over 1/rate s with per-point "
+                 "time; compensated: swept, then moved into the frame at the stamp (KITTI's "
+                 "files) [default: the params section's]."),
 )
 
 
-def _spec(world: str, seed: int, frames: int, sensor: str, segments: str,
-          kitti_trajectory: Path | None, noise: float | None = None,
-          dropout: float | None = None,
-          motion_distortion: bool = False):  # type: ignore[no-untyped-def]
-    """The SimSpec of the ``_world_options`` (and noise / dropout), checked."""
+def _spec(params_path: Path | None, world: str, seed: int, frames: int, sensor: str | None,
+          segments: str, kitti_trajectory: Path | None, start: int, motion: str | None,
+          noise: float | None = None,
+          dropout: float | None = None):  # type: ignore[no-untyped-def]
+    """The SimSpec of the ``_world_options`` (and noise / dropout), checked; sensor, effects
+    and motion from the params section ``simulate`` (``simulate_kitti`` for --world kitti)
+    unless given."""
+    from pipeline.config import load_section, validate_section
+    from pipeline.sim.dataset import SimulateSection
+    from pipeline.sim.effects import SensorEffects
+    from pipeline.sim.kitti_dataset import SimulateKittiSection
     from pipeline.sim.simulate import SimSpec
 
-    if kitti_trajectory is not None and world == "cave":  # the default: switch to street
-        world = "street"
+    name = "simulate_kitti" if world == "kitti" else "simulate"
+    section: SimulateSection | SimulateKittiSection = (
+        load_section(params_path, name, SimulateKittiSection) if world == "kitti"
+        else load_section(params_path, name, SimulateSection))
+    given = {k: v for k, v in (("range_noise_m", noise), ("dropout", dropout)) if v is not None}
+    effects = validate_section(SensorEffects, f"{name}.effects",
+                               section.effects.model_dump() | given)
     segs = tuple(s.strip() for s in segments.split(",") if s.strip())
-    spec = SimSpec(world, seed, frames, sensor, segs, kitti_trajectory, noise, dropout,
-                   motion_distortion)
+    spec = SimSpec(world, seed, frames, sensor or section.sensor, segs, effects,
+                   motion or section.motion, kitti_trajectory, start,  # type: ignore[arg-type]
+                   *([section.world] if isinstance(section, SimulateKittiSection) else []))
     spec.check()
     return spec
 
 
 @click.command()
 @_world_options
-@click.option("--noise", type=float, default=None, help="Range noise std [m] (default 0.02).")
-@click.option(
-    "--dropout", type=float, default=None, help="Return dropout probability (default 0.01)."
-)
-@click.option("--motion-distortion", is_flag=True,
-              help="Sweep each scan over 1/rate s from the moving sensor (distorted, as real "
-              "scans) and store per-point time; default: instantaneous scans.")
+@click.option("--noise", type=float, default=None,
+              help="Range noise std [m] at short range (default: the params section's).")
+@click.option("--dropout", type=float, default=None,
+              help="Return dropout probability (default: the params section's).")
 @click.option("--name", default=None, help="Sequence name (default: the file stem of --out).")
 @file_option("--out", help="Sequence MCAP to write (atomically).")
 def simulate(name: str | None, out: Path, **world: Any) -> None:

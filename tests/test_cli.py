@@ -68,7 +68,8 @@ def test_default_simulation_fits_the_default_length() -> None:
 
     from pipeline.config import BaseSection
     from pipeline.sim.simulate import SimSpec, make_world
-    from stages.simulate import WORLDS, simulate
+    from pipeline.sim.worlds import WORLDS  # the toy worlds (kitti drives a given trajectory)
+    from stages.simulate import simulate
 
     frames = next(p.default for p in simulate.params if p.name == "frames")
     for world in WORLDS:

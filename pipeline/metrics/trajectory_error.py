@@ -228,13 +228,23 @@ def _consecutive_pairs_by_path(poses: F64, delta_m: float) -> tuple[I64, I64]:
     return np.array(ends[:-1], np.int64), np.array(ends[1:], np.int64)
 
 
+def rpe_error_poses(gt: F64, aligned: F64, i: I64, j: I64) -> F64:
+    """(P, 4, 4) relative pose errors inv(inv(gt_i) gt_j) inv(est_i) est_j of the pairs
+    (i, j) of paired (M, 4, 4) poses."""
+    d_gt = inv_se3(gt[i]) @ gt[j]
+    d_est = inv_se3(aligned[i]) @ aligned[j]
+    return inv_se3(d_gt) @ d_est
+
+
+def pose_error_sizes(E: F64) -> tuple[F64, F64]:
+    """(translation [m], rotation angle [deg]), each (P,), of (P, 4, 4) pose errors."""
+    return np.linalg.norm(E[:, :3, 3], axis=1), rotation_angle_deg(E[:, :3, :3])
+
+
 def rpe_errors(gt: F64, aligned: F64, i: I64, j: I64) -> tuple[F64, F64]:
     """RPE of the pairs (i, j) of paired (M, 4, 4) poses: (translation error [m], rotation
     angle [deg]), each (P,)."""
-    d_gt = inv_se3(gt[i]) @ gt[j]
-    d_est = inv_se3(aligned[i]) @ aligned[j]
-    E = inv_se3(d_gt) @ d_est
-    return np.linalg.norm(E[:, :3, 3], axis=1), rotation_angle_deg(E[:, :3, :3])
+    return pose_error_sizes(rpe_error_poses(gt, aligned, i, j))
 
 
 def _stats(err: F64) -> dict[str, float]:

@@ -4,10 +4,11 @@ Parameters and baseline = KISS-ICP's own defaults (kiss_icp.config): ``max_range
 ``min_range`` 0 m, ``voxel_size`` = max_range / 100 = 1.0 m (KISS-ICP derives it from
 max_range when unset; we fix it at that value so the baseline is one point of the space),
 ``initial_threshold`` 2.0 m, ``min_motion_th`` 0.1 m, ``max_points_per_voxel`` 20.
-Not tuned (options): ``deskew`` (False; True: KISS-ICP corrects each scan's motion distortion
-with its per-point times, where the sequence MCAP has them: the PointCloud2 field ``time``,
-kept by ``ingest`` from the drivers' ``t`` / ``time`` / ``timestamp`` / ``offset_time``, or
-written by ``simulate --motion-distortion``; a scan without them is registered as it is),
+Not tuned (options): ``deskew`` (True: KISS-ICP corrects each scan's motion distortion with
+its per-point times, where the sequence MCAP has them: the PointCloud2 field ``time``, kept by
+``ingest`` from the drivers' ``t`` / ``time`` / ``timestamp`` / ``offset_time``, or written by
+``simulate`` for swept scans, its default; a scan without them, as KITTI's, is registered as it
+is; False: never),
 ``max_num_threads`` (1), ``max_num_iterations`` (500), ``convergence_criterion`` (1e-4).
 
 Parameter changes (``set_params``) rebuild the KissICP object with the new configuration and
@@ -43,7 +44,7 @@ SPACE = ParameterSpace((
 class KissOptions(Section):
     """Settings of ``kiss_icp`` that are not tuned."""
 
-    deskew: bool = False
+    deskew: bool = True
     max_num_threads: int = Field(default=1, ge=0, le=64)
     max_num_iterations: int = Field(default=500, ge=1)
     convergence_criterion: float = Field(default=1e-4, gt=0)

@@ -30,15 +30,18 @@ def write_realism(result: RealismResult, out_dir: str | Path) -> list[Path]:
 
 
 def summary(result: RealismResult) -> dict[str, Any]:
-    """The JSON document: settings, per slice statistics and step errors, pooled 90th
-    percentiles, the ratios simulated / real and whether each is within the target."""
+    """The JSON document: settings, per slice statistics, step errors and ground-truth error,
+    pooled 90th percentiles, the ratios simulated / real (with the ground-truth error added:
+    ``ratios``; against the exact ground truth: ``ratios_exact_gt``) and whether each is
+    within the target."""
     pooled = {a: {side: {what: result.pooled_p90(a, side, what) for what in ("t_cm", "r_deg")}
-                  for side in ("real", "sim")} for a in result.algorithms}
+                  for side in ("real", "sim", "sim_gt")} for a in result.algorithms}
     return {"replicas": result.replicas, "sensor": result.sensor, "beams": result.beams,
             "settings": result.settings,
             "target_ratio": TARGET_RATIO,
             "slices": [asdict(s) for s in result.slices], "pooled_p90": pooled,
-            "ratios": result.ratios(), "within_target": result.within_target()}
+            "ratios": result.ratios(), "ratios_exact_gt": result.ratios("sim"),
+            "within_target": result.within_target()}
 
 
 def _ratio(sim: float, real: float) -> str:
@@ -48,31 +51,57 @@ def _ratio(sim: float, real: float) -> str:
 
 
 def markdown(result: RealismResult) -> str:
-    """The frame-to-frame error table (per slice and algorithm: median t [cm] and r [deg], real
-    and simulated, simulated replicas' range, ratio; then the pooled 90th percentiles) and the
-    scan statistics table. ``!`` marks a ratio outside [1/1.5, 1.5]."""
-    lines = [f"Frame-to-frame error, defaults; simulated: {result.replicas} replicas "
+    """The frame-to-frame error table (per slice and algorithm: median t [cm] and r [deg],
+    real, simulated against the exact ground truth, simulated with the ground-truth error
+    added and its replicas' range, ratio of the latter to real; then the pooled 90th
+    percentiles), the ground-truth error table and the scan statistics table. ``!`` marks a
+    ratio outside [1/1.5, 1.5]."""
+    lines = [f"Frame-to-frame error at the defaults. sim: against the exact ground truth; "
+             f"sim+gt: with the slice's ground-truth error added; {result.replicas} replicas "
              "(median over their steps, [min-max of the replicas' medians]).", "",
-             "| slice | env | algorithm | real t [cm] | sim t [cm] | sim/real | real r [deg] "
-             "| sim r [deg] | sim/real |", "|---|---|---|---|---|---|---|---|---|"]
+             "| slice | env | algorithm | real t [cm] | sim t | sim+gt t | ratio "
+             "| real r [deg] | sim r | sim+gt r | ratio |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in result.slices:
         for a in result.algorithms:
-            re, si = s.real[a], s.sim[a]
+            re, ex, si = s.real[a], s.sim[a], s.sim_gt[a]
             lines.append(
                 f"| {s.sequence} {s.first}-{s.last} | {s.environment} | {a} "
-                f"| {re.median_t_cm:.2f} | {si.median_t_cm:.2f} [{min(si.replica_t_cm):.2f}-"
-                f"{max(si.replica_t_cm):.2f}] | {_ratio(si.median_t_cm, re.median_t_cm)} "
-                f"| {re.median_r_deg:.3f} | {si.median_r_deg:.3f} [{min(si.replica_r_deg):.3f}-"
-                f"{max(si.replica_r_deg):.3f}] | {_ratio(si.median_r_deg, re.median_r_deg)} |")
+                f"| {re.median_t_cm:.2f} | {ex.median_t_cm:.2f} | {si.median_t_cm:.2f} "
+                f"[{min(si.replica_t_cm):.2f}-{max(si.replica_t_cm):.2f}] "
+                f"| {_ratio(si.median_t_cm, re.median_t_cm)} "
+                f"| {re.median_r_deg:.3f} | {ex.median_r_deg:.3f} | {si.median_r_deg:.3f} "
+                f"[{min(si.replica_r_deg):.3f}-{max(si.replica_r_deg):.3f}] "
+                f"| {_ratio(si.median_r_deg, re.median_r_deg)} |")
     for a in result.algorithms:
-        rt, st = result.pooled_p90(a, "real", "t_cm"), result.pooled_p90(a, "sim", "t_cm")
-        rr, sr = result.pooled_p90(a, "real", "r_deg"), result.pooled_p90(a, "sim", "r_deg")
-        lines.append(f"| all, p90 | | {a} | {rt:.2f} | {st:.2f} | {_ratio(st, rt)} | {rr:.3f} "
-                     f"| {sr:.3f} | {_ratio(sr, rr)} |")
-    within = result.within_target()
-    return "\n".join([*lines, "", *_scan_table(result), "",
+        p90 = {(side, w): result.pooled_p90(a, side, w) for side in ("real", "sim", "sim_gt")
+               for w in ("t_cm", "r_deg")}
+        lines.append(
+            f"| all, p90 | | {a} | {p90['real', 't_cm']:.2f} | {p90['sim', 't_cm']:.2f} "
+            f"| {p90['sim_gt', 't_cm']:.2f} | {_ratio(p90['sim_gt', 't_cm'], p90['real', 't_cm'])}"
+            f" | {p90['real', 'r_deg']:.3f} | {p90['sim', 'r_deg']:.3f} "
+            f"| {p90['sim_gt', 'r_deg']:.3f} "
+            f"| {_ratio(p90['sim_gt', 'r_deg'], p90['real', 'r_deg'])} |")
+    within, exact = result.within_target(), result.within_target("sim")
+    return "\n".join([*lines, "", *_ground_truth_table(result), "", *_scan_table(result), "",
                       f"Within x{TARGET_RATIO:g}: {sum(within.values())} of {len(within)} "
-                      "figures."]) + "\n"
+                      f"figures with the ground-truth error added ({sum(exact.values())} "
+                      "against the exact ground truth)."]) + "\n"
+
+
+def _ground_truth_table(result: RealismResult) -> list[str]:
+    """The ground-truth error table's lines (``markdown``)."""
+    lines = ["Ground-truth error of a step: its bias, the step error both odometries share on "
+             "the real slice, and the median of its white noise (from the trajectory).", "",
+             "| slice | bias t [cm] | bias r [deg] | white t [cm] | white r [deg] |",
+             "|---|---|---|---|---|"]
+    for s in result.slices:
+        g = s.gt_error
+        bias_t = "-" if g is None else f"{100 * float(np.linalg.norm(g.mean[:3])):.2f}"
+        bias_r = "-" if g is None else f"{np.rad2deg(float(np.linalg.norm(g.mean[3:]))):.3f}"
+        lines.append(f"| {s.sequence} | {bias_t} | {bias_r} | {s.gt_white[0]:.2f} "
+                     f"| {s.gt_white[1]:.3f} |")
+    return lines
 
 
 RING_GROUPS = 4
@@ -82,13 +111,14 @@ RING_GROUPS = 4
 def _scan_table(result: RealismResult) -> list[str]:
     """The scan statistics table's lines (``markdown``)."""
     bins = [f"{a:g}-{b:g}" for a, b in itertools.pairwise(RANGE_EDGES_M)]
-    lines = ["Scan statistics (real / simulated): points a scan, lost returns, share of points "
-             f"by range [m] ({', '.join(bins)}), rings recovered from the points' order (the "
-             f"fewest in a scan; ! fewer than the sensor's {result.beams}: the returns a ring "
-             f"are then off), returns a ring and scan, mean over {RING_GROUPS} groups of rings "
-             "(top first).", "",
-             "| slice | points | lost | range shares [%] | rings | returns a ring |",
-             "|---|---|---|---|---|---|"]
+    lines = ["Scan statistics (real / simulated): points a scan, lost returns, thickness of the "
+             f"road 4-10 m away, share of points by range [m] ({', '.join(bins)}), rings "
+             "recovered from the points' order (the fewest in a scan; ! fewer than the "
+             f"sensor's {result.beams}: the returns a ring are then off), returns a ring and "
+             f"scan, mean over {RING_GROUPS} groups of rings (top first).", "",
+             "| slice | points | lost | road thickness [mm] | range shares [%] | rings "
+             "| returns a ring |",
+             "|---|---|---|---|---|---|---|"]
     for s in result.slices:
         re, si = s.real_stats, s.sim_stats
         shares = " ".join(f"{100 * r:.0f}/{100 * m:.0f}" for r, m in
@@ -98,7 +128,8 @@ def _scan_table(result: RealismResult) -> list[str]:
         groups = " ".join(f"{r:.0f}/{m:.0f}" for r, m in
                           zip(_ring_groups(re), _ring_groups(si), strict=True))
         lines.append(f"| {s.sequence} | {re.points:.0f} / {si.points:.0f} "
-                     f"| {100 * re.lost_share:.1f} / {100 * si.lost_share:.1f} % | {shares} "
+                     f"| {100 * re.lost_share:.1f} / {100 * si.lost_share:.1f} % "
+                     f"| {re.road_planarity_mm:.1f} / {si.road_planarity_mm:.1f} | {shares} "
                      f"| {rings} | {groups} |")
     return lines
 
@@ -111,7 +142,8 @@ def _ring_groups(stats: ScanStatistics) -> list[float]:
 
 def figure(result: RealismResult, out_png: Path) -> None:
     """Top row: per slice the median step errors (t, r) of each algorithm, real against
-    simulated (bars: the replicas' range). Bottom row: range histogram, returns per ring and
+    simulated with the ground-truth error added (bars: the replicas' range) and against the
+    exact ground truth (open squares). Bottom row: range histogram, returns per ring and
     points a scan, real against simulated (all slices)."""
     from pipeline.report.outputs import figure as report_figure
 
@@ -131,13 +163,16 @@ def _draw(result: RealismResult, axes: Any) -> None:
         for j, (what, unit) in enumerate((("t_cm", "t [cm]"), ("r_deg", "r [deg]"))):
             ax = axes[0, 2 * i + j]
             real = [np.median(getattr(s.real[a], what)) for s in result.slices]
-            sim = [np.median(getattr(s.sim[a], what)) for s in result.slices]
-            reps = [getattr(s.sim[a], "replica_" + what) for s in result.slices]
+            exact = [np.median(getattr(s.sim[a], what)) for s in result.slices]
+            sim = [np.median(getattr(s.sim_gt[a], what)) for s in result.slices]
+            reps = [getattr(s.sim_gt[a], "replica_" + what) for s in result.slices]
             lo = [m - min(r) for m, r in zip(sim, reps, strict=True)]
             hi = [max(r) - m for m, r in zip(sim, reps, strict=True)]
-            ax.plot(x - 0.1, real, "ko", label="real")
-            ax.errorbar(x + 0.1, sim, yerr=[lo, hi], fmt="s", color="tab:red", capsize=3,
-                        label="simulated")
+            ax.plot(x - 0.15, real, "ko", label="real")
+            ax.errorbar(x + 0.15, sim, yerr=[lo, hi], fmt="s", color="tab:red", capsize=3,
+                        label="simulated + gt error")
+            ax.plot(x + 0.15, exact, "s", mfc="none", color="tab:red",
+                    label="simulated, exact gt")
             ax.set_xticks(x, names)
             ax.set_ylim(bottom=0)
             ax.set_title(f"{a}: median step error {unit}")

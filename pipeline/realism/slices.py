@@ -27,6 +27,7 @@ def simulated_slice(trajectories: Path, sequence: str, first: int, last: int,
     from pipeline.sim.kitti_world import build_kitti_world
     from pipeline.sim.simulate import iter_scans
 
-    world = build_kitti_world(trajectories / f"{sequence}.txt", sequence, seed, first, last)
+    world = build_kitti_world(trajectories / f"{sequence}.txt", sequence, seed, first, last,
+                              section.world)
     return list(iter_scans(world, kitti_sensor(section), seed,
-                           motion_distortion=section.motion_distortion))
+                           motion=section.motion))

@@ -14,9 +14,16 @@ from pipeline.config import Section
 from pipeline.io_utils import output_folder
 from pipeline.progress import PROGRESS
 from pipeline.sequence_index import write_index
+from pipeline.sim.effects import SensorEffects
 from pipeline.sim.route import LABELS
 from pipeline.sim.sensors import SensorName
-from pipeline.sim.simulate import SimSpec, SimSummary, derive_seed, simulate_sequence
+from pipeline.sim.simulate import (
+    MotionMode,
+    SimSpec,
+    SimSummary,
+    derive_seed,
+    simulate_sequence,
+)
 from pipeline.sim.worlds import MAX_FRAMES, WORLDS
 
 log = logging.getLogger(__name__)
@@ -27,14 +34,15 @@ class SimulateSection(Section):
     unless ``seed`` is given here; ``workers``: sequences simulated at a time (processes; the
     output does not depend on it). ``sensor``: of the validation sequences, and of the
     training ones unless ``train_sensors`` is given: then training sequence i of a world
-    (``cave_i``) uses ``train_sensors[i % len(train_sensors)]``."""
+    (``cave_i``) uses ``train_sensors[i % len(train_sensors)]``. ``effects``: the sensor's
+    physical effects (``SensorEffects``, docs/simulator.md); ``motion``: how scans follow the
+    sensor's motion (``MotionMode``)."""
 
     seed: int | None = Field(None, ge=0)
     sensor: SensorName = "hdl32"
     train_sensors: list[SensorName] = Field(default_factory=list)
-    range_noise_m: float = Field(0.02, ge=0.0, le=0.5)
-    dropout: float = Field(0.01, ge=0.0, lt=1.0)
-    motion_distortion: bool = False
+    effects: SensorEffects = Field(default_factory=lambda: SensorEffects.model_validate({}))
+    motion: MotionMode = "sweep"
     train: dict[str, int] = Field(default_factory=lambda: {"cave": 4, "street": 4})
     train_frames: int = Field(350, ge=10, le=MAX_FRAMES)
     validation_count: int = Field(1, ge=0)
@@ -69,17 +77,8 @@ def dataset_specs(section: SimulateSection, base_seed: int) -> dict[str, tuple[s
 
     def spec(world: str, name: str, frames: int, segments: tuple[str, ...] = (),
              sensor: str = section.sensor) -> SimSpec:
-        return SimSpec(
-            world,
-            derive_seed(seed0, name),
-            frames,
-            sensor,
-            segments or tuple(LABELS),
-            None,
-            section.range_noise_m,
-            section.dropout,
-            section.motion_distortion,
-        )
+        return SimSpec(world, derive_seed(seed0, name), frames, sensor,
+                       segments or tuple(LABELS), section.effects, section.motion)
 
     out: dict[str, tuple[str, SimSpec]] = {}
     sensors = section.train_sensors or [section.sensor]

@@ -19,9 +19,10 @@ from pipeline.errors import InputError
 from pipeline.io_utils import output_folder
 from pipeline.sequence_index import check_split, write_index
 from pipeline.sim.dataset import simulate_all
-from pipeline.sim.kitti_world import SCHEDULES
+from pipeline.sim.effects import SensorEffects
+from pipeline.sim.kitti_world import SCHEDULES, KittiWorldEffects
 from pipeline.sim.sensors import SensorModel, SensorName, get_sensor
-from pipeline.sim.simulate import SimSummary, derive_seed
+from pipeline.sim.simulate import MotionMode, SimSummary, derive_seed
 
 log = logging.getLogger(__name__)
 
@@ -34,8 +35,10 @@ class SimulateKittiSection(Section):
     sequence's length); windows: [[NN, start, end], ...] for single sequences (override
     start/end; a list, not a mapping: `dvc exp run -S` merges mappings and reads the key 10 as a
     number, which DVC cannot sort beside "09").
-    seed: null = derived from base.seed and the sequence name; motion_distortion: every scan a
-    sweep with per-point times (``SimSpec.motion_distortion``), as a real HDL-64E records;
+    effects: the sensor's physical effects (``SensorEffects``, docs/simulator.md); world: what
+    the world adds (``KittiWorldEffects``: ground roughness, road camber, traffic); seed: null =
+    derived from base.seed and the sequence name; motion: how scans follow the motion
+    (``MotionMode``; KITTI's files are swept and compensated with the vehicle's poses);
     workers: sequences simulated at a time (processes; the output does not depend on it).
     """
 
@@ -46,10 +49,11 @@ class SimulateKittiSection(Section):
     end: int | None = Field(None, ge=0)
     windows: list[tuple[str, int, int]] = Field(default_factory=list)
     sensor: SensorName = "hdl64"
-    range_noise_m: float = Field(0.02, ge=0.0, le=0.5)
-    dropout: float = Field(0.01, ge=0.0, lt=1.0)
+    effects: SensorEffects = Field(default_factory=lambda: SensorEffects.model_validate({}))
+    world: KittiWorldEffects = Field(
+        default_factory=lambda: KittiWorldEffects.model_validate({}))
     seed: int | None = Field(None, ge=0)
-    motion_distortion: bool = False
+    motion: MotionMode = "compensated"
     workers: int = Field(2, ge=1)
 
     @field_validator("train", "validation")
@@ -110,26 +114,20 @@ def simulate_kitti_sequence(section: SimulateKittiSection, name: str, base_seed:
     """One simulated KITTI sequence (its window) into ``out_path``."""
     from pipeline.sim.kitti import kitti_lidar_poses
     from pipeline.sim.kitti_world import build_kitti_world
-    from pipeline.sim.simulate import write_world
+    from pipeline.sim.simulate import sensor_extra, write_world
 
     assert section.trajectories is not None
     trajectory = Path(section.trajectories) / f"{name}.txt"
     frames = len(kitti_lidar_poses(trajectory)[0])
     first, last = section.window(name, frames)
     seed = derive_seed(base_seed if section.seed is None else section.seed, name)
-    world = build_kitti_world(trajectory, name, seed, first, last)
+    world = build_kitti_world(trajectory, name, seed, first, last, section.world)
     sensor = kitti_sensor(section)
     extra = {"world": "kitti", "kitti_sequence": name, "first_frame": str(first),
-             "last_frame": str(last), "seed": str(seed), "sensor_model": section.sensor,
-             "range_noise_m": str(sensor.range_noise_m), "dropout": str(sensor.dropout),
-             "mesh_triangles": str(len(world.triangles)),
-             "motion_distortion": (
-                 f"sweep: points fired over 1/{sensor.rate_hz:g} s from the stamp, per-point "
-                 "time [s] in the PointCloud2 field 'time'" if section.motion_distortion
-                 else "none (instantaneous scans)")}
+             "last_frame": str(last), "seed": str(seed),
+             "mesh_triangles": str(len(world.triangles))} | sensor_extra(sensor, section.motion)
     summary = write_world(world, sensor, seed, out_path, name,
-                          f"simulation:kitti {trajectory.name}", extra, progress,
-                          section.motion_distortion)
+                          f"simulation:kitti {trajectory.name}", extra, progress, section.motion)
     log.info("%s: frames %d-%d, %.0f m, %s", name, first, last, summary.length_m,
              ", ".join(f"{x.label} {x.start}-{x.end}" for x in summary.labels))
     return summary
@@ -137,4 +135,4 @@ def simulate_kitti_sequence(section: SimulateKittiSection, name: str, base_seed:
 
 def kitti_sensor(section: SimulateKittiSection) -> SensorModel:
     """The sensor model the section configures."""
-    return get_sensor(section.sensor).with_noise(section.range_noise_m, section.dropout)
+    return get_sensor(section.sensor, section.effects)

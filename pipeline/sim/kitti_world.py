@@ -30,10 +30,14 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
+from pipeline.config import Section
 from pipeline.errors import ConfigError
 from pipeline.sim import meshes
+from pipeline.sim.materials import Material
 from pipeline.sim.route import DS_M, Poses, Route, route_from_positions
+from pipeline.sim.traffic import Traffic, lanes_traffic
 from pipeline.sim.worlds import World
 
 F64 = NDArray[np.float64]
@@ -81,10 +85,14 @@ REACH_M = 110.0
 """The world is built within this distance of the window's route [m] (HDL-64E: 120 m)."""
 MARGIN_M = 120.0
 """Route before the window's first and after its last frame that is dressed too [m]."""
+LEAD_M = 150.0
+"""Straight road added before a drive's first and after its last pose [m] (``_with_lead``)."""
 LIDAR_HEIGHT_M = 1.73
 """KITTI's velodyne above the road [m]."""
 GROUND_AMPLITUDE_M = {"urban": 0.0, "residential": 0.3, "rural": 2.0, "highway": 1.5}
 """Amplitude of the ground's undulation beside the road, by environment [m]."""
+ROAD_HALF_WIDTH_M = {"urban": 6.0, "residential": 4.5, "rural": 3.5, "highway": 8.0}
+"""Half width of the asphalt around the route, by environment [m]."""
 CORRIDOR_M = 9.0
 """Half width of the flat road corridor [m]; the undulation grows over the next 15 m."""
 
@@ -98,15 +106,39 @@ class Ground:
     route: Route
     tree: object  # scipy cKDTree over route.xy
     noise: meshes.SmoothNoise2D
+    roughness: meshes.SmoothNoise2D
+    """Unit-amplitude height noise of 1.5-6 m wavelengths (scaled by ``effects``)."""
+    effects: KittiWorldEffects
 
     def __call__(self, x: F64, y: F64) -> F64:
         xy = np.stack([np.ravel(x), np.ravel(y)], -1)
         d, i = self.tree.query(xy, k=8)  # type: ignore[attr-defined]
         w = 1.0 / (d + 5.0) ** 2
         z = (self.route.floor_z[i] * w).sum(axis=1) / w.sum(axis=1)
-        amp = np.array([GROUND_AMPLITUDE_M[e] for e in ENVIRONMENTS])[self.route.label[i[:, 0]]]
+        label = self.route.label[i[:, 0]]
+        amp = np.array([GROUND_AMPLITUDE_M[e] for e in ENVIRONMENTS])[label]
         rise = np.clip((d[:, 0] - CORRIDOR_M) / 15.0, 0.0, 1.0)
-        return z + amp * rise * (self.noise(xy[:, 0], xy[:, 1]) + 0.5)
+        z = z + amp * rise * (self.noise(xy[:, 0], xy[:, 1]) + 0.5)
+        half = np.array([ROAD_HALF_WIDTH_M[e] for e in ENVIRONMENTS])[label]
+        e = self.effects
+        if e.road_cross_slope > 0.0:  # the crown at the route, falling to both edges
+            z = z - e.road_cross_slope * np.minimum(d[:, 0], half)
+        if e.ground_roughness_m > 0.0:  # beyond the asphalt (a metre to blend in)
+            off_road = np.clip(d[:, 0] - half, 0.0, 1.0)
+            z = z + e.ground_roughness_m * off_road * self.roughness(xy[:, 0], xy[:, 1])
+        return z
+
+
+class KittiWorldEffects(Section):
+    """What the simulated-KITTI world adds to its geometry (docs/simulator.md, "World
+    effects"): ``ground_roughness_m`` sigma of the height of the soil and grass beside the
+    road (wavelengths 1.5-6 m; 0 = smooth), ``road_cross_slope`` the road's fall from its crown
+    to the edges (0.025: German guidelines), ``traffic`` moving cars in the other lanes
+    (``pipeline/sim/traffic.py``)."""
+
+    ground_roughness_m: float = Field(0.0, ge=0.0, le=1.0)
+    road_cross_slope: float = Field(0.0, ge=0.0, le=0.1)
+    traffic: bool = False
 
 
 def frame_environments(sequence: str, frames: int) -> list[str]:
@@ -139,12 +171,23 @@ def kitti_drive(trajectory: Path, sequence: str) -> KittiDrive:
     T, stamps = kitti_lidar_poses(trajectory)
     envs = frame_environments(sequence, len(T))
     step = np.linalg.norm(np.diff(T[:, :2, 3], axis=0), axis=1)
-    s_frame = np.concatenate([[0.0], np.cumsum(step)])
-    route = route_from_positions(T[:, :3, 3], height_m=LIDAR_HEIGHT_M)
+    s_frame = LEAD_M + np.concatenate([[0.0], np.cumsum(step)])
+    route = route_from_positions(_with_lead(T), height_m=LIDAR_HEIGHT_M)
     frame_of_sample = np.clip(np.searchsorted(s_frame, route.s, side="right") - 1, 0, len(T) - 1)
     env_idx = np.array([ENVIRONMENTS.index(e) for e in envs])
     route = Route(route.xy, route.heading, env_idx[frame_of_sample], ENVIRONMENTS, route.floor_z)
     return KittiDrive(T, stamps, envs, s_frame, route)
+
+
+def _with_lead(T: F64) -> F64:
+    """The sensor positions (N + 2 K, 3) of poses ``T`` with LEAD_M of straight road before
+    the first (along its heading) and after the last, so that a window at either end of a
+    drive has a world around it too (the real car came from somewhere)."""
+    k = np.arange(LEAD_M, 0.0, -DS_M)[:, None]
+    head0, head1 = T[0, :3, 0] * [1, 1, 0], T[-1, :3, 0] * [1, 1, 0]
+    before = T[0, :3, 3] - k * head0 / np.linalg.norm(head0)
+    after = T[-1, :3, 3] + k[::-1] * head1 / np.linalg.norm(head1)
+    return np.concatenate([before, T[:, :3, 3], after])
 
 
 @dataclass
@@ -178,8 +221,28 @@ class _Site:
         return float(self.ground(xy[:1], xy[1:]).item())
 
 
+def check_kitti_args(trajectory: Path | None, start: int, frames: int) -> None:
+    """ConfigError unless ``trajectory`` is a KITTI ground-truth file NN.txt of a sequence with
+    an environment schedule and ``start`` .. ``start + frames - 1`` a window of its frames."""
+    from pipeline.sim.kitti import kitti_lidar_poses
+
+    if trajectory is None:
+        raise ConfigError("--world kitti needs --kitti-trajectory NN.txt")
+    sequence = Path(trajectory).stem
+    if sequence not in SCHEDULES:
+        raise ConfigError(f"{trajectory}: the simulated-KITTI world is known for NN.txt of "
+                          f"the sequences {', '.join(SCHEDULES)}, got {Path(trajectory).name!r}")
+    if start < 0 or frames < 2:
+        raise ConfigError(f"--start must be >= 0 and --frames >= 2, got (start={start}, "
+                          f"frames={frames})")
+    count = len(kitti_lidar_poses(trajectory)[0])
+    if start + frames > count:
+        raise ConfigError(f"{trajectory} has {count} poses: frames {start}..{start + frames - 1} "
+                          "are not a window of them")
+
+
 def build_kitti_world(trajectory: Path, sequence: str, seed: int, first: int,
-                      last: int) -> World:
+                      last: int, effects: KittiWorldEffects | None = None) -> World:
     """The simulated-KITTI world of frames ``first`` .. ``last`` (inclusive) of ``sequence``
     driven along ``trajectory`` (its ground-truth file)."""
     from scipy.spatial import cKDTree
@@ -190,8 +253,11 @@ def build_kitti_world(trajectory: Path, sequence: str, seed: int, first: int,
                           f"{len(drive.T_world_lidar)} frames")
     route = drive.route
     normal = np.stack([-np.sin(route.heading), np.cos(route.heading)], -1)
+    effects = effects or KittiWorldEffects.model_validate({})
     ground = Ground(route, cKDTree(route.xy),
-                    meshes.SmoothNoise2D(np.random.default_rng([seed, 3]), (25.0, 90.0), 1.0))
+                    meshes.SmoothNoise2D(np.random.default_rng([seed, 3]), (25.0, 90.0), 1.0),
+                    meshes.SmoothNoise2D(np.random.default_rng([seed, 5]), (1.5, 6.0), 1.0,
+                                         waves=24), effects)
     site = _Site(route, ground.tree, ground, normal)
     lo = max(0.0, drive.s_frame[first] - MARGIN_M)
     hi = min(route.s[-1], drive.s_frame[last] + MARGIN_M)
@@ -203,7 +269,44 @@ def build_kitti_world(trajectory: Path, sequence: str, seed: int, first: int,
     vertices, triangles = mb.build()
     poses = Poses(drive.T_world_lidar[first:last + 1], drive.stamps_ns[first:last + 1],
                   drive.environments[first:last + 1])
-    return World("kitti", seed, vertices, triangles, poses, route)
+    traffic = (kitti_traffic(drive, _cells_near(route, near), seed) if effects.traffic
+               else None)
+    return World("kitti", seed, vertices, triangles, mb.materials(), poses, route, traffic)
+
+
+TRAFFIC = {"urban": (12.0, (8.0, 14.0)), "residential": (5.0, (6.0, 12.0)),
+           "rural": (4.0, (14.0, 25.0)), "highway": (10.0, (25.0, 36.0))}
+"""Environment -> (vehicles a km and lane, speed range [m/s]) of the traffic."""
+LANES_M = {"urban": (3.5,), "residential": (3.5,), "rural": (3.5,),
+           "highway": (3.75, 11.0)}
+"""Lanes with traffic, left of the car's lane [m]: the oncoming lane; on the highway the
+overtaking lane (same direction) and the far carriageway's lane (oncoming)."""
+
+
+def kitti_traffic(drive: KittiDrive, cells: list[int], seed: int) -> Traffic:
+    """The moving cars of the route ``cells``: in every cell and lane (``LANES_M``) a Poisson
+    number of cars (``TRAFFIC``) placed where they are when the car passes the cell's
+    centre, each at its own speed; one generator per (seed, cell)."""
+    route = drive.route
+    t_frame = (drive.stamps_ns - drive.stamps_ns[0]) * 1e-9
+    lateral, s_then, speed, t_then = [], [], [], []
+    for cell in cells:
+        rng = np.random.default_rng([seed, 13, cell])
+        centre = (cell + 0.5) * CELL_M
+        i = int(np.clip(round(centre / DS_M), 0, len(route.xy) - 1))
+        density, speeds = TRAFFIC[ENVIRONMENTS[int(route.label[i])]]
+        env = ENVIRONMENTS[int(route.label[i])]
+        when = float(np.interp(centre, drive.s_frame, t_frame))
+        for k, lane in enumerate(LANES_M[env]):
+            count = rng.poisson(density * CELL_M / 1000.0)
+            oncoming = k == len(LANES_M[env]) - 1
+            lateral += [lane] * count
+            s_then += list(rng.uniform(cell * CELL_M, (cell + 1) * CELL_M, count))
+            v = rng.uniform(*speeds, count)
+            speed += list(-v if oncoming else v)
+            t_then += [when] * count
+    return lanes_traffic(route, np.array(lateral), np.array(s_then), np.array(speed),
+                         np.array(t_then))
 
 
 def _cells_near(route: Route, near: NDArray[np.bool_]) -> list[int]:
@@ -214,8 +317,11 @@ def _cells_near(route: Route, near: NDArray[np.bool_]) -> list[int]:
     return sorted(set((route.s[np.isfinite(d)] // CELL_M).astype(int).tolist()))
 
 
-def _terrain(site: _Site, near: NDArray[np.bool_], cell_m: float = 2.0) -> tuple[F64, I64]:
-    """The ground within REACH_M of the ``near`` route samples, a grid of ``cell_m`` [m]."""
+def _terrain(site: _Site, near: NDArray[np.bool_],
+             cell_m: float = 1.0) -> tuple[F64, I64, NDArray[np.uint8]]:
+    """The ground within REACH_M of the ``near`` route samples, a grid of ``cell_m`` [m], and
+    its material: asphalt within the road's half width (``ROAD_HALF_WIDTH_M``) of the route,
+    ground beyond."""
     from scipy.spatial import cKDTree
 
     xy = site.route.xy[near]
@@ -229,7 +335,10 @@ def _terrain(site: _Site, near: NDArray[np.bool_], cell_m: float = 2.0) -> tuple
         return np.isfinite(d)
 
     nx, ny = (round((hi - lo)[k] / cell_m) + 1 for k in range(2))
-    return meshes.height_field(lo[0], lo[1], nx, ny, cell_m, site.ground, keep)  # type: ignore[arg-type]
+    v, t = meshes.height_field(lo[0], lo[1], nx, ny, cell_m, site.ground, keep)  # type: ignore[arg-type]
+    d, i = site.tree.query(v[t, :2].mean(axis=1))  # type: ignore[attr-defined]
+    half = np.array([ROAD_HALF_WIDTH_M[e] for e in ENVIRONMENTS])[site.route.label[i]]
+    return v, t, np.where(d < half, Material.ROAD, Material.GROUND).astype(np.uint8)
 
 
 def _dress_cell(mb: meshes.MeshBuilder, site: _Site, cell: int, seed: int) -> None:
@@ -252,10 +361,10 @@ def _dress_cell(mb: meshes.MeshBuilder, site: _Site, cell: int, seed: int) -> No
 
 
 def _box(mb: meshes.MeshBuilder, site: _Site, s: float, lateral: float, size: tuple[float, ...],
-         side: float, clearance: float, yaw_jitter: float = 0.0) -> bool:
-    """A box (length along the road, width across, height) whose near edge is ``lateral``
-    metres from the route at arc ``s``, standing on the ground (sunk 0.5 m); False when it
-    would come closer than ``clearance`` to the route."""
+         side: float, clearance: float, material: Material, yaw_jitter: float = 0.0) -> bool:
+    """A box of ``material`` (length along the road, width across, height) whose near edge is
+    ``lateral`` metres from the route at arc ``s``, standing on the ground (sunk 0.5 m); False
+    when it would come closer than ``clearance`` to the route."""
     p, h, n, _ = site.at(s)
     length, width, height = size
     c = p + side * (lateral + width / 2) * n
@@ -264,7 +373,7 @@ def _box(mb: meshes.MeshBuilder, site: _Site, s: float, lateral: float, size: tu
         return False
     z0 = site.z(c) - 0.5
     mb.add(*meshes.box(np.array([c[0], c[1], z0 + (height + 0.5) / 2]),
-                       np.array([length, width, height + 0.5]), yaw))
+                       np.array([length, width, height + 0.5]), yaw), material)
     return True
 
 
@@ -280,11 +389,12 @@ def _facades(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: fl
         if f < 0.5 * front[0]:
             break
         back = rng.uniform(*setback)
-        _box(mb, site, s + f / 2, back, (f, rng.uniform(*depth), rng.uniform(*tall)), side, 7.0)
+        _box(mb, site, s + f / 2, back, (f, rng.uniform(*depth), rng.uniform(*tall)), side, 7.0,
+             Material.BUILDING)
         g = rng.uniform(*gap)
         if rng.random() < hedge:
             _box(mb, site, s + (f + g) / 2, back - rng.uniform(2.0, 4.0),
-                 (f + 0.8 * g, 0.6, rng.uniform(0.8, 1.6)), side, 4.5)
+                 (f + 0.8 * g, 0.6, rng.uniform(0.8, 1.6)), side, 4.5, Material.VEGETATION)
         s += f + g
 
 
@@ -304,7 +414,7 @@ def _cars(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: float
     for s in _along(site, s0, s1, rng, spacing):
         if rng.random() < p:
             _box(mb, site, s, rng.uniform(2.3, 3.1), (4.4, 1.8, 1.5), side, 2.2,
-                 rng.normal(0.0, 0.04))
+                 Material.VEHICLE, rng.normal(0.0, 0.04))
 
 
 def _poles(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: float,
@@ -316,7 +426,8 @@ def _poles(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: floa
         c = p + side * rng.uniform(*lateral) * n
         if site.clearance(c, 0.3, 0.3, 0.0) > 3.5:
             mb.add(*meshes.cylinder(np.array([c[0], c[1], site.z(c) - 0.2]),
-                                    rng.uniform(0.12, 0.15), rng.uniform(*height), sides=8))
+                                    rng.uniform(0.12, 0.15), rng.uniform(*height), sides=8),
+                   Material.METAL)
 
 
 def _trees(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: float,
@@ -329,7 +440,28 @@ def _trees(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: floa
         pos, _, n, _ = site.at(s)
         c = pos + side * rng.uniform(*lateral) * n
         if site.clearance(c, 0.5, 0.5, 0.0) > 4.5:
-            mb.add(*meshes.tree(np.array([c[0], c[1], site.z(c) - 0.3]), rng))
+            meshes.add_tree(mb, np.array([c[0], c[1], site.z(c) - 0.3]), rng)
+
+
+def _hedgerow(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: float,
+              rng: np.random.Generator, lateral: tuple[float, float],
+              radius: tuple[float, float]) -> None:
+    """Stretches (15-50 m, gaps of 3-15 m) of hedge or shrub along [s0, s1): overlapping
+    lumpy blobs of foliage (``radius`` [m]) ``lateral`` metres from the route, wandering by
+    half a metre."""
+    s = s0 + rng.uniform(0.0, 10.0)
+    base = rng.uniform(*lateral)
+    while s < s1:
+        end = min(s1, s + rng.uniform(15.0, 50.0))
+        while s < end:
+            r = rng.uniform(*radius)
+            p, _, n, _ = site.at(s)
+            c = p + side * (base + rng.uniform(-0.5, 0.5) + r) * n
+            if site.clearance(c, 2 * r, 2 * r, 0.0) > 3.5:
+                mb.add(*meshes.rock(np.array([c[0], c[1], site.z(c) + 0.4 * r]), r, rng, 1),
+                       Material.VEGETATION)
+            s += rng.uniform(0.8, 1.2) * r
+        s = end + rng.uniform(3.0, 15.0)
 
 
 def _urban(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: float,
@@ -352,19 +484,22 @@ def _residential(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side
 
 def _rural(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: float,
            rng: np.random.Generator) -> None:
-    _trees(mb, site, s0, s1, side, rng, (8.0, 30.0), 0.5, (6.0, 14.0))
+    if rng.random() < 0.6:
+        _hedgerow(mb, site, s0, s1, side, rng, (5.0, 15.0), (0.8, 1.6))
+    _trees(mb, site, s0, s1, side, rng, (6.0, 16.0), 0.6, (6.0, 14.0))
     _trees(mb, site, s0, s1, side, rng, (20.0, 60.0), 0.7, (20.0, 70.0))
     for s in _along(site, s0, s1, rng, (15.0, 40.0)):  # bushes
         p, _, n, _ = site.at(s)
         c = p + side * rng.uniform(5.0, 15.0) * n
         r = rng.uniform(0.5, 1.3)
         if site.clearance(c, 2 * r, 2 * r, 0.0) > 4.0:
-            mb.add(*meshes.rock(np.array([c[0], c[1], site.z(c) + 0.2 * r]), r, rng))
+            mb.add(*meshes.rock(np.array([c[0], c[1], site.z(c) + 0.2 * r]), r, rng),
+                   Material.VEGETATION)
     _poles(mb, site, s0, s1, side, rng, (35.0, 50.0), (5.0, 6.5), (7.0, 9.0))
     if rng.random() < 0.15 * (s1 - s0) / CELL_M:  # a farm building
         _box(mb, site, rng.uniform(s0, s1), rng.uniform(25.0, 60.0),
              (rng.uniform(15.0, 30.0), rng.uniform(10.0, 20.0), rng.uniform(5.0, 9.0)),
-             side, 20.0)
+             side, 20.0, Material.BUILDING)
 
 
 RAIL_M = (0.45, 0.8)
@@ -383,8 +518,11 @@ def _highway(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: fl
         c = p - 8.0 * n
         for off in (-1.2, 1.2):
             base = np.array([c[0] + off * np.cos(h), c[1] + off * np.sin(h), z - 0.2])
-            mb.add(*meshes.cylinder(base, 0.08, 4.5, sides=6))
-        mb.add(*meshes.box(np.array([c[0], c[1], z + 4.5]), np.array([3.2, 0.1, 2.0]), h))
+            mb.add(*meshes.cylinder(base, 0.08, 4.5, sides=6), Material.METAL)
+        mb.add(*meshes.box(np.array([c[0], c[1], z + 4.5]), np.array([3.2, 0.1, 2.0]), h),
+               Material.METAL)
+    if rng.random() < 0.5:  # shrubs on the embankment
+        _hedgerow(mb, site, s0, s1, side, rng, (10.0, 20.0), (1.0, 2.0))
     _trees(mb, site, s0, s1, side, rng, (40.0, 120.0), 0.6, (15.0, 50.0))
 
 
@@ -399,12 +537,12 @@ def _rail(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, offset: flo
     z = route.floor_z[i]
     v = np.concatenate([np.column_stack([xy, z + RAIL_M[0]]), np.column_stack([xy, z + RAIL_M[1]])])
     strip = meshes.grid_triangles(2, len(i))
-    mb.add(v, strip)
+    mb.add(v, strip, Material.METAL)
     for s in np.arange(np.ceil(s0 / RAIL_POST_M) * RAIL_POST_M, s1, RAIL_POST_M):
         p, h, n, z0 = site.at(float(s))
         c = p + (offset - np.sign(offset) * 0.15) * n
         mb.add(*meshes.box(np.array([c[0], c[1], z0 + RAIL_M[1] / 2 - 0.1]),
-                           np.array([0.12, 0.12, RAIL_M[1] + 0.2]), h))
+                           np.array([0.12, 0.12, RAIL_M[1] + 0.2]), h), Material.METAL)
 
 
 DRESSERS = {"urban": _urban, "residential": _residential, "rural": _rural, "highway": _highway}

@@ -1,8 +1,9 @@
 """Triangle-mesh primitives built with numpy: tubes, height fields, boxes, cylinders, rocks.
 
-Everything is in world coordinates [m], z up. A ``MeshBuilder`` collects parts; ``build()``
-returns (vertices (V, 3) float64, triangles (T, 3) int64). Ray casting ignores face
-orientation, so winding is not kept consistent.
+Everything is in world coordinates [m], z up. A ``MeshBuilder`` collects parts, each of one
+material or one per triangle (``pipeline.sim.materials``); ``build()`` returns (vertices (V, 3)
+float64, triangles (T, 3) int64) and ``materials()`` the (T,) uint8 material of every triangle.
+Ray casting ignores face orientation, so winding is not kept consistent.
 """
 
 from __future__ import annotations
@@ -18,18 +19,26 @@ I64 = NDArray[np.int64]
 
 
 class MeshBuilder:
-    """Accumulates mesh parts; ``build()`` concatenates them."""
+    """Accumulates mesh parts; ``build()`` concatenates them, ``materials()`` their materials."""
 
     def __init__(self) -> None:
         self._verts: list[F64] = []
         self._tris: list[I64] = []
+        self._mats: list[NDArray[np.uint8]] = []
         self._count = 0
 
-    def add(self, vertices: F64, triangles: I64) -> None:
-        """Append a part: vertices (V, 3), triangles (T, 3) indexing into these vertices."""
+    def add(self, vertices: F64, triangles: I64, material: int | NDArray[np.uint8]) -> None:
+        """Append a part: vertices (V, 3), triangles (T, 3) indexing into these vertices, its
+        material (a ``Material``, or (T,) one per triangle)."""
         self._verts.append(np.asarray(vertices, np.float64).reshape(-1, 3))
         self._tris.append(np.asarray(triangles, np.int64).reshape(-1, 3) + self._count)
+        self._mats.append(np.broadcast_to(np.asarray(material, np.uint8),
+                                          (len(self._tris[-1]),)).copy())
         self._count += len(self._verts[-1])
+
+    def materials(self) -> NDArray[np.uint8]:
+        """(T,) uint8 material of every triangle of ``build()``."""
+        return np.concatenate(self._mats) if self._mats else np.zeros(0, np.uint8)
 
     def build(self) -> tuple[F64, I64]:
         """(vertices (V, 3) float64, triangles (T, 3) int64) of all parts."""
@@ -149,25 +158,23 @@ def _icosphere(subdivisions: int) -> tuple[F64, I64]:
     return np.array(verts), f.astype(np.int64)
 
 
-def rock(center: F64, radius: float, rng: np.random.Generator) -> tuple[F64, I64]:
+def rock(center: F64, radius: float, rng: np.random.Generator,
+         subdivisions: int = 2) -> tuple[F64, I64]:
     """A lumpy rock: an icosphere with random radial displacement, flattened a little."""
-    v, f = icosphere(2)
+    v, f = icosphere(subdivisions)
     lumps = 1 + 0.25 * np.sin(v @ rng.normal(size=(3, 4)) * 2 + rng.uniform(0, 6.3, 4)).sum(1) / 2
     v = v * (radius * lumps)[:, None] * np.array([1.0, rng.uniform(0.7, 1.0), 0.7])
     return v + center, f
 
 
-def tree(base: F64, rng: np.random.Generator) -> tuple[F64, I64]:
-    """A trunk and a lumpy round crown standing on ``base``."""
-    mb = MeshBuilder()
+def add_tree(mb: MeshBuilder, base: F64, rng: np.random.Generator) -> None:
+    """A trunk (wood) and a lumpy round crown (vegetation) standing on ``base``, into ``mb``."""
+    from pipeline.sim.materials import Material
+
     h = rng.uniform(2.5, 4.0)
-    mb.add(*cylinder(base, rng.uniform(0.15, 0.3), h + 0.5))
-    mb.add(
-        *rock(
-            np.asarray(base, np.float64) + np.array([0.0, 0.0, h + 1.5]), rng.uniform(1.5, 2.5), rng
-        )
-    )
-    return mb.build()
+    mb.add(*cylinder(base, rng.uniform(0.15, 0.3), h + 0.5), Material.WOOD)
+    mb.add(*rock(np.asarray(base, np.float64) + np.array([0.0, 0.0, h + 1.5]),
+                 rng.uniform(1.5, 2.5), rng), Material.VEGETATION)
 
 
 def height_field(

@@ -27,7 +27,7 @@ def plot_world(
 
     world = make_world(spec)
     k = world.frames // 2 if scan_frame is None else min(max(scan_frame, 0), world.frames - 1)
-    scan = next(iter_scans(world, spec.sensor_model(), spec.seed, range(k, k + 1)))
+    scan = next(iter_scans(world, spec.sensor_model(), spec.seed, range(k, k + 1), spec.motion))
     height, extent = height_map(world.vertices, world.triangles, cell_m)
     fig, ax = plt.subplots(figsize=(10, 10), dpi=110)
     ax.imshow(height.T, origin="lower", extent=extent, cmap="gray", interpolation="nearest")

@@ -1,32 +1,61 @@
 """Ray casting a sensor model against a world mesh (open3d RaycastingScene, Embree).
 
-``scan``: all rays of a scan (beams x azimuths) are cast at once from the frame's pose: the
-scan is instantaneous (no motion distortion within a scan). ``sweep``: the azimuth columns are
-fired one after the other over the sweep, each from the pose at its own time (linear in
-translation, slerp in rotation between the sweep's start and end poses), so the points carry
-the motion distortion of a real spinning sensor, and each gets its time. Each return gets
-Gaussian range noise, random dropouts, a random azimuth phase per scan (as a free-running
-spinning sensor has), and an intensity = |cos(incidence angle)|.
+``scan``: all rays of a scan (beams x azimuths) are cast at once from the frame's pose: an
+instantaneous scan. ``sweep``: the azimuth columns are fired one after the other over the
+sweep, each from the pose at its own time (linear in translation, slerp in rotation between
+the sweep's start and end poses), so the points carry the motion distortion of a real spinning
+sensor and each gets its time; ``compensate`` then moves every point into the frame of the
+sweep's start (the ego-motion compensation KITTI's odometry files had, with exact poses).
+
+Every scan has a random azimuth phase (a free-running sensor). The sensor's effects
+(``pipeline.sim.effects.SensorEffects``; docs/simulator.md, "Sensor effects") are applied to
+the rays and returns: lasers from their own origins (``heights_m``) at their true elevations
+(the unit's calibration errors) with per-firing jitter, the car's hidden sectors never fired,
+foliage entered by the beam, returns kept with a probability from reflectance, incidence and
+range, range noise from range and incidence plus each laser's range offset. The point is then
+placed where the sensor believes the ray went (reported elevation, no jitter); its intensity is
+reflectance x cos(incidence). Moving objects (``movers``: a mesh at the scan's time) are cast
+beside the static world.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.sim.materials import Material, reflectance_table, relief_table
 from pipeline.sim.sensors import SensorModel
 
 F64 = NDArray[np.float64]
+F32 = NDArray[np.float32]
+REFLECTANCE = reflectance_table()
+RELIEF = relief_table()
+VEGETATION_STEP_M = 0.01
+"""How far past a foliage surface a ray is cast again [m]."""
+
+
+@dataclass(frozen=True)
+class Hits:
+    """Returns of M rays: range [m] (inf: none), unit normal (M, 3) and material (M,)."""
+
+    t: F32
+    normal: F32
+    material: NDArray[np.uint8]
 
 
 class Raycaster:
-    """Casts scans of ``sensor`` against one mesh. Build once per world, call ``scan`` per frame.
+    """Casts scans of ``sensor`` against one mesh (``materials``: (T,) uint8 per triangle,
+    default ground; ``world_seed``: of the surfaces' relief). Build once per world, call
+    ``scan`` or ``sweep`` per frame.
 
     The mesh is shifted to a local origin so that float32 ray casting keeps mm precision
     far from the world origin.
     """
 
-    def __init__(self, vertices: F64, triangles: NDArray[np.int64], sensor: SensorModel) -> None:
+    def __init__(self, vertices: F64, triangles: NDArray[np.int64], sensor: SensorModel,
+                 materials: NDArray[np.uint8] | None = None, world_seed: int = 0) -> None:
         import open3d as o3d
 
         self.sensor = sensor
@@ -36,25 +65,23 @@ class Raycaster:
             o3d.core.Tensor((vertices - self.origin).astype(np.float32)),  # type: ignore[call-overload]
             o3d.core.Tensor(triangles.astype(np.uint32)),  # type: ignore[call-overload]
         )
-        self._dirs = sensor.ray_directions()
         self._o3d = o3d
+        self.materials = (np.full(len(triangles), Material.GROUND, np.uint8) if materials is None
+                          else np.asarray(materials, np.uint8))
+        self._beam = _BeamGeometry(sensor)
+        self._bumps = Relief(np.random.default_rng([world_seed, 73]))
 
-    def scan(self, T_world_lidar: F64, rng: np.random.Generator) -> NDArray[np.float32]:
+    def scan(self, T_world_lidar: F64, rng: np.random.Generator,
+             movers: tuple[F64, NDArray[np.int64]] | None = None) -> F32:
         """(N, 4) float32 points [m] in the lidar frame + intensity in [0, 1]."""
-        s = self.sensor
-        phase = rng.uniform(0.0, np.deg2rad(s.azimuth_step_deg))
-        c, si = np.cos(phase), np.sin(phase)
-        Rz = np.array([[c, -si, 0.0], [si, c, 0.0], [0.0, 0.0, 1.0]])
-        dirs_world = self._dirs @ (T_world_lidar[:3, :3] @ Rz).T.astype(np.float32)
-        rays = np.empty((len(dirs_world), 6), np.float32)
-        rays[:, :3] = (T_world_lidar[:3, 3] - self.origin).astype(np.float32)
-        rays[:, 3:] = dirs_world
-        return self._returns(rays, dirs_world, Rz, rng)[0]
+        return self._scan(T_world_lidar[None], rng, movers, compensate=False)[0]
 
-    def sweep(self, T_start: F64, T_end: F64,
-              rng: np.random.Generator) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    def sweep(self, T_start: F64, T_end: F64, rng: np.random.Generator,
+              movers: tuple[F64, NDArray[np.int64]] | None = None,
+              compensate: bool = False) -> tuple[F32, F32]:
         """A motion-distorted scan: ((N, 4) float32 points in the lidar frame at each point's
-        firing time + intensity, (N,) float32 firing time [s] after the sweep's start).
+        firing time + intensity, (N,) float32 firing time [s] after the sweep's start);
+        ``compensate``: the points in the frame at the sweep's start instead.
 
         Column a of the A azimuth columns fires at a / A of the sweep (1 / rate_hz s), from the
         pose interpolated between ``T_start`` (the stamp) and ``T_end`` (one sweep later).
@@ -62,40 +89,276 @@ class Raycaster:
         from scipy.spatial.transform import Rotation
 
         s = self.sensor
-        phase = rng.uniform(0.0, np.deg2rad(s.azimuth_step_deg))
-        c, si = np.cos(phase), np.sin(phase)
-        Rz = np.array([[c, -si, 0.0], [si, c, 0.0], [0.0, 0.0, 1.0]])
         alpha = np.arange(s.azimuths) / s.azimuths  # (A,) fraction of the sweep
         delta = Rotation.from_matrix(T_start[:3, :3].T @ T_end[:3, :3]).as_rotvec()
-        R_col = T_start[:3, :3] @ Rotation.from_rotvec(alpha[:, None] * delta).as_matrix()
-        p_col = T_start[:3, 3] + alpha[:, None] * (T_end[:3, 3] - T_start[:3, 3])
-        col = np.arange(len(self._dirs)) % s.azimuths  # beam-major rows: column of each ray
-        local = self._dirs @ Rz.T.astype(np.float32)
-        dirs_world = np.einsum("nij,nj->ni", R_col[col], local).astype(np.float32)
-        rays = np.empty((len(dirs_world), 6), np.float32)
-        rays[:, :3] = (p_col[col] - self.origin).astype(np.float32)
-        rays[:, 3:] = dirs_world
-        pts, idx = self._returns(rays, dirs_world, Rz, rng)
-        return pts, (alpha[col[idx]] / s.rate_hz).astype(np.float32)
+        T_col = np.tile(np.eye(4), (s.azimuths, 1, 1))
+        turn = Rotation.from_rotvec(alpha[:, None] * delta).as_matrix()
+        T_col[:, :3, :3] = T_start[:3, :3] @ turn
+        T_col[:, :3, 3] = T_start[:3, 3] + alpha[:, None] * (T_end[:3, 3] - T_start[:3, 3])
+        pts, col = self._scan(T_col, rng, movers, compensate)
+        return pts, (alpha[col] / s.rate_hz).astype(np.float32)
 
-    def _returns(self, rays: NDArray[np.float32], dirs_world: NDArray[np.float32],
-                 Rz: F64, rng: np.random.Generator) -> tuple[NDArray[np.float32], NDArray]:
-        """Cast ``rays`` (M, 6); the kept returns (N, 4) in the lidar frame and their ray
-        indices (N,)."""
-        s = self.sensor
+    def _scan(self, T_col: F64, rng: np.random.Generator,
+              movers: tuple[F64, NDArray[np.int64]] | None,
+              compensate: bool) -> tuple[F32, NDArray[np.int64]]:
+        """Fire every ray, column a from pose ``T_col[a]`` (one pose: all columns); the kept
+        points (N, 4) (lidar frame at the firing, or at ``T_col[0]`` with ``compensate``) and
+        the azimuth column of each."""
+        g, e = self._beam, self.sensor.effects
+        phase = rng.uniform(0.0, np.deg2rad(self.sensor.azimuth_step_deg))
+        c, si = np.cos(phase), np.sin(phase)
+        Rz = np.array([[c, -si, 0.0], [si, c, 0.0], [0.0, 0.0, 1.0]], np.float32)
+        d_true = g.dirs_true
+        if e.angle_jitter_deg > 0.0:
+            d_true = _jitter(d_true, rng, np.deg2rad(e.angle_jitter_deg))
+        R = T_col[:, :3, :3] @ Rz.astype(np.float64)  # (A or 1, 3, 3): lidar at the firing
+        if len(T_col) == 1:  # one pose: rotate the free rays only
+            d_free = d_true[g.active] if d_true is not g.dirs_true else g.dirs_true_free
+            dirs_w = d_free @ R[0].T.astype(np.float32)
+            orig_w = (g.height_free[:, None] * T_col[0, :3, 2].astype(np.float32)
+                      + (T_col[0, :3, 3] - self.origin).astype(np.float32))
+        else:
+            dirs_w = g.turn(d_true, R)[g.active]
+            orig_w = (g.turn(g.offsets, T_col[:, :3, :3])
+                      + g.per_column(T_col[:, :3, 3] - self.origin))[g.active]
+        hits = self._cast(orig_w, dirs_w)
+        if movers is not None and len(movers[1]):
+            hits = _nearer(hits, _cast_movers(self._o3d, movers[0] - self.origin, movers[1],
+                                              orig_w, dirs_w))
+        idx = np.flatnonzero(np.isfinite(hits.t))
+        t, normal, mat = hits.t[idx], hits.normal[idx], hits.material[idx]
+        cos_inc = np.abs(np.einsum("ij,ij->i", normal, dirs_w[idx]))
+        if e.vegetation_free_path_m > 0.0:
+            t, cos_inc = self._foliage(idx, t, mat, cos_inc, orig_w, dirs_w, rng)
+            back = np.isfinite(t)
+            idx, t, mat, cos_inc = idx[back], t[back], mat[back], cos_inc[back]
+            if e.ground_cover_m > 0.0:
+                t, cos_inc = _ground_cover(t, mat, cos_inc, e.ground_cover_m,
+                                           e.vegetation_free_path_m, rng)
+        if e.surface_relief_m > 0.0:
+            t = t + self._relief(orig_w[idx] + dirs_w[idx] * t[:, None], mat, cos_inc,
+                                 e.surface_relief_m)
+        reflect = REFLECTANCE[mat]
+        keep = _detected(t, reflect, cos_inc, e.detection_range_m, e.incidence_exponent,
+                         e.detection_spread, rng)
+        keep &= rng.random(len(t), dtype=np.float32) >= np.float32(e.dropout)
+        ray = g.active[idx]
+        r = t + _range_noise(t, cos_inc, e.range_noise_m, e.range_noise_growth_m,
+                             e.beam_divergence_mrad, rng) + g.range_bias[ray]
+        keep &= (r >= self.sensor.min_range_m) & (r <= self.sensor.max_range_m)
+        ray, r = ray[keep], r[keep]
+        out = np.empty((len(ray), 4), np.float32)
+        if compensate and len(T_col) > 1:  # into the frame at the sweep's start
+            T_rel = np.linalg.solve(T_col[0], T_col)  # (A, 4, 4) T_start_column
+            R_rel = T_rel[:, :3, :3] @ Rz.astype(np.float64)
+            d = g.turn(g.dirs_stored, R_rel)[ray]
+            o = (g.turn(g.offsets, T_rel[:, :3, :3]) + g.per_column(T_rel[:, :3, 3]))[ray]
+            out[:, :3] = d * r[:, None] + o
+        else:
+            out[:, :3] = (g.dirs_stored[ray] @ Rz.T) * r[:, None] + g.offsets[ray]
+        out[:, 3] = np.clip(reflect[keep] * cos_inc[keep], 0.0, 1.0)
+        return out, ray % g.azimuths
+
+    def _cast(self, origins: F32, dirs: F32) -> Hits:
+        """Cast rays (M, 3) + (M, 3) against the world."""
+        rays = np.empty((len(dirs), 6), np.float32)
+        rays[:, :3] = origins
+        rays[:, 3:] = dirs
         hit = self.scene.cast_rays(self._o3d.core.Tensor.from_numpy(rays))
-        t_hit = hit["t_hit"].numpy()
-        r = t_hit + rng.standard_normal(len(t_hit), dtype=np.float32) * np.float32(s.range_noise_m)
-        keep = (r >= s.min_range_m) & (r <= s.max_range_m)  # misses are inf
-        keep &= rng.random(len(t_hit), dtype=np.float32) >= s.dropout
-        idx = np.flatnonzero(keep)
-        out = np.empty((len(idx), 4), np.float32)
-        out[:, :3] = (self._dirs[idx] @ Rz.T.astype(np.float32)) * r[idx, None]
-        n = hit["primitive_normals"].numpy()[idx]
-        out[:, 3] = np.abs(np.einsum("ij,ij->i", n, dirs_world[idx]))
-        return out, idx
+        t = hit["t_hit"].numpy()
+        prim = hit["primitive_ids"].numpy()
+        mat = np.zeros(len(t), np.uint8)
+        ok = np.isfinite(t)
+        mat[ok] = self.materials[prim[ok]]
+        return Hits(t, hit["primitive_normals"].numpy(), mat)
+
+    def _relief(self, hit_w: F32, mat: NDArray[np.uint8], cos_inc: F32,
+                scale_m: float) -> F32:
+        """Range change [m] of hits at ``hit_w`` (relative to ``self.origin``) from the relief
+        of the surfaces: a height field along the normal, fixed in the world (``self._bumps``,
+        at world coordinates: every window of a world sees the same relief), of sigma
+        ``scale_m`` x the material's factor (``RELIEF``), seen along the ray."""
+        height = self._bumps(hit_w + self.origin.astype(np.float32)) * (
+            np.float32(scale_m) * RELIEF[mat])
+        return (height / np.maximum(cos_inc, np.float32(0.2))).astype(np.float32)
+
+    def _foliage(self, idx: NDArray[np.int64], t: F32, mat: NDArray[np.uint8], cos_inc: F32,
+                 orig_w: F32, dirs_w: F32, rng: np.random.Generator) -> tuple[F32, F32]:
+        """Rays ``idx`` whose first hit (range ``t``) is foliage enter it: each travels an
+        exponential depth (mean free path) and returns from there unless it leaves the crown
+        first (then the next surface answers, foliage hit from outside only at its face). A
+        return from inside has the incidence of a random leaf (cos uniform)."""
+        veg = np.flatnonzero(mat == Material.VEGETATION)
+        if not len(veg):
+            return t, cos_inc
+        t, cos_inc = t.copy(), cos_inc.copy()
+        depth = rng.exponential(self.sensor.effects.vegetation_free_path_m,
+                                len(veg)).astype(np.float32)
+        leaf = rng.uniform(0.0, 1.0, len(veg)).astype(np.float32)
+        rays, start = idx[veg], t[veg] + VEGETATION_STEP_M
+        inner = self._cast(orig_w[rays] + dirs_w[rays] * start[:, None], dirs_w[rays])
+        inside = depth < inner.t
+        t[veg[inside]] += depth[inside]
+        cos_inc[veg[inside]] = leaf[inside]
+        out = ~inside
+        exits = out & (inner.material == Material.VEGETATION)
+        solid = out & ~exits
+        t[veg[solid]] = start[solid] + inner.t[solid]
+        if exits.any():
+            far = start[exits] + inner.t[exits] + VEGETATION_STEP_M
+            r = rays[exits]
+            behind = self._cast(orig_w[r] + dirs_w[r] * far[:, None], dirs_w[r])
+            t[veg[exits]] = far + behind.t
+            cos_inc[veg[exits]] = np.abs(np.einsum("ij,ij->i", behind.normal, dirs_w[r]))
+        return t, cos_inc
 
     def distance_to_mesh(self, points_world: F64) -> F64:
         """(N,) unsigned distance [m] from world points (N, 3) to the mesh."""
         q = self._o3d.core.Tensor((points_world - self.origin).astype(np.float32))  # type: ignore[call-overload]
         return self.scene.compute_distance(q).numpy().astype(np.float64)
+
+
+class Relief:
+    """Unit-variance 3-D noise fixed in the world: a sum of plane waves of 0.3-2 m wavelength
+    (the relief a mesh leaves out: recessed windows and sills, car bodies, clods, bark)."""
+
+    def __init__(self, rng: np.random.Generator, waves: int = 12) -> None:
+        lam = np.exp(rng.uniform(np.log(0.3), np.log(2.0), waves))
+        k = rng.standard_normal((waves, 3))
+        self.k = (2 * np.pi / lam[:, None] * k / np.linalg.norm(k, axis=1, keepdims=True)
+                  ).astype(np.float32)
+        self.phase = rng.uniform(0.0, 2 * np.pi, waves).astype(np.float32)
+        self.amp = np.float32(np.sqrt(2.0 / waves))
+
+    def __call__(self, p: F32) -> F32:
+        return (np.sin(p @ self.k.T + self.phase) * self.amp).sum(axis=1).astype(np.float32)
+
+
+class _BeamGeometry:
+    """The rays of one sensor unit (its calibration errors drawn once from
+    ``effects.unit_seed``): reported and true directions (B * A, 3) in the lidar frame at phase
+    0, laser origins (B * A, 3), each ray's range offset, and the rays the carrier leaves free
+    (``active``)."""
+
+    def __init__(self, sensor: SensorModel) -> None:
+        e = sensor.effects
+        unit = np.random.default_rng([e.unit_seed, 71])
+        el_err = unit.standard_normal(sensor.beams) * e.laser_elevation_error_deg
+        bias = unit.standard_normal(sensor.beams) * e.laser_range_bias_m
+        az_err = unit.standard_normal(sensor.beams) * e.laser_azimuth_error_deg
+        true_el = np.asarray(sensor.elevations_deg) - e.elevation_error_deg - el_err
+        self.beams, self.azimuths = sensor.beams, sensor.azimuths
+        self.active = np.flatnonzero(~sensor.hidden_rays())
+        self.dirs_stored = sensor.ray_directions()
+        self.dirs_true = sensor.ray_directions(elevations_deg=true_el,
+                                               azimuth_offsets_deg=-az_err)
+        self.offsets = np.zeros((len(self.dirs_true), 3), np.float32)
+        self.offsets[:, 2] = np.repeat(sensor.laser_heights(), self.azimuths)
+        self.range_bias = np.repeat(bias, self.azimuths).astype(np.float32)
+        self.dirs_true_free = self.dirs_true[self.active]
+        self.height_free = self.offsets[self.active, 2].copy()
+
+    def turn(self, v: F32, R: F64) -> F32:
+        """Vectors ``v`` (B * A, 3) turned by their column's rotation (``R`` (A, 3, 3), or
+        (1, 3, 3) for all): a batched product over the columns."""
+        if len(R) == 1:
+            return v @ R[0].T.astype(np.float32)
+        cols = v.reshape(self.beams, self.azimuths, 3).transpose(1, 0, 2)  # (A, B, 3)
+        out = np.matmul(cols, R.transpose(0, 2, 1).astype(np.float32))
+        return out.transpose(1, 0, 2).reshape(-1, 3)
+
+    def per_column(self, x: F64) -> F32:
+        """(B * A, 3) the column's vector of ``x`` (A, 3) (or (1, 3) for all) for every ray."""
+        if len(x) == 1:
+            return np.broadcast_to(x.astype(np.float32), (self.beams * self.azimuths, 3))
+        return np.tile(x.astype(np.float32), (self.beams, 1))
+
+
+def _jitter(d: F32, rng: np.random.Generator, sigma_rad: float) -> F32:
+    """Directions ``d`` (M, 3) turned at random by N(0, sigma) about both axes across the
+    ray (an isotropic perturbation, the part along the ray removed by normalising)."""
+    out = d + rng.standard_normal(d.shape, dtype=np.float32) * np.float32(sigma_rad)
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def _cast_movers(o3d: object, vertices: F64, triangles: NDArray[np.int64], origins: F32,
+                 dirs: F32) -> Hits:
+    """Cast the rays that pass within the bounding sphere of the movers' mesh against it
+    (vehicles); the others miss."""
+    centre = vertices.mean(axis=0)
+    radius = float(np.linalg.norm(vertices - centre, axis=1).max())
+    rel = centre.astype(np.float32) - origins
+    along = np.einsum("ij,ij->i", rel, dirs)
+    near = np.flatnonzero((along > 0) & (np.einsum("ij,ij->i", rel, rel) - along**2
+                                         < radius**2))
+    t = np.full(len(dirs), np.inf, np.float32)
+    normal = np.zeros((len(dirs), 3), np.float32)
+    if len(near):
+        hit = _cast_mesh(o3d, vertices, triangles, origins[near], dirs[near], Material.VEHICLE)
+        t[near], normal[near] = hit.t, hit.normal
+    return Hits(t, normal, np.full(len(dirs), Material.VEHICLE, np.uint8))
+
+
+def _cast_mesh(o3d: object, vertices: F64, triangles: NDArray[np.int64], origins: F32,
+               dirs: F32, material: Material) -> Hits:
+    """Cast rays against a small mesh of one material (the movers of a scan)."""
+    scene = o3d.t.geometry.RaycastingScene()  # type: ignore[attr-defined]
+    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)),  # type: ignore[attr-defined]
+                        o3d.core.Tensor(triangles.astype(np.uint32)))  # type: ignore[attr-defined]
+    rays = np.concatenate([origins, dirs], axis=1).astype(np.float32)
+    hit = scene.cast_rays(o3d.core.Tensor.from_numpy(rays))  # type: ignore[attr-defined]
+    t = hit["t_hit"].numpy()
+    return Hits(t, hit["primitive_normals"].numpy(), np.full(len(t), material, np.uint8))
+
+
+def _nearer(a: Hits, b: Hits) -> Hits:
+    """Per ray, the nearer of two casts."""
+    closer = b.t < a.t
+    if not closer.any():
+        return a
+    return Hits(np.where(closer, b.t, a.t), np.where(closer[:, None], b.normal, a.normal),
+                np.where(closer, b.material, a.material))
+
+
+def _ground_cover(t: F32, mat: NDArray[np.uint8], cos_inc: F32, height_m: float,
+                  free_path_m: float, rng: np.random.Generator) -> tuple[F32, F32]:
+    """Returns from ground (soil and grass) come from a layer of grass ``height_m`` high on
+    it: the beam enters the layer (height_m / cos(incidence) before the soil) and returns an
+    exponential depth (mean ``free_path_m``) in, or from the soil when it gets through; a
+    return from a blade has the incidence of a random blade."""
+    grass = np.flatnonzero(mat == Material.GROUND)
+    if not len(grass):
+        return t, cos_inc
+    t, cos_inc = t.copy(), cos_inc.copy()
+    path = np.float32(height_m) / np.maximum(cos_inc[grass], np.float32(0.05))
+    depth = rng.exponential(free_path_m, len(grass)).astype(np.float32)
+    blade = depth < path
+    t[grass[blade]] -= path[blade] - depth[blade]
+    cos_inc[grass[blade]] = rng.uniform(0.0, 1.0, int(blade.sum())).astype(np.float32)
+    return t, cos_inc
+
+
+def _detected(t: F32, reflect: F32, cos_inc: F32, range_m: float, exponent: float,
+              spread: float, rng: np.random.Generator) -> NDArray[np.bool_]:
+    """Whether each echo comes back: Phi(ln(power / threshold) / spread), power =
+    reflectance cos(incidence)^exponent / t^2, threshold = 0.1 / range_m^2 (``range_m`` 0:
+    all)."""
+    if range_m <= 0.0:
+        return np.ones(len(t), bool)
+    power = reflect * np.maximum(cos_inc, 1e-6) ** np.float32(exponent) / np.maximum(t, 0.1) ** 2
+    margin = np.log(power * np.float32(range_m**2 / 0.1)) / np.float32(spread)
+    return rng.standard_normal(len(t), dtype=np.float32) < margin
+
+
+def _range_noise(t: F32, cos_inc: F32, sigma0: float, growth: float, divergence_mrad: float,
+                 rng: np.random.Generator) -> F32:
+    """Gaussian range noise [m]: sigma^2 = sigma0^2 + (growth t / 100)^2
+    + (t tan(incidence) divergence / sqrt(12))^2 (SensorEffects)."""
+    var = np.full(len(t), sigma0**2, np.float32)
+    if growth > 0.0:
+        var += (np.float32(growth / 100.0) * t) ** 2
+    if divergence_mrad > 0.0:
+        cos = np.clip(cos_inc, 0.05, 1.0)
+        tan = np.sqrt(1.0 - cos**2) / cos
+        var += (t * tan * np.float32(divergence_mrad * 1e-3 / np.sqrt(12.0))) ** 2
+    return rng.standard_normal(len(t), dtype=np.float32) * np.sqrt(var)

@@ -5,8 +5,9 @@ from __future__ import annotations
 import logging
 import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -15,44 +16,55 @@ from pipeline.errors import ConfigError
 from pipeline.geometry import inv_se3
 from pipeline.io_utils import check_plain_name, refuse_input_as_output
 from pipeline.sequence import EnvLabel, Scan, SequenceInfo, SequenceWriter
+from pipeline.sim.effects import SensorEffects
+from pipeline.sim.kitti_world import KittiWorldEffects, check_kitti_args
 from pipeline.sim.raycast import Raycaster
 from pipeline.sim.sensors import SENSOR_TITLES, SensorModel, get_sensor
-from pipeline.sim.worlds import (
-    DEFAULT_SEGMENTS,
-    WORLDS,
-    World,
-    build_world,
-    check_world_args,
-)
+from pipeline.sim.worlds import DEFAULT_SEGMENTS, WORLDS, World, build_world, check_world_args
 
 log = logging.getLogger(__name__)
 
 
+MotionMode = Literal["none", "sweep", "compensated"]
+"""How a scan relates to the sensor's motion: ``none`` instantaneous scans; ``sweep`` every
+scan swept over 1 / rate_hz s from its stamp, points measured from the moving sensor, with
+per-point time (Raycaster.sweep); ``compensated`` the sweep moved into the frame at its stamp,
+without times (KITTI's odometry files)."""
+
+
 @dataclass(frozen=True)
 class SimSpec:
-    """What to simulate. ``range_noise_m`` / ``dropout`` None keep the sensor's defaults."""
+    """What to simulate: a world (``WORLDS``, or ``kitti``: the simulated-KITTI world of the
+    ground-truth file ``kitti_trajectory`` NN.txt, frames ``start`` .. ``start + frames - 1``),
+    its seed, frame count, sensor and sensor effects, and how scans follow the motion."""
 
     world: str
     seed: int
     frames: int
     sensor: str = "hdl32"
     segments: tuple[str, ...] = DEFAULT_SEGMENTS
+    effects: SensorEffects = field(default_factory=lambda: SensorEffects.model_validate({}))
+    motion: MotionMode = "sweep"
     kitti_trajectory: Path | None = None
-    range_noise_m: float | None = None
-    dropout: float | None = None
-    motion_distortion: bool = False
-    """True: every scan is a sweep over 1 / rate_hz s from its stamp, points measured from the
-    moving sensor, with per-point time (Raycaster.sweep); False: instantaneous scans."""
+    start: int = 0
+    kitti_world: KittiWorldEffects = field(
+        default_factory=lambda: KittiWorldEffects.model_validate({}))
 
     def sensor_model(self) -> SensorModel:
-        return get_sensor(self.sensor).with_noise(self.range_noise_m, self.dropout)
+        return get_sensor(self.sensor, self.effects)
 
     def check(self) -> None:
         """ConfigError for an unknown world / sensor / segment, a bad frame count or seed."""
         if not 0 <= self.seed < 2**63:
             raise ConfigError(f"seed must be an integer in [0, 2^63), got {self.seed}")
         self.sensor_model()
-        check_world_args(self.world, self.frames, self.segments, self.kitti_trajectory)
+        if self.world == "kitti":
+            check_kitti_args(self.kitti_trajectory, self.start, self.frames)
+        else:
+            check_world_args(self.world, self.frames, self.segments)
+            if self.kitti_trajectory is not None:
+                raise ConfigError(f"--kitti-trajectory needs --world kitti, got --world "
+                                  f"{self.world}")
 
 
 @dataclass(frozen=True)
@@ -86,35 +98,40 @@ def label_ranges(frame_labels: list[str]) -> list[EnvLabel]:
 def make_world(spec: SimSpec) -> World:
     """The world and drive of ``spec`` (mesh built once)."""
     spec.check()
-    return build_world(
-        spec.world,
-        spec.seed,
-        spec.frames,
-        spec.sensor_model().rate_hz,
-        tuple(spec.segments),
-        spec.kitti_trajectory,
-    )
+    if spec.world == "kitti":
+        from pipeline.sim.kitti_world import build_kitti_world
+
+        assert spec.kitti_trajectory is not None
+        path = Path(spec.kitti_trajectory)
+        return build_kitti_world(path, path.stem, spec.seed, spec.start,
+                                 spec.start + spec.frames - 1, spec.kitti_world)
+    return build_world(spec.world, spec.seed, spec.frames, spec.sensor_model().rate_hz,
+                       tuple(spec.segments))
 
 
 def iter_scans(
     world: World, sensor: SensorModel, seed: int, frames: range | None = None,
-    motion_distortion: bool = False,
+    motion: MotionMode = "none",
 ) -> Iterator[Scan]:
     """Ray-cast scans of ``world``; frame k's noise comes from the seed (seed, 1, k) alone,
-    so any frame can be reproduced without the ones before it. With ``motion_distortion``
-    each scan is a sweep from pose k to pose k + 1 (the last one continues the motion before
-    it), with per-point time; the ground truth is the pose at the stamp, the sweep's start."""
-    caster = Raycaster(world.vertices, world.triangles, sensor)
+    so any frame can be reproduced without the ones before it. A sweep (``motion``) runs from
+    pose k to pose k + 1 (the last one continues the motion before it); the ground truth is
+    the pose at the stamp, the sweep's start. The world's traffic is where it is at the stamp
+    (instantaneous) or half a sweep later."""
+    caster = Raycaster(world.vertices, world.triangles, sensor, world.materials, world.seed)
     T_all = world.poses.T_world_lidar
     for k in frames if frames is not None else range(world.frames):
         T = T_all[k]
+        stamp_ns = int(world.poses.stamps_ns[k])
         rng = np.random.default_rng([seed, 1, k])
-        if not motion_distortion:
-            yield Scan(k, int(world.poses.stamps_ns[k]), caster.scan(T, rng), T)
+        when_s = stamp_ns * 1e-9 + (0.0 if motion == "none" else 0.5 / sensor.rate_hz)
+        movers = world.traffic.mesh_at(when_s) if world.traffic is not None else None
+        if motion == "none":
+            yield Scan(k, stamp_ns, caster.scan(T, rng, movers), T)
             continue
         T_end = T_all[k + 1] if k + 1 < len(T_all) else T @ inv_se3(T_all[k - 1]) @ T
-        pts, time_s = caster.sweep(T, T_end, rng)
-        yield Scan(k, int(world.poses.stamps_ns[k]), pts, T, time_s)
+        pts, time_s = caster.sweep(T, T_end, rng, movers, compensate=motion == "compensated")
+        yield Scan(k, stamp_ns, pts, T, None if motion == "compensated" else time_s)
 
 
 def simulate_sequence(
@@ -124,21 +141,17 @@ def simulate_sequence(
     refuse_input_as_output(out_path, [spec.kitti_trajectory])
     name = check_plain_name(name or Path(out_path).stem, "the sequence name")  # before the work
     world = make_world(spec)
-    source = "simulation:" + (
-        "kitti-trajectory " + Path(spec.kitti_trajectory).name
-        if spec.kitti_trajectory
-        else spec.world
-    )
+    source = "simulation:" + (f"kitti {Path(spec.kitti_trajectory).name}"
+                              if spec.kitti_trajectory else spec.world)
     return write_world(world, spec.sensor_model(), spec.seed, out_path,
-                       name, source, _extra(spec, world), progress,
-                       spec.motion_distortion)
+                       name, source, _extra(spec, world), progress, spec.motion)
 
 
 def write_world(world: World, sensor: SensorModel, seed: int, out_path: str | Path, name: str,
                 source: str, extra: dict[str, str], progress: bool = False,
-                motion_distortion: bool = False) -> SimSummary:
-    """Ray-cast every frame of ``world`` (noise from ``seed``, sweeps with ``motion_distortion``,
-    as ``iter_scans``) into the sequence MCAP ``out_path`` (atomically), labels per frame range
+                motion: MotionMode = "none") -> SimSummary:
+    """Ray-cast every frame of ``world`` (noise from ``seed``, sweeps by ``motion``, as
+    ``iter_scans``) into the sequence MCAP ``out_path`` (atomically), labels per frame range
     from the world's poses. ``progress``: a bar on a terminal, log lines elsewhere
     (``pipeline.progress``)."""
     from pipeline.progress import progress as shown
@@ -148,7 +161,7 @@ def write_world(world: World, sensor: SensorModel, seed: int, out_path: str | Pa
                         labels=labels, extra=extra)
     points = 0
     with SequenceWriter(out_path, info) as w:
-        scans = iter_scans(world, sensor, seed, motion_distortion=motion_distortion)
+        scans = iter_scans(world, sensor, seed, motion=motion)
         for scan in shown(scans, world.frames, f"simulate {name}", "scan", enabled=progress):
             w.add(scan.stamp_ns, scan.points_lidar, scan.T_world_lidar, scan.time_s)
             points += len(scan.points_lidar)
@@ -159,36 +172,48 @@ def write_world(world: World, sensor: SensorModel, seed: int, out_path: str | Pa
     return SimSummary(Path(out_path), name, world.frames, points, length, labels)
 
 
-def _extra(spec: SimSpec, world: World) -> dict[str, str]:
+def sensor_extra(sensor: SensorModel, motion: MotionMode) -> dict[str, str]:
+    """The metadata of a simulated sequence that says how it was scanned."""
     return {
-        "world": spec.world,
-        "seed": str(spec.seed),
-        "segments": ",".join(spec.segments),
-        "sensor_model": spec.sensor,
-        "range_noise_m": str(spec.sensor_model().range_noise_m),
-        "dropout": str(spec.sensor_model().dropout),
-        "mesh_triangles": str(len(world.triangles)),
-        "motion_distortion": (
-            f"sweep: points fired over 1/{spec.sensor_model().rate_hz:g} s from the stamp, "
-            "per-point time [s] in the PointCloud2 field 'time'"
-            if spec.motion_distortion else "none (instantaneous scans)"),
+        "sensor_model": sensor.name,
+        "effects": sensor.effects.model_dump_json(),
+        "range_noise_m": str(sensor.range_noise_m),
+        "dropout": str(sensor.dropout),
+        "motion": motion,
+        "motion_distortion": {
+            "none": "none (instantaneous scans)",
+            "sweep": f"sweep: points fired over 1/{sensor.rate_hz:g} s from the stamp, "
+                     "per-point time [s] in the PointCloud2 field 'time'",
+            "compensated": f"compensated: swept over 1/{sensor.rate_hz:g} s, moved into the "
+                           "frame at the stamp (no per-point time)"}[motion],
     }
 
 
+def _extra(spec: SimSpec, world: World) -> dict[str, str]:
+    extra = {"world": spec.world, "seed": str(spec.seed), "segments": ",".join(spec.segments),
+             "mesh_triangles": str(len(world.triangles))}
+    if spec.kitti_trajectory is not None:
+        extra |= {"kitti_sequence": Path(spec.kitti_trajectory).stem,
+                  "first_frame": str(spec.start),
+                  "last_frame": str(spec.start + spec.frames - 1)}
+    return extra | sensor_extra(spec.sensor_model(), spec.motion)
+
+
 def spec_of(info: SequenceInfo) -> SimSpec | None:
-    """The SimSpec a simulated sequence was made from (its metadata), or None for other data,
-    a street driven along a KITTI trajectory or simulated KITTI (whose pose files are not
-    recorded)."""
+    """The SimSpec a simulated sequence was made from (its metadata), or None for other data
+    and simulated KITTI (whose pose files are not recorded)."""
     extra = info.extra
-    if not info.source.startswith("simulation:") or "world" not in extra:
-        return None
-    if info.source.startswith("simulation:kitti-trajectory") or extra["world"] not in WORLDS:
+    if not info.source.startswith("simulation:") or extra.get("world") not in WORLDS:
         return None
     segments = tuple(s for s in extra.get("segments", "").split(",") if s) or DEFAULT_SEGMENTS
+    effects = (SensorEffects.model_validate_json(extra["effects"]) if "effects" in extra
+               else SensorEffects.model_validate({"range_noise_m": float(extra["range_noise_m"]),
+                                                  "dropout": float(extra["dropout"])}))
+    motion = extra.get("motion") or (
+        "sweep" if extra.get("motion_distortion", "none").startswith("sweep") else "none")
     return SimSpec(extra["world"], int(extra["seed"]), info.frame_count,
-                   extra.get("sensor_model", "hdl32"), segments, None,
-                   float(extra["range_noise_m"]), float(extra["dropout"]),
-                   extra.get("motion_distortion", "none").startswith("sweep"))
+                   extra.get("sensor_model", "hdl32"), segments, effects,
+                   motion)  # type: ignore[arg-type]
 
 
 def world_points(scan: Scan) -> NDArray[np.float64]:

@@ -9,30 +9,33 @@ sensor poses (ground truth) of every frame, with the environment label of every 
   sides of the road, parked cars, poles and trees;
 - composite: one continuous route through the given segments (default cave, open, street);
   the cave's open end is the mouth into the terrain.
-A KITTI ground-truth trajectory can replace the generated route (street world along it).
+Simulated KITTI (a world along a KITTI ground-truth trajectory) is pipeline/sim/kitti_world.py.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError
 from pipeline.sim import meshes
+from pipeline.sim.materials import Material
 from pipeline.sim.route import (
     DS_M,
     LABELS,
     Poses,
     Route,
     generate_route,
-    route_from_positions,
     sample_poses,
     segment_lengths,
     smooth,
 )
+
+if TYPE_CHECKING:
+    from pipeline.sim.traffic import Traffic
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -41,6 +44,8 @@ WORLDS = ("cave", "open", "street", "composite")
 DEFAULT_SEGMENTS = ("cave", "open", "street")
 TERRAIN_REACH_M = 80.0
 ROAD_CLEARANCE_M = 6.5
+ROAD_HALF_WIDTH_M = 4.0
+"""Half width of the asphalt along a street segment [m] (material ``ROAD``)."""
 WALL_NOISE = ((10, (2.0, 6.0), (1, 6), 0.22), (14, (0.5, 1.5), (4, 18), 0.06))
 """Cave wall displacement: (waves, wavelength range along the tunnel [m], waves around the
 ring, amplitude [m]) for the lumps and the knobs."""
@@ -49,14 +54,18 @@ ring, amplitude [m]) for the lumps and the knobs."""
 @dataclass
 class World:
     """A simulated world with its drive: mesh vertices (V, 3) / triangles (T, 3) [m, world
-    frame], poses (ground truth, stamps, label per frame) and the route (for plots)."""
+    frame] and the material of every triangle (T,) (``pipeline.sim.materials``), poses (ground
+    truth, stamps, label per frame), the route (for plots) and the traffic that moves through
+    it (None: a static world)."""
 
     kind: str
     seed: int
     vertices: F64
     triangles: I64
+    materials: NDArray[np.uint8]
     poses: Poses
     route: Route
+    traffic: Traffic | None = None
 
     @property
     def frames(self) -> int:
@@ -69,31 +78,22 @@ def build_world(
     frames: int,
     rate_hz: float = 10.0,
     segments: tuple[str, ...] = DEFAULT_SEGMENTS,
-    kitti_trajectory: Path | None = None,
 ) -> World:
     """The world ``kind`` for ``frames`` frames at ``rate_hz``, all randomness from ``seed``."""
-    check_world_args(kind, frames, segments, kitti_trajectory)
+    check_world_args(kind, frames, segments)
     rng = np.random.default_rng([seed, 0])
-    if kitti_trajectory is not None:
-        from pipeline.sim.kitti import kitti_lidar_poses
-
-        T, stamps = kitti_lidar_poses(kitti_trajectory, frames)
-        route = route_from_positions(T[:, :3, 3])
-        poses = Poses(T, stamps, ["street"] * len(T))
-        ground: _Terrain | _kitti_ground = _kitti_ground(route)
-    else:
-        labels = list(segments) if kind == "composite" else [kind]
-        route, ground, poses = _drive(labels, frames, rate_hz, rng)
+    labels = list(segments) if kind == "composite" else [kind]
+    route, ground, poses = _drive(labels, frames, rate_hz, rng)
     mb = meshes.MeshBuilder()
     if "cave" in [route.labels[i] for i in np.unique(route.label)]:
         for a, b in route.runs("cave"):
-            mb.add(*_cave_tube(route, a, b, rng))
+            mb.add(*_cave_tube(route, a, b, rng), Material.ROCK)
     if (route.label != LABELS.index("cave")).any():
         mb.add(*_terrain_mesh(route, ground))
         _dress_open(mb, route, ground, rng)
         _dress_street(mb, route, ground, rng)
     vertices, triangles = mb.build()
-    return World(kind, seed, vertices, triangles, poses, route)
+    return World(kind, seed, vertices, triangles, mb.materials(), poses, route)
 
 
 ROUTE_ATTEMPTS = 4
@@ -128,12 +128,10 @@ MAX_FRAMES = 100_000
 """The most frames one simulated sequence may have (2.8 hours at 10 Hz)."""
 
 
-def check_world_args(
-    kind: str, frames: int, segments: tuple[str, ...], kitti_trajectory: Path | None
-) -> None:
+def check_world_args(kind: str, frames: int, segments: tuple[str, ...]) -> None:
     """ConfigError unless the world, frame count (2 .. MAX_FRAMES) and segments make sense."""
     if kind not in WORLDS:
-        raise ConfigError(f"unknown world {kind!r} (known: {', '.join(WORLDS)})")
+        raise ConfigError(f"unknown world {kind!r} (known: {', '.join(WORLDS)}, kitti)")
     if not 2 <= frames <= MAX_FRAMES:
         raise ConfigError(f"frames must be in [2, {MAX_FRAMES}] (MAX_FRAMES), got {frames}")
     bad = [s for s in segments if s not in LABELS]
@@ -141,8 +139,6 @@ def check_world_args(
         raise ConfigError(
             f"segments must be a non-empty list of {', '.join(LABELS)}, got {list(segments)}"
         )
-    if kitti_trajectory is not None and kind != "street":
-        raise ConfigError(f"--kitti-trajectory builds a street world, got --world {kind}")
 
 
 # --- ground -------------------------------------------------------------------------------
@@ -178,21 +174,6 @@ class _Terrain:
         return self.hills(x, y) * a[:, 0] + self.bumps(x, y) * a[:, 1] + self.offset
 
 
-class _kitti_ground:  # noqa: N801 - used like a function
-    """Ground under a driven route: inverse-distance weighted floor heights of the route."""
-
-    def __init__(self, route: Route) -> None:
-        from scipy.spatial import cKDTree
-
-        self.tree = cKDTree(route.xy)
-        self.z = route.floor_z
-
-    def __call__(self, x: F64, y: F64) -> F64:
-        d, i = self.tree.query(np.stack([np.ravel(x), np.ravel(y)], -1), k=8)
-        w = 1.0 / (d + 5.0) ** 2
-        return (self.z[i] * w).sum(axis=1) / w.sum(axis=1)
-
-
 def _floor_profile(route: Route, ground: _Terrain, rng: np.random.Generator) -> F64:
     """Floor height of every route sample: the terrain outside caves; inside a cave a floor
     sloping by up to about 9 % that meets the terrain at the cave's open ends."""
@@ -215,8 +196,10 @@ def _floor_profile(route: Route, ground: _Terrain, rng: np.random.Generator) -> 
     return floor
 
 
-def _terrain_mesh(route: Route, ground: object, cell_m: float = 1.0) -> tuple[F64, I64]:
-    """Ground grid within TERRAIN_REACH_M of the non-cave route, with a hole over caves."""
+def _terrain_mesh(route: Route, ground: object,
+                  cell_m: float = 1.0) -> tuple[F64, I64, NDArray[np.uint8]]:
+    """Ground grid within TERRAIN_REACH_M of the non-cave route, with a hole over caves; its
+    material: road within ROAD_HALF_WIDTH_M of a street, ground elsewhere."""
     from scipy.spatial import cKDTree
 
     cave = route.label == LABELS.index("cave")
@@ -234,7 +217,11 @@ def _terrain_mesh(route: Route, ground: object, cell_m: float = 1.0) -> tuple[F6
         return ok & ~(cave_sub[i] & (d < 4.6))
 
     nx, ny = (int((hi - lo)[k] / cell_m) + 1 for k in range(2))
-    return meshes.height_field(lo[0], lo[1], nx, ny, cell_m, ground, keep)  # type: ignore[arg-type]
+    v, t = meshes.height_field(lo[0], lo[1], nx, ny, cell_m, ground, keep)  # type: ignore[arg-type]
+    d, i = tree_all.query(v[t, :2].mean(axis=1))
+    street = route.label[::2][i] == LABELS.index("street")
+    road = street & (d < ROAD_HALF_WIDTH_M)
+    return v, t, np.where(road, Material.ROAD, Material.GROUND).astype(np.uint8)
 
 
 # --- cave ---------------------------------------------------------------------------------
@@ -330,9 +317,10 @@ def _dress_open(
                 z = float(ground(p[:1], p[1:]).item())  # type: ignore[operator]
                 if kind == "rock":
                     r = rng.uniform(0.4, 1.8)
-                    mb.add(*meshes.rock(np.array([p[0], p[1], z + 0.2 * r]), r, rng))
+                    mb.add(*meshes.rock(np.array([p[0], p[1], z + 0.2 * r]), r, rng),
+                           Material.ROCK)
                 else:
-                    mb.add(*meshes.tree(np.array([p[0], p[1], z - 0.3]), rng))
+                    meshes.add_tree(mb, np.array([p[0], p[1], z - 0.3]), rng)
 
 
 def _dress_street(
@@ -378,7 +366,8 @@ def _buildings(
                 np.array([c[0], c[1], z0 + (tall + 1.0) / 2]),
                 np.array([front, depth, tall + 1.0]),
                 h,
-            )
+            ),
+            Material.BUILDING,
         )
 
 
@@ -404,7 +393,8 @@ def _street_items(
                 if _box_clearance(route, c, 4.4, 1.8, yaw) < 2.2:
                     continue
                 z = float(ground(c[:1], c[1:]).item())  # type: ignore[operator]
-                mb.add(*meshes.box(np.array([c[0], c[1], z + 0.8]), np.array([4.4, 1.8, 1.5]), yaw))
+                mb.add(*meshes.box(np.array([c[0], c[1], z + 0.8]), np.array([4.4, 1.8, 1.5]), yaw),
+                       Material.VEHICLE)
                 continue
             c = p + side * rng.uniform(6.0, 7.0) * n_h
             if _min_dist(route, c[None])[0] < (4.5 if kind == "pole" else 5.5):
@@ -412,9 +402,9 @@ def _street_items(
             z = float(ground(c[:1], c[1:]).item())  # type: ignore[operator]
             base = np.array([c[0], c[1], z - 0.2])
             if kind == "pole":
-                mb.add(*meshes.cylinder(base, 0.12, rng.uniform(5.0, 8.0), sides=8))
+                mb.add(*meshes.cylinder(base, 0.12, rng.uniform(5.0, 8.0), sides=8), Material.METAL)
             elif rng.random() < 0.7:
-                mb.add(*meshes.tree(base, rng))
+                meshes.add_tree(mb, base, rng)
 
 
 def _min_dist(route: Route, p: F64) -> F64:

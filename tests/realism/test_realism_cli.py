@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.sim import kitti_sensor
+
 
 def adaptune(*args: str | Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "stages.cli", *map(str, args)],
@@ -33,16 +35,23 @@ def test_realism_compares_a_real_slice_with_its_simulation(tmp_path: Path, kitti
     counts = [np.fromfile(b, np.float32).size // 4 for b in bins]
     assert slice_["real_stats"]["points"] == np.mean(counts)
     assert slice_["real_stats"]["rings_found"] == 64
-    assert 0 < slice_["sim_stats"]["points"] < 64 * 2000
+    assert 0 < slice_["sim_stats"]["points"] < 64 * kitti_sensor.FIRINGS
+    for stats in (slice_["real_stats"], slice_["sim_stats"]):
+        assert 0.0 < stats["road_planarity_mm"] < 50.0
     for algorithm in ("gicp", "kiss_icp"):
-        for side in ("real", "sim"):
+        # sim: against the exact ground truth; sim_gt: with the slice's ground-truth error
+        for side in ("real", "sim", "sim_gt"):
             errors = slice_[side][algorithm]
             assert len(errors["t_cm"]) == len(errors["r_deg"]) == 3  # 4 frames, 3 steps
             assert all(np.isfinite(errors["t_cm"])) and all(v >= 0 for v in errors["t_cm"])
-    assert set(summary["ratios"]) == {f"{a} {what}" for a in ("gicp", "kiss_icp") for what in (
-        "04 median t", "04 median r", "pooled p90 t", "pooled p90 r")}
+        assert slice_["sim_gt"][algorithm] != slice_["sim"][algorithm]
+    assert len(slice_["gt_error"]["mean"]) == len(slice_["gt_error"]["variance"]) == 6
+    for ratios in (summary["ratios"], summary["ratios_exact_gt"]):
+        assert set(ratios) == {f"{a} {what}" for a in ("gicp", "kiss_icp") for what in (
+            "04 median t", "04 median r", "pooled p90 t", "pooled p90 r")}
     table = (out / "realism.md").read_text()
     assert "| 04 2-5 | rural | gicp |" in table and "| 04 2-5 | rural | kiss_icp |" in table
+    assert "with the ground-truth error added" in table
     assert (out / "realism.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 

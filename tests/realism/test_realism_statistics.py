@@ -11,6 +11,10 @@ import pytest
 from numpy.typing import NDArray
 
 from pipeline.realism.statistics import RANGE_EDGES_M, ring_of_points, scan_statistics
+from pipeline.sim.effects import SensorEffects
+from pipeline.sim.raycast import Raycaster
+from pipeline.sim.sensors import get_sensor
+from pipeline.sim.simulate import SimSpec, make_world
 
 AZIMUTHS_DEG = tuple(-157.5 + 45.0 * k for k in range(8))
 """8 firings a ring, 45 deg apart, stored in ascending azimuth as KITTI and the simulator
@@ -38,6 +42,17 @@ def test_rings_are_found_by_angle_even_where_returns_are_missing() -> None:
     # gap, from ring 1's 112.5 deg to ring 2's -112.5 deg, is 135 deg
     gappy = ring_scan({0: [1, 2, 3, 4, 5, 6, 7], 1: [0, 1, 2, 3, 4, 5, 6], 2: [1, 2, 3, 5, 6, 7]})
     assert ring_of_points(gappy).tolist() == [0] * 7 + [1] * 7 + [2] * 6
+
+
+def test_rings_are_recovered_from_a_simulated_scans_stored_order() -> None:
+    """Every return of a simulated scan gets its laser's ring back, from the order alone."""
+    w = make_world(SimSpec("street", 1, 3))
+    sensor = get_sensor("hdl32", SensorEffects.ideal())
+    caster = Raycaster(w.vertices, w.triangles, sensor, w.materials)
+    pts = caster.scan(w.poses.T_world_lidar[1], np.random.default_rng(0))
+    el = np.degrees(np.arcsin(pts[:, 2] / np.linalg.norm(pts[:, :3], axis=1)))
+    beam = np.abs(el[:, None] - np.array(sensor.elevations_deg)[None]).argmin(axis=1)
+    assert (ring_of_points(pts) == beam).all()
 
 
 def test_statistics_of_a_full_and_a_gappy_scan() -> None:

@@ -18,7 +18,7 @@ from pipeline.realism.compare import (
 from pipeline.realism.statistics import ScanStatistics
 from pipeline.sim.kitti_dataset import SimulateKittiSection
 
-STATS = ScanStatistics(1.0, (1.0,), (1.0,), 0.0, 1)
+STATS = ScanStatistics(1.0, (1.0,), (1.0,), 0.0, 1, 1.0)
 
 
 def side(t_cm: list[float], r_deg: list[float], replicas: int = 1) -> SideErrors:
@@ -37,10 +37,11 @@ def two_slices() -> RealismResult:
     b_sim = [10.0 * v for v in a_real]
     slices = []
     for name, real, sim in (("A", a_real, a_sim), ("B", b_real, b_sim)):
+        simulated = {"gicp": side(sim, [v / 10 for v in sim], replicas=2)}
         slices.append(SliceResult(
             name, 0, 9, "rural", STATS, STATS,
-            {"gicp": side(real, [v / 10 for v in real])},
-            {"gicp": side(sim, [v / 10 for v in sim], replicas=2)}))
+            {"gicp": side(real, [v / 10 for v in real])}, simulated, simulated, None,
+            (0.0, 0.0)))
     return RealismResult(slices, ("gicp",), 2, "hdl64", 64, {})
 
 
@@ -101,8 +102,23 @@ def test_too_easy_misses_the_target_as_too_hard_does() -> None:
     """Simulated steps half the real ones (0.5 < 1 / 1.5) miss the target as 1.6x does."""
     real = [1.0, 2.0, 3.0]
     for factor, ok in ((0.5, False), (0.7, True), (1.45, True), (1.6, False)):
+        simulated = {"gicp": side([factor * v for v in real], [factor * v for v in real])}
         result = RealismResult([SliceResult(
-            "A", 0, 3, "rural", STATS, STATS, {"gicp": side(real, real)},
-            {"gicp": side([factor * v for v in real], [factor * v for v in real])})],
-            ("gicp",), 1, "hdl64", 64, {})
+            "A", 0, 3, "rural", STATS, STATS, {"gicp": side(real, real)}, simulated, simulated,
+            None, (0.0, 0.0))], ("gicp",), 1, "hdl64", 64, {})
         assert set(result.within_target().values()) == {ok}, factor
+
+
+def test_the_target_compares_the_side_with_the_ground_truths_error() -> None:
+    """Real 1, 2, 3 cm; simulated against the exact ground truth 0.5x (too easy), with the
+    ground-truth error added 1x: the target reads the latter, ``ratios("sim")`` the former."""
+    real = [1.0, 2.0, 3.0]
+    exact = {"gicp": side([0.5 * v for v in real], [0.5 * v for v in real])}
+    with_gt = {"gicp": side(real, real)}
+    result = RealismResult([SliceResult("A", 0, 3, "rural", STATS, STATS,
+                                        {"gicp": side(real, real)}, exact, with_gt, None,
+                                        (0.0, 0.0))], ("gicp",), 1, "hdl64", 64, {})
+    assert result.ratios()["gicp A median t"] == pytest.approx(1.0)
+    assert result.ratios("sim")["gicp A median t"] == pytest.approx(0.5)
+    assert all(result.within_target().values())
+    assert not any(result.within_target("sim").values())

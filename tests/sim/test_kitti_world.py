@@ -13,6 +13,7 @@ from click.testing import CliRunner
 
 from pipeline.errors import ConfigError
 from pipeline.sequence import SequenceReader
+from pipeline.sim.effects import SensorEffects
 from pipeline.sim.kitti_world import (
     ENVIRONMENTS,
     SCHEDULES,
@@ -56,8 +57,8 @@ def test_change_windows_show_the_first_change_of_environment() -> None:
 
 
 def _noise_free_scan(world, k: int) -> np.ndarray:  # type: ignore[no-untyped-def]
-    sensor = get_sensor("hdl64").with_noise(0.0, 0.0)
-    pts = Raycaster(world.vertices, world.triangles, sensor).scan(
+    sensor = get_sensor("hdl64", SensorEffects.ideal())
+    pts = Raycaster(world.vertices, world.triangles, sensor, world.materials).scan(
         world.poses.T_world_lidar[k], np.random.default_rng(0))
     return pts[np.linalg.norm(pts[:, :3], axis=1) < 90.0]
 
@@ -90,11 +91,14 @@ def _near_structure(path: Path, name: str, frame: int) -> float:
 
 def test_environments_differ_as_kitti_does(kitti_trajectories: Path) -> None:
     """Urban canyons close the view, residential streets less so, the country road and the
-    highway (sequence 01) leave it open: the structure the odometry has to work with."""
+    highway (sequence 01) leave it open: the structure the odometry has to work with. (The
+    highway's embankments carry shrubs 10-20 m off the road since issue 30: less open than the
+    country road, still less closed than a residential street.)"""
     share = {env: _near_structure(kitti_trajectories, name, frame) for env, name, frame in (
         ("urban", "07", 100), ("residential", "05", 200), ("rural", "04", 100),
         ("highway", "01", 300))}
-    assert share["urban"] > share["residential"] > 2 * max(share["rural"], share["highway"])
+    assert share["urban"] > share["residential"] > max(share["rural"], share["highway"])
+    assert share["rural"] < share["residential"] / 2
 
 
 def test_simulate_kitti_set_writes_labelled_hdl64_sequences(tmp_path: Path,
@@ -102,7 +106,7 @@ def test_simulate_kitti_set_writes_labelled_hdl64_sequences(tmp_path: Path,
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump({"base": {"seed": 3}, "simulate_kitti": {
         "trajectories": str(kitti_trajectories), "train": ["05"], "validation": ["04"],
-        "start": 697, "end": 702, "windows": [["04", 268, 280]], "motion_distortion": True}}))
+        "start": 697, "end": 702, "windows": [["04", 268, 280]], "motion": "sweep"}}))
     out = tmp_path / "sim"
     result = CliRunner().invoke(main, ["simulate-kitti-set", "--params", str(params),
                                        "--out", str(out)])

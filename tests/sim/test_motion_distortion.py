@@ -6,12 +6,15 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import yaml
 from click.testing import CliRunner
 
 from pipeline.geometry import interpolate_rotations
 from pipeline.odometry.base import Schedule
 from pipeline.odometry.kiss import KissIcpAdapter
 from pipeline.sequence import SequenceReader
+from pipeline.sim.dataset import SimulateSection
+from pipeline.sim.effects import SensorEffects
 from pipeline.sim.raycast import Raycaster
 from pipeline.sim.simulate import SimSpec, make_world, world_points
 from stages.cli import main
@@ -21,16 +24,18 @@ def test_sweeps_carry_per_point_time_and_land_on_the_mesh_by_it(tmp_path: Path) 
     """A distorted scan lands on the mesh only when each point takes the pose of its own time;
     by the stamp's pose alone it does not. Params and metadata say which mode was used."""
     out = tmp_path / "d.mcap"
-    result = CliRunner().invoke(main, ["simulate", "--world", "street", "--seed", "2",
-                                       "--frames", "6", "--sensor", "vlp16", "--noise", "0",
-                                       "--dropout", "0", "--motion-distortion", "--out", str(out)])
+    params = tmp_path / "params.yaml"  # an ideal sensor: the points land exactly on the mesh
+    params.write_text(yaml.safe_dump({"simulate": {"effects": SensorEffects.ideal().model_dump()}}))
+    result = CliRunner().invoke(main, ["simulate", "--params", str(params), "--world", "street",
+                                       "--seed", "2", "--frames", "6", "--sensor", "vlp16",
+                                       "--out", str(out)])
     assert result.exit_code == 0, result.output
     with SequenceReader(out) as r:
         scans, gt = list(r), r.ground_truth()
         assert r.info.extra["motion_distortion"].startswith("sweep: points fired over 1/10 s")
-    spec = SimSpec("street", 2, 6, "vlp16", range_noise_m=0.0, dropout=0.0,
-                   motion_distortion=True)
-    assert SimSpec.__dataclass_fields__["motion_distortion"].default is False
+    spec = SimSpec("street", 2, 6, "vlp16", effects=SensorEffects.ideal(), motion="sweep")
+    # distortion is on by default for moving sensors: the spec, the toy data set, the CLI
+    assert SimSpec("street", 2, 6).motion == "sweep" == SimulateSection().motion
     w = make_world(spec)
     caster = Raycaster(w.vertices, w.triangles, spec.sensor_model())
     scan = scans[2]
@@ -45,7 +50,9 @@ def test_sweeps_carry_per_point_time_and_land_on_the_mesh_by_it(tmp_path: Path) 
     assert np.quantile(caster.distance_to_mesh(by_time), 0.99) < 0.01
     by_stamp = caster.distance_to_mesh(world_points(scan))
     assert np.quantile(by_stamp, 0.99) > 0.1  # ~1 m of travel during the sweep
-    # kiss_icp: deskew uses the times (another result); without times it changes nothing
+    # kiss_icp: deskew uses the times (another result); without times it changes nothing;
+    # it deskews by default
+    assert KissIcpAdapter().options.deskew
     schedule = Schedule.constant(KissIcpAdapter().space.defaults(), len(scans))
     runs = {d: KissIcpAdapter(deskew=d).run(scans, schedule).T_world_lidar for d in (False, True)}
     assert np.abs(runs[True] - runs[False]).max() > 1e-3

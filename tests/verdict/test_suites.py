@@ -17,6 +17,7 @@ from pipeline.config import load_params, validate_section
 from pipeline.errors import ConfigError, InputError
 from pipeline.odometry.ndt import SPACE
 from pipeline.sim.dataset import SimulateSection
+from pipeline.sim.effects import SensorEffects
 from pipeline.verdict.headroom import (
     CandidateRuns,
     best_per_label,
@@ -78,7 +79,8 @@ def test_world_i_depends_on_its_root_and_i_alone() -> None:
 
 def test_worlds_follow_the_draw_and_the_training_sensor_model() -> None:
     section = VerdictSection()
-    simulate = SimulateSection(range_noise_m=0.05, dropout=0.02, motion_distortion=True)
+    effects = SensorEffects.ideal(range_noise_m=0.05, dropout=0.02)
+    simulate = SimulateSection(effects=effects, motion="compensated")
     for family in ("id", "ood"):
         draw = section.suites.draw(family)
         worlds = suite_worlds(section, family, sensor_template(simulate, 42))
@@ -88,8 +90,7 @@ def test_worlds_follow_the_draw_and_the_training_sensor_model() -> None:
             assert 2 <= len(segs) <= 4 and all(a != b for a, b in itertools.pairwise(segs))
             assert 900 <= w.spec.frames <= 1200
             assert w.spec.sensor == draw.sensors[i % len(draw.sensors)]
-            assert (w.spec.range_noise_m, w.spec.dropout, w.spec.motion_distortion) == (
-                0.05, 0.02, True)
+            assert (w.spec.effects, w.spec.motion) == (effects, "compensated")
             w.spec.check()
     ids = suite_worlds(section, "id", TEMPLATE)
     assert {w.spec.sensor for w in ids} == {"hdl32", "hdl64"}
