@@ -5,16 +5,17 @@ The real step error of an odometry is e = g + a: the ground truth's error g (OXT
 through the calibration, and KITTI's motion compensation of the scans; the same for every
 odometry) plus the odometry's own error a. Two parts of g are measured:
 - systematic: two odometries that work differently (GICP, plane to plane; KISS-ICP, point to
-  point) have different own errors, so the step error both show on average, the shared mean
-  m = mean over the slice's steps of (e1 + e2) / 2 (6-vector: translation [m], rotation vector
-  [rad]), is the ground truth's bias on that stretch;
-- random: white pose noise, from the trajectory itself (``white_sigma``: third differences of
-  the relative motions, which a smooth drive keeps near zero).
-A slice's ground-truth error is modelled as g ~ N(m, diag(white sigma^2)) a step; the
-simulated side, scored against its exact ground truth, gets such a g composed onto each step
-error, so both sides carry the same ground-truth error. (The shared variance of the two
-odometries is not used: where both struggle on the same frames, their errors correlate
-without the ground truth being wrong.)
+  point) have different own errors, so the mean step error both show is the ground truth's
+  bias on that stretch: per axis (translation [m], rotation vector [rad]) the smaller of the
+  two means where they have the same sign, else 0 (what both agree on at least);
+- random: white noise. Two bounds of its variance, each too large in its own way: the
+  trajectory's (``white_sigma``: third differences of the relative motions, which a smooth
+  drive keeps near zero; it also counts the car body's real quick motions) and the variance
+  the two odometries share (mean((e1 - m)(e2 - m)); it also counts what both get wrong on the
+  same hard frames). Per axis the smaller one is taken.
+A slice's ground-truth error is modelled as g ~ N(m, diag(variance)) a step; the simulated
+side, scored against its exact ground truth, gets such a g composed onto each step error, so
+both sides carry the same ground-truth error.
 """
 
 from __future__ import annotations
@@ -69,9 +70,13 @@ def twists(E: F64) -> F64:
 
 def shared_error(first: F64, second: F64, step_sigma: F64) -> GroundTruthError:
     """The ground-truth error model (module docstring) from two odometries' step errors
-    (twists (N, 6) each, the same steps) and the white noise of a step (6,)."""
-    m = 0.5 * (first + second).mean(axis=0)
-    return GroundTruthError(tuple(m.tolist()), tuple((np.asarray(step_sigma) ** 2).tolist()))
+    (twists (N, 6) each, the same steps) and the trajectory's bound of a step's white noise
+    (6,) per-axis sigma."""
+    m1, m2 = first.mean(axis=0), second.mean(axis=0)
+    m = np.where(np.sign(m1) == np.sign(m2), np.sign(m1) * np.minimum(abs(m1), abs(m2)), 0.0)
+    shared = np.clip(((first - m1) * (second - m2)).mean(axis=0), 0.0, None)
+    variance = np.minimum(shared, np.asarray(step_sigma) ** 2)
+    return GroundTruthError(tuple(m.tolist()), tuple(variance.tolist()))
 
 
 def white_sigma(T_world_lidar: F64) -> F64:

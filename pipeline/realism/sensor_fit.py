@@ -1,5 +1,5 @@
 """KITTI's HDL-64E as its scans show it: per-laser elevations and heights, and the sectors the
-car hides (docs/simulator.md, "KITTI's HDL-64E"). ``pipeline/sim/kitti_sensor.py`` holds the
+car hides (docs/simulator.md, "Sensor model"). ``pipeline/sim/kitti_sensor.py`` holds the
 values this estimate gave on the kitti_mini scans; ``adaptune realism`` can re-derive them.
 
 Per ring (``ring_of_points``): the points obey z = h + rho tan(e) (rho the horizontal range),

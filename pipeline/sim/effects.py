@@ -1,7 +1,9 @@
 """What a real spinning LiDAR does that an ideal ray caster does not: the switchable effects
 of the sensor model (docs/simulator.md, "Sensor effects", gives each one's physics and
 reference). ``SensorEffects`` is the nested ``effects`` mapping of the params sections
-``simulate`` and ``simulate_kitti``; every effect is off at 0 (or false).
+``simulate`` and ``simulate_kitti``; every effect is off at 0 (or false). The defaults are the
+values calibrated against real KITTI (docs/simulator.md, "Calibration against real KITTI");
+``KITTI_EFFECTS`` adds what is KITTI's recording's own: its car and its elevation error.
 """
 
 from __future__ import annotations
@@ -37,21 +39,21 @@ class SensorEffects(Section):
     pipeline/sim/kitti_sensor.py); HDL-64E only.
     """
 
-    range_noise_m: float = Field(0.02, ge=0.0, le=0.5)
-    range_noise_growth_m: float = Field(0.0, ge=0.0, le=0.5)
-    beam_divergence_mrad: float = Field(0.0, ge=0.0, le=20.0)
-    laser_range_bias_m: float = Field(0.0, ge=0.0, le=0.5)
-    laser_elevation_error_deg: float = Field(0.0, ge=0.0, le=1.0)
-    laser_azimuth_error_deg: float = Field(0.0, ge=0.0, le=1.0)
+    range_noise_m: float = Field(0.01, ge=0.0, le=0.5)
+    range_noise_growth_m: float = Field(0.01, ge=0.0, le=0.5)
+    beam_divergence_mrad: float = Field(1.5, ge=0.0, le=20.0)
+    laser_range_bias_m: float = Field(0.008, ge=0.0, le=0.5)
+    laser_elevation_error_deg: float = Field(0.03, ge=0.0, le=1.0)
+    laser_azimuth_error_deg: float = Field(0.05, ge=0.0, le=1.0)
     elevation_error_deg: float = Field(0.0, ge=-2.0, le=2.0)
-    angle_jitter_deg: float = Field(0.0, ge=0.0, le=1.0)
-    detection_range_m: float = Field(0.0, ge=0.0, le=1000.0)
+    angle_jitter_deg: float = Field(0.01, ge=0.0, le=1.0)
+    detection_range_m: float = Field(75.0, ge=0.0, le=1000.0)
     incidence_exponent: float = Field(0.3, ge=0.0, le=2.0)
     detection_spread: float = Field(0.5, gt=0.0, le=5.0)
     dropout: float = Field(0.01, ge=0.0, lt=1.0)
-    vegetation_free_path_m: float = Field(0.0, ge=0.0, le=20.0)
-    ground_cover_m: float = Field(0.0, ge=0.0, le=2.0)
-    surface_relief_m: float = Field(0.0, ge=0.0, le=1.0)
+    vegetation_free_path_m: float = Field(1.0, ge=0.0, le=20.0)
+    ground_cover_m: float = Field(0.15, ge=0.0, le=2.0)
+    surface_relief_m: float = Field(0.08, ge=0.0, le=1.0)
     ego_vehicle: bool = False
     unit_seed: int = Field(0, ge=0)
 
@@ -66,3 +68,9 @@ class SensorEffects(Section):
                                       "vegetation_free_path_m", "ground_cover_m",
                                       "surface_relief_m")}
         return cls.model_validate(off | {"ego_vehicle": False} | overrides)
+
+
+KITTI_EFFECTS = {"ego_vehicle": True, "elevation_error_deg": -0.205}
+"""The effects of KITTI's recording on top of the defaults (simulated KITTI's defaults):
+its car hides the lowest rings' sectors, its stored elevations are 0.205 deg low
+(pipeline/sim/kitti_sensor.py)."""

@@ -19,7 +19,7 @@ from pipeline.errors import InputError
 from pipeline.io_utils import output_folder
 from pipeline.sequence_index import check_split, write_index
 from pipeline.sim.dataset import simulate_all
-from pipeline.sim.effects import SensorEffects
+from pipeline.sim.effects import KITTI_EFFECTS, SensorEffects
 from pipeline.sim.kitti_world import SCHEDULES, KittiWorldEffects
 from pipeline.sim.sensors import SensorModel, SensorName, get_sensor
 from pipeline.sim.simulate import MotionMode, SimSummary, derive_seed
@@ -49,7 +49,8 @@ class SimulateKittiSection(Section):
     end: int | None = Field(None, ge=0)
     windows: list[tuple[str, int, int]] = Field(default_factory=list)
     sensor: SensorName = "hdl64"
-    effects: SensorEffects = Field(default_factory=lambda: SensorEffects.model_validate({}))
+    effects: SensorEffects = Field(
+        default_factory=lambda: SensorEffects.model_validate(KITTI_EFFECTS))
     world: KittiWorldEffects = Field(
         default_factory=lambda: KittiWorldEffects.model_validate({}))
     seed: int | None = Field(None, ge=0)

@@ -1,4 +1,4 @@
-"""KITTI's Velodyne HDL-64E S2 as its scans show it (docs/simulator.md, "KITTI's HDL-64E").
+"""KITTI's Velodyne HDL-64E S2 as its scans show it (docs/simulator.md, "Sensor model").
 
 Estimated by ``pipeline.realism.sensor_fit.fit_sensor`` from the 40 scans of kitti_mini
 (sequences 01, 04, 06, 10, frames 0-9; ``adaptune realism`` re-derives them): the elevation of

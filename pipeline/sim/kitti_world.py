@@ -6,11 +6,18 @@ Environments (the label of every frame):
   of 60 m (cross streets between them), cars parked nose to tail, street lamps, few trees;
 - ``residential``: detached houses 6-10 m high, 12-20 m back, gaps between them, hedges
   and fences, many trees, parked cars;
-- ``rural``: an open road through rolling fields: tree lines and bushes, power-line poles, now
-  and then a farm building far from the road, terrain that rises and falls beside the road;
+- ``rural``: an open road through rolling fields: hedgerows and shrubs 5-15 m off the road in
+  stretches, tree lines and bushes, delineator posts every 50 m, power-line poles, now and
+  then a farm building far from the road, terrain that rises and falls beside the road;
 - ``highway``: a wide carriageway with a guard rail on the median (posts every 4 m) and a
-  guard rail on the verge in stretches only, embankments, a sign now and then, far trees.
-  Along the road little but the rails constrains the motion: sequence 01.
+  guard rail on the verge in stretches only, embankments with shrubs 25-45 m off, a sign now
+  and then, far trees. Along the road little but the rails constrains the motion: sequence 01.
+
+The drive is extended by LEAD_M of straight road before its first and after its last pose, so
+that a window at either end of a drive has a world behind it too. Every triangle has a
+material (``pipeline.sim.materials``): asphalt within the road's half width, soil and grass
+beyond, foliage for crowns, hedges and bushes. ``KittiWorldEffects`` adds the soil's roughness,
+the road's camber and moving cars (``pipeline.sim.traffic``).
 
 ``SCHEDULES`` gives each of the sequences 00-10 a fixed schedule of environments along its
 frames, chosen from what each sequence is known to show (01 is KITTI's highway drive, 04 a
@@ -136,9 +143,9 @@ class KittiWorldEffects(Section):
     to the edges (0.025: German guidelines), ``traffic`` moving cars in the other lanes
     (``pipeline/sim/traffic.py``)."""
 
-    ground_roughness_m: float = Field(0.0, ge=0.0, le=1.0)
-    road_cross_slope: float = Field(0.0, ge=0.0, le=0.1)
-    traffic: bool = False
+    ground_roughness_m: float = Field(0.05, ge=0.0, le=1.0)
+    road_cross_slope: float = Field(0.025, ge=0.0, le=0.1)
+    traffic: bool = True
 
 
 def frame_environments(sequence: str, frames: int) -> list[str]:
@@ -482,8 +489,20 @@ def _residential(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side
     _trees(mb, site, s0, s1, side, rng, (6.0, 14.0), 0.75, (6.0, 11.0))
 
 
+def _delineators(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: float,
+                 lateral: float) -> None:
+    """Delineator posts (0.12 x 0.1 x 1 m) every DELINEATOR_M metres of route, ``lateral``
+    metres from the route (German rural roads and motorways: RPS / Leitpfosten)."""
+    for s in np.arange(np.ceil(s0 / DELINEATOR_M) * DELINEATOR_M, s1, DELINEATOR_M):
+        p, h, n, _ = site.at(float(s))
+        c = p + side * lateral * n
+        mb.add(*meshes.box(np.array([c[0], c[1], site.z(c) + 0.45]),
+                           np.array([0.12, 0.1, 1.1]), h), Material.METAL)
+
+
 def _rural(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: float,
            rng: np.random.Generator) -> None:
+    _delineators(mb, site, s0, s1, side, ROAD_HALF_WIDTH_M["rural"] + 0.5)
     if rng.random() < 0.6:
         _hedgerow(mb, site, s0, s1, side, rng, (5.0, 15.0), (0.8, 1.6))
     _trees(mb, site, s0, s1, side, rng, (6.0, 16.0), 0.6, (6.0, 14.0))
@@ -502,6 +521,8 @@ def _rural(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: floa
              side, 20.0, Material.BUILDING)
 
 
+DELINEATOR_M = 50.0
+"""Spacing of delineator posts along rural roads [m]."""
 RAIL_M = (0.45, 0.8)
 """Guard rail beam: bottom and top above the road [m]."""
 RAIL_POST_M = 4.0
@@ -521,14 +542,15 @@ def _highway(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, side: fl
             mb.add(*meshes.cylinder(base, 0.08, 4.5, sides=6), Material.METAL)
         mb.add(*meshes.box(np.array([c[0], c[1], z + 4.5]), np.array([3.2, 0.1, 2.0]), h),
                Material.METAL)
-    if rng.random() < 0.5:  # shrubs on the embankment
-        _hedgerow(mb, site, s0, s1, side, rng, (10.0, 20.0), (1.0, 2.0))
+    if rng.random() < 0.5:  # shrubs at the top of the embankment
+        _hedgerow(mb, site, s0, s1, side, rng, (25.0, 45.0), (1.0, 2.0))
     _trees(mb, site, s0, s1, side, rng, (40.0, 120.0), 0.6, (15.0, 50.0))
 
 
 def _rail(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, offset: float) -> None:
     """A guard rail ``offset`` metres left (+) or right (-) of the route along [s0, s1): a
-    beam as a vertical strip every metre, and posts every RAIL_POST_M metres of the route."""
+    beam as a vertical strip every metre, and posts every RAIL_POST_M metres of the route
+    behind it (as real guard rails: the beam hides the posts but below it)."""
     route = site.route
     i = np.arange(int(s0 / DS_M), min(len(route.xy), int(s1 / DS_M) + 1), max(1, round(1 / DS_M)))
     if len(i) < 2:
@@ -540,7 +562,7 @@ def _rail(mb: meshes.MeshBuilder, site: _Site, s0: float, s1: float, offset: flo
     mb.add(v, strip, Material.METAL)
     for s in np.arange(np.ceil(s0 / RAIL_POST_M) * RAIL_POST_M, s1, RAIL_POST_M):
         p, h, n, z0 = site.at(float(s))
-        c = p + (offset - np.sign(offset) * 0.15) * n
+        c = p + (offset + np.sign(offset) * 0.15) * n  # behind the beam, seen below it
         mb.add(*meshes.box(np.array([c[0], c[1], z0 + RAIL_M[1] / 2 - 0.1]),
                            np.array([0.12, 0.12, RAIL_M[1] + 0.2]), h), Material.METAL)
 

@@ -3,7 +3,7 @@
 Every triangle of a world carries a material (``Material``, stored as uint8). The sensor model
 reads its diffuse reflectance at 905 nm (``REFLECTANCE``: how strong the echo is, hence whether
 a return comes back, and the intensity) and whether it is foliage (``VEGETATION``: the beam
-enters the volume; docs/simulator.md, "Vegetation").
+enters the volume; docs/simulator.md, "Sensor effects").
 
 Reflectances are typical values of the ECOSTRESS spectral library (Meerdink et al., Remote
 Sensing of Environment 230, 2019) near 905 nm: asphalt 0.08-0.17, concrete and plaster
@@ -60,7 +60,7 @@ def reflectance_table() -> NDArray[np.float32]:
 
 RELIEF = {
     Material.GROUND: 1.0,
-    Material.ROAD: 0.1,
+    Material.ROAD: 0.03,
     Material.BUILDING: 1.0,
     Material.VEGETATION: 0.0,
     Material.VEHICLE: 1.0,

@@ -108,19 +108,10 @@ class Raycaster:
         phase = rng.uniform(0.0, np.deg2rad(self.sensor.azimuth_step_deg))
         c, si = np.cos(phase), np.sin(phase)
         Rz = np.array([[c, -si, 0.0], [si, c, 0.0], [0.0, 0.0, 1.0]], np.float32)
-        d_true = g.dirs_true
-        if e.angle_jitter_deg > 0.0:
-            d_true = _jitter(d_true, rng, np.deg2rad(e.angle_jitter_deg))
         R = T_col[:, :3, :3] @ Rz.astype(np.float64)  # (A or 1, 3, 3): lidar at the firing
-        if len(T_col) == 1:  # one pose: rotate the free rays only
-            d_free = d_true[g.active] if d_true is not g.dirs_true else g.dirs_true_free
-            dirs_w = d_free @ R[0].T.astype(np.float32)
-            orig_w = (g.height_free[:, None] * T_col[0, :3, 2].astype(np.float32)
-                      + (T_col[0, :3, 3] - self.origin).astype(np.float32))
-        else:
-            dirs_w = g.turn(d_true, R)[g.active]
-            orig_w = (g.turn(g.offsets, T_col[:, :3, :3])
-                      + g.per_column(T_col[:, :3, 3] - self.origin))[g.active]
+        dirs_w, orig_w = g.world_rays(R, T_col[:, :3, 3] - self.origin)
+        if e.angle_jitter_deg > 0.0:  # isotropic: the same in any frame
+            dirs_w = _jitter(dirs_w, rng, np.deg2rad(e.angle_jitter_deg))
         hits = self._cast(orig_w, dirs_w)
         if movers is not None and len(movers[1]):
             hits = _nearer(hits, _cast_movers(self._o3d, movers[0] - self.origin, movers[1],
@@ -136,8 +127,10 @@ class Raycaster:
                 t, cos_inc = _ground_cover(t, mat, cos_inc, e.ground_cover_m,
                                            e.vegetation_free_path_m, rng)
         if e.surface_relief_m > 0.0:
-            t = t + self._relief(orig_w[idx] + dirs_w[idx] * t[:, None], mat, cos_inc,
-                                 e.surface_relief_m)
+            rough = np.flatnonzero(RELIEF[mat] > 0.0)
+            hit_w = orig_w[idx[rough]] + dirs_w[idx[rough]] * t[rough, None]
+            t = t.copy()
+            t[rough] += self._relief(hit_w, mat[rough], cos_inc[rough], e.surface_relief_m)
         reflect = REFLECTANCE[mat]
         keep = _detected(t, reflect, cos_inc, e.detection_range_m, e.incidence_exponent,
                          e.detection_spread, rng)
@@ -146,16 +139,15 @@ class Raycaster:
         r = t + _range_noise(t, cos_inc, e.range_noise_m, e.range_noise_growth_m,
                              e.beam_divergence_mrad, rng) + g.range_bias[ray]
         keep &= (r >= self.sensor.min_range_m) & (r <= self.sensor.max_range_m)
-        ray, r = ray[keep], r[keep]
+        ray, r, ray_free = ray[keep], r[keep], idx[keep]
         out = np.empty((len(ray), 4), np.float32)
         if compensate and len(T_col) > 1:  # into the frame at the sweep's start
             T_rel = np.linalg.solve(T_col[0], T_col)  # (A, 4, 4) T_start_column
-            R_rel = T_rel[:, :3, :3] @ Rz.astype(np.float64)
-            d = g.turn(g.dirs_stored, R_rel)[ray]
-            o = (g.turn(g.offsets, T_rel[:, :3, :3]) + g.per_column(T_rel[:, :3, 3]))[ray]
-            out[:, :3] = d * r[:, None] + o
+            d, o = g.world_rays(T_rel[:, :3, :3] @ Rz.astype(np.float64), T_rel[:, :3, 3],
+                                stored=True)
+            out[:, :3] = d[ray_free] * r[:, None] + o[ray_free]
         else:
-            out[:, :3] = (g.dirs_stored[ray] @ Rz.T) * r[:, None] + g.offsets[ray]
+            out[:, :3] = _rotate(g.dirs_stored[ray], Rz) * r[:, None] + g.offsets[ray]
         out[:, 3] = np.clip(reflect[keep] * cos_inc[keep], 0.0, 1.0)
         return out, ray % g.azimuths
 
@@ -222,7 +214,7 @@ class Relief:
     """Unit-variance 3-D noise fixed in the world: a sum of plane waves of 0.3-2 m wavelength
     (the relief a mesh leaves out: recessed windows and sills, car bodies, clods, bark)."""
 
-    def __init__(self, rng: np.random.Generator, waves: int = 12) -> None:
+    def __init__(self, rng: np.random.Generator, waves: int = 8) -> None:
         lam = np.exp(rng.uniform(np.log(0.3), np.log(2.0), waves))
         k = rng.standard_normal((waves, 3))
         self.k = (2 * np.pi / lam[:, None] * k / np.linalg.norm(k, axis=1, keepdims=True)
@@ -238,7 +230,8 @@ class _BeamGeometry:
     """The rays of one sensor unit (its calibration errors drawn once from
     ``effects.unit_seed``): reported and true directions (B * A, 3) in the lidar frame at phase
     0, laser origins (B * A, 3), each ray's range offset, and the rays the carrier leaves free
-    (``active``)."""
+    (``active``, beam-major; ``active_cm`` the same rays in column-major order, the layout in
+    which a sweep turns every column by its own rotation)."""
 
     def __init__(self, sensor: SensorModel) -> None:
         e = sensor.effects
@@ -249,36 +242,50 @@ class _BeamGeometry:
         true_el = np.asarray(sensor.elevations_deg) - e.elevation_error_deg - el_err
         self.beams, self.azimuths = sensor.beams, sensor.azimuths
         self.active = np.flatnonzero(~sensor.hidden_rays())
+        self.active_cm = (self.active % self.azimuths) * self.beams + self.active // self.azimuths
         self.dirs_stored = sensor.ray_directions()
-        self.dirs_true = sensor.ray_directions(elevations_deg=true_el,
-                                               azimuth_offsets_deg=-az_err)
-        self.offsets = np.zeros((len(self.dirs_true), 3), np.float32)
-        self.offsets[:, 2] = np.repeat(sensor.laser_heights(), self.azimuths)
+        dirs_true = sensor.ray_directions(elevations_deg=true_el, azimuth_offsets_deg=-az_err)
+        self.heights = sensor.laser_heights().astype(np.float32)
+        self.offsets = np.zeros((len(dirs_true), 3), np.float32)
+        self.offsets[:, 2] = np.repeat(self.heights, self.azimuths)
         self.range_bias = np.repeat(bias, self.azimuths).astype(np.float32)
-        self.dirs_true_free = self.dirs_true[self.active]
         self.height_free = self.offsets[self.active, 2].copy()
+        self._true = (dirs_true[self.active], self._columns(dirs_true))
+        self._stored = (self.dirs_stored[self.active], self._columns(self.dirs_stored))
 
-    def turn(self, v: F32, R: F64) -> F32:
-        """Vectors ``v`` (B * A, 3) turned by their column's rotation (``R`` (A, 3, 3), or
-        (1, 3, 3) for all): a batched product over the columns."""
+    def _columns(self, v: F32) -> F32:
+        """(A, B, 3) column-major copy of the beam-major (B * A, 3) ``v``."""
+        return np.ascontiguousarray(v.reshape(self.beams, self.azimuths, 3).transpose(1, 0, 2))
+
+    def world_rays(self, R: F64, t: F64, stored: bool = False) -> tuple[F32, F32]:
+        """Directions and origins (M, 3) of the free rays (true ones, or as the sensor reports
+        them with ``stored``) fired from column poses (``R`` (A, 3, 3), ``t`` (A, 3); or one
+        pose (1, ...) for all columns)."""
+        free, cols = self._true if not stored else self._stored
+        R32, t32 = R.astype(np.float32), t.astype(np.float32)
         if len(R) == 1:
-            return v @ R[0].T.astype(np.float32)
-        cols = v.reshape(self.beams, self.azimuths, 3).transpose(1, 0, 2)  # (A, B, 3)
-        out = np.matmul(cols, R.transpose(0, 2, 1).astype(np.float32))
-        return out.transpose(1, 0, 2).reshape(-1, 3)
+            dirs = _rotate(free, R32[0])
+            orig = self.height_free[:, None] * R32[0, :, 2] + t32[0]
+            return dirs, orig
+        dirs = np.einsum("abj,aij->abi", cols, R32).reshape(-1, 3)[self.active_cm]
+        col = self.active_cm // self.beams
+        orig = t32[col]
+        if self.heights.any():
+            orig = orig + self.height_free[:, None] * R32[col, :, 2]
+        return dirs, orig
 
-    def per_column(self, x: F64) -> F32:
-        """(B * A, 3) the column's vector of ``x`` (A, 3) (or (1, 3) for all) for every ray."""
-        if len(x) == 1:
-            return np.broadcast_to(x.astype(np.float32), (self.beams * self.azimuths, 3))
-        return np.tile(x.astype(np.float32), (self.beams, 1))
+
+def _rotate(v: F32, R: F32) -> F32:
+    """(M, 3) vectors ``v`` turned by one rotation R (3, 3): v R^T, without BLAS (whose
+    threads only cost time for an inner dimension of 3)."""
+    return np.einsum("ij,kj->ik", v, R.astype(np.float32))
 
 
 def _jitter(d: F32, rng: np.random.Generator, sigma_rad: float) -> F32:
     """Directions ``d`` (M, 3) turned at random by N(0, sigma) about both axes across the
-    ray (an isotropic perturbation, the part along the ray removed by normalising)."""
-    out = d + rng.standard_normal(d.shape, dtype=np.float32) * np.float32(sigma_rad)
-    return out / np.linalg.norm(out, axis=1, keepdims=True)
+    ray (an isotropic perturbation; its part along the ray changes the length by a factor
+    1 + O(sigma^2), negligible at the jitters of a LiDAR)."""
+    return d + rng.standard_normal(d.shape, dtype=np.float32) * np.float32(sigma_rad)
 
 
 def _cast_movers(o3d: object, vertices: F64, triangles: NDArray[np.int64], origins: F32,
@@ -345,9 +352,10 @@ def _detected(t: F32, reflect: F32, cos_inc: F32, range_m: float, exponent: floa
     all)."""
     if range_m <= 0.0:
         return np.ones(len(t), bool)
-    power = reflect * np.maximum(cos_inc, 1e-6) ** np.float32(exponent) / np.maximum(t, 0.1) ** 2
-    margin = np.log(power * np.float32(range_m**2 / 0.1)) / np.float32(spread)
-    return rng.standard_normal(len(t), dtype=np.float32) < margin
+    log_power = (np.log(reflect * np.float32(range_m**2 / 0.1))
+                 + np.float32(exponent) * np.log(np.maximum(cos_inc, np.float32(1e-6)))
+                 - 2.0 * np.log(np.maximum(t, np.float32(0.1))))
+    return rng.standard_normal(len(t), dtype=np.float32) * np.float32(spread) < log_power
 
 
 def _range_noise(t: F32, cos_inc: F32, sigma0: float, growth: float, divergence_mrad: float,

@@ -113,25 +113,30 @@ def iter_scans(
     world: World, sensor: SensorModel, seed: int, frames: range | None = None,
     motion: MotionMode = "none",
 ) -> Iterator[Scan]:
-    """Ray-cast scans of ``world``; frame k's noise comes from the seed (seed, 1, k) alone,
-    so any frame can be reproduced without the ones before it. A sweep (``motion``) runs from
-    pose k to pose k + 1 (the last one continues the motion before it); the ground truth is
-    the pose at the stamp, the sweep's start. The world's traffic is where it is at the stamp
-    (instantaneous) or half a sweep later."""
+    """Ray-cast scans of ``world`` (``scan_frame`` for each of ``frames``, default all)."""
     caster = Raycaster(world.vertices, world.triangles, sensor, world.materials, world.seed)
-    T_all = world.poses.T_world_lidar
     for k in frames if frames is not None else range(world.frames):
-        T = T_all[k]
-        stamp_ns = int(world.poses.stamps_ns[k])
-        rng = np.random.default_rng([seed, 1, k])
-        when_s = stamp_ns * 1e-9 + (0.0 if motion == "none" else 0.5 / sensor.rate_hz)
-        movers = world.traffic.mesh_at(when_s) if world.traffic is not None else None
-        if motion == "none":
-            yield Scan(k, stamp_ns, caster.scan(T, rng, movers), T)
-            continue
-        T_end = T_all[k + 1] if k + 1 < len(T_all) else T @ inv_se3(T_all[k - 1]) @ T
-        pts, time_s = caster.sweep(T, T_end, rng, movers, compensate=motion == "compensated")
-        yield Scan(k, stamp_ns, pts, T, None if motion == "compensated" else time_s)
+        yield scan_frame(caster, world, seed, k, motion)
+
+
+def scan_frame(caster: Raycaster, world: World, seed: int, k: int,
+               motion: MotionMode = "none") -> Scan:
+    """Frame k of ``world`` cast by ``caster``: its noise comes from the seed (seed, 1, k)
+    alone, so any frame can be reproduced without the ones before it. A sweep (``motion``)
+    runs from pose k to pose k + 1 (the last one continues the motion before it); the ground
+    truth is the pose at the stamp, the sweep's start. The world's traffic is where it is at
+    the stamp (instantaneous) or half a sweep later."""
+    T_all = world.poses.T_world_lidar
+    T = T_all[k]
+    stamp_ns = int(world.poses.stamps_ns[k])
+    rng = np.random.default_rng([seed, 1, k])
+    when_s = stamp_ns * 1e-9 + (0.0 if motion == "none" else 0.5 / caster.sensor.rate_hz)
+    movers = world.traffic.mesh_at(when_s) if world.traffic is not None else None
+    if motion == "none":
+        return Scan(k, stamp_ns, caster.scan(T, rng, movers), T)
+    T_end = T_all[k + 1] if k + 1 < len(T_all) else T @ inv_se3(T_all[k - 1]) @ T
+    pts, time_s = caster.sweep(T, T_end, rng, movers, compensate=motion == "compensated")
+    return Scan(k, stamp_ns, pts, T, None if motion == "compensated" else time_s)
 
 
 def simulate_sequence(

@@ -1,5 +1,5 @@
 """Moving vehicles: boxes that drive along lanes of a route at their own speeds
-(docs/simulator.md, "Moving vehicles").
+(docs/simulator.md, "World effects").
 
 A ``Traffic`` holds every vehicle of a world (lane offset from the route [m], left positive;
 arc position at time 0 [m]; signed speed along the route [m/s]); ``mesh_at(t_s)`` is the

@@ -12,13 +12,17 @@ from pipeline.realism.ground_truth import shared_error, twists, white_noise
 
 def test_the_error_two_odometries_share_is_the_ground_truths() -> None:
     """Two odometries with independent own errors a, b (4 mm a step) on top of one ground-truth
-    error g: the shared model's mean is g, and errors drawn from it average g."""
+    error g: the shared model's mean is g, with no shared variance; errors drawn from it average
+    g. Opposite errors (g and -g) are not shared."""
     rng = np.random.default_rng(0)
     g = np.array([0.0, 0.01, 0.0, 0.0, 0.0, 0.001])  # what the ground truth gets wrong
     a, b = rng.normal(0, 0.004, (200, 6)), rng.normal(0, 0.004, (200, 6))
     shared = shared_error(g + a, g + b, np.full(6, 1e-4))
     np.testing.assert_allclose(shared.mean, g, atol=1e-3)
     assert shared.rms_t_cm == pytest.approx(1.0, abs=0.15)
+    assert max(shared.variance) <= 1e-8  # independent errors share no variance
+    # errors the two do not agree on are not the ground truth's
+    assert shared_error(a + g, b - g, np.full(6, 1e-4)).rms_t_cm < 0.2
     E = np.tile(np.eye(4), (5000, 1, 1))
     drawn = twists(shared.compose(E, rng))
     np.testing.assert_allclose(drawn.mean(axis=0), shared.mean, atol=3e-4)

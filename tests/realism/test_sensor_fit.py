@@ -1,4 +1,4 @@
-"""KITTI's HDL-64E as its scans show it (docs/simulator.md, "KITTI's HDL-64E"): the table in
+"""KITTI's HDL-64E as its scans show it (docs/simulator.md, "Sensor model"): the table in
 pipeline/sim/kitti_sensor.py is what pipeline/realism/sensor_fit.py derives from the kitti_mini
 scans."""
 
