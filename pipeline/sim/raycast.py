@@ -20,12 +20,16 @@ beside the static world.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.sim.effects import SensorEffects
 from pipeline.sim.materials import Material, reflectance_table, relief_table
+from pipeline.sim.returns_kernel import shape_returns
 from pipeline.sim.sensors import SensorModel
 
 F64 = NDArray[np.float64]
@@ -70,11 +74,13 @@ class Raycaster:
                           else np.asarray(materials, np.uint8))
         self._beam = _BeamGeometry(sensor)
         self._bumps = Relief(np.random.default_rng([world_seed, 73]))
+        self._settings = _settings(sensor.effects, sensor.min_range_m, sensor.max_range_m)
 
     def scan(self, T_world_lidar: F64, rng: np.random.Generator,
              movers: tuple[F64, NDArray[np.int64]] | None = None) -> F32:
         """(N, 4) float32 points [m] in the lidar frame + intensity in [0, 1]."""
-        return self._scan(T_world_lidar[None], rng, movers, compensate=False)[0]
+        with _one_blas_thread():
+            return self._scan(T_world_lidar[None], rng, movers, compensate=False)[0]
 
     def sweep(self, T_start: F64, T_end: F64, rng: np.random.Generator,
               movers: tuple[F64, NDArray[np.int64]] | None = None,
@@ -95,7 +101,8 @@ class Raycaster:
         turn = Rotation.from_rotvec(alpha[:, None] * delta).as_matrix()
         T_col[:, :3, :3] = T_start[:3, :3] @ turn
         T_col[:, :3, 3] = T_start[:3, 3] + alpha[:, None] * (T_end[:3, 3] - T_start[:3, 3])
-        pts, col = self._scan(T_col, rng, movers, compensate)
+        with _one_blas_thread():
+            pts, col = self._scan(T_col, rng, movers, compensate)
         return pts, (alpha[col] / s.rate_hz).astype(np.float32)
 
     def _scan(self, T_col: F64, rng: np.random.Generator,
@@ -116,40 +123,26 @@ class Raycaster:
         if movers is not None and len(movers[1]):
             hits = _nearer(hits, _cast_movers(self._o3d, movers[0] - self.origin, movers[1],
                                               orig_w, dirs_w))
-        idx = np.flatnonzero(np.isfinite(hits.t))
-        t, normal, mat = hits.t[idx], hits.normal[idx], hits.material[idx]
-        cos_inc = np.abs(np.einsum("ij,ij->i", normal, dirs_w[idx]))
+        t, cos_set = hits.t, np.full(len(hits.t), -1.0, np.float32)
         if e.vegetation_free_path_m > 0.0:
-            t, cos_inc = self._foliage(idx, t, mat, cos_inc, orig_w, dirs_w, rng)
-            back = np.isfinite(t)
-            idx, t, mat, cos_inc = idx[back], t[back], mat[back], cos_inc[back]
-            if e.ground_cover_m > 0.0:
-                t, cos_inc = _ground_cover(t, mat, cos_inc, e.ground_cover_m,
-                                           e.vegetation_free_path_m, rng)
-        if e.surface_relief_m > 0.0:
-            rough = np.flatnonzero(RELIEF[mat] > 0.0)
-            hit_w = orig_w[idx[rough]] + dirs_w[idx[rough]] * t[rough, None]
             t = t.copy()
-            t[rough] += self._relief(hit_w, mat[rough], cos_inc[rough], e.surface_relief_m)
-        reflect = REFLECTANCE[mat]
-        keep = _detected(t, reflect, cos_inc, e.detection_range_m, e.incidence_exponent,
-                         e.detection_spread, rng)
-        keep &= rng.random(len(t), dtype=np.float32) >= np.float32(e.dropout)
-        ray = g.active[idx]
-        r = t + _range_noise(t, cos_inc, e.range_noise_m, e.range_noise_growth_m,
-                             e.beam_divergence_mrad, rng) + g.range_bias[ray]
-        keep &= (r >= self.sensor.min_range_m) & (r <= self.sensor.max_range_m)
-        ray, r, ray_free = ray[keep], r[keep], idx[keep]
-        out = np.empty((len(ray), 4), np.float32)
+            self._foliage(t, cos_set, hits, orig_w, dirs_w, rng)
         if compensate and len(T_col) > 1:  # into the frame at the sweep's start
             T_rel = np.linalg.solve(T_col[0], T_col)  # (A, 4, 4) T_start_column
-            d, o = g.world_rays(T_rel[:, :3, :3] @ Rz.astype(np.float64), T_rel[:, :3, 3],
-                                stored=True)
-            out[:, :3] = d[ray_free] * r[:, None] + o[ray_free]
+            out_dirs, out_orig = g.world_rays(T_rel[:, :3, :3] @ Rz.astype(np.float64),
+                                              T_rel[:, :3, 3], stored=True)
         else:
-            out[:, :3] = _rotate(g.dirs_stored[ray], Rz) * r[:, None] + g.offsets[ray]
-        out[:, 3] = np.clip(reflect[keep] * cos_inc[keep], 0.0, 1.0)
-        return out, ray % g.azimuths
+            out_dirs, out_orig = _rotate(g.dirs_stored_free, Rz), g.offsets_free
+        height = np.zeros(len(t), np.float32)
+        if e.surface_relief_m > 0.0:  # the surfaces' relief at the hits, fixed in the world
+            rough = np.flatnonzero(np.isfinite(t) & (RELIEF[hits.material] > 0.0))
+            hit_w = orig_w[rough] + dirs_w[rough] * t[rough, None]
+            height[rough] = self._bumps(hit_w, self.origin) * (
+                np.float32(e.surface_relief_m) * RELIEF[hits.material[rough]])
+        points, free = shape_returns(
+            int(rng.integers(2**31)), t, hits.normal, hits.material, cos_set, height, dirs_w,
+            g.range_bias_free, out_dirs, out_orig, REFLECTANCE, self._settings)
+        return points, g.active[free] % g.azimuths
 
     def _cast(self, origins: F32, dirs: F32) -> Hits:
         """Cast rays (M, 3) + (M, 3) against the world."""
@@ -164,45 +157,35 @@ class Raycaster:
         mat[ok] = self.materials[prim[ok]]
         return Hits(t, hit["primitive_normals"].numpy(), mat)
 
-    def _relief(self, hit_w: F32, mat: NDArray[np.uint8], cos_inc: F32,
-                scale_m: float) -> F32:
-        """Range change [m] of hits at ``hit_w`` (relative to ``self.origin``) from the relief
-        of the surfaces: a height field along the normal, fixed in the world (``self._bumps``,
-        at world coordinates: every window of a world sees the same relief), of sigma
-        ``scale_m`` x the material's factor (``RELIEF``), seen along the ray."""
-        height = self._bumps(hit_w + self.origin.astype(np.float32)) * (
-            np.float32(scale_m) * RELIEF[mat])
-        return (height / np.maximum(cos_inc, np.float32(0.2))).astype(np.float32)
-
-    def _foliage(self, idx: NDArray[np.int64], t: F32, mat: NDArray[np.uint8], cos_inc: F32,
-                 orig_w: F32, dirs_w: F32, rng: np.random.Generator) -> tuple[F32, F32]:
-        """Rays ``idx`` whose first hit (range ``t``) is foliage enter it: each travels an
-        exponential depth (mean free path) and returns from there unless it leaves the crown
-        first (then the next surface answers, foliage hit from outside only at its face). A
-        return from inside has the incidence of a random leaf (cos uniform)."""
-        veg = np.flatnonzero(mat == Material.VEGETATION)
+    def _foliage(self, t: F32, cos_set: F32, hits: Hits, orig_w: F32, dirs_w: F32,
+                 rng: np.random.Generator) -> None:
+        """Rays whose first hit is foliage enter it: each travels an exponential depth (mean
+        free path) and returns from there unless it leaves the crown first (then the next
+        surface answers; foliage hit from outside only at its face). Updates the ranges ``t``
+        and sets the incidence of a return from inside (``cos_set``: a random leaf's, cos
+        uniform) in place."""
+        veg = np.flatnonzero(hits.material == Material.VEGETATION)
         if not len(veg):
-            return t, cos_inc
-        t, cos_inc = t.copy(), cos_inc.copy()
+            return
         depth = rng.exponential(self.sensor.effects.vegetation_free_path_m,
                                 len(veg)).astype(np.float32)
         leaf = rng.uniform(0.0, 1.0, len(veg)).astype(np.float32)
-        rays, start = idx[veg], t[veg] + VEGETATION_STEP_M
-        inner = self._cast(orig_w[rays] + dirs_w[rays] * start[:, None], dirs_w[rays])
+        start = t[veg] + VEGETATION_STEP_M
+        inner = self._cast(orig_w[veg] + dirs_w[veg] * start[:, None], dirs_w[veg])
         inside = depth < inner.t
         t[veg[inside]] += depth[inside]
-        cos_inc[veg[inside]] = leaf[inside]
+        cos_set[veg[inside]] = leaf[inside]
         out = ~inside
         exits = out & (inner.material == Material.VEGETATION)
         solid = out & ~exits
         t[veg[solid]] = start[solid] + inner.t[solid]
+        cos_set[veg[solid]] = np.abs(_dot(inner.normal[solid], dirs_w[veg[solid]]))
         if exits.any():
             far = start[exits] + inner.t[exits] + VEGETATION_STEP_M
-            r = rays[exits]
+            r = veg[exits]
             behind = self._cast(orig_w[r] + dirs_w[r] * far[:, None], dirs_w[r])
-            t[veg[exits]] = far + behind.t
-            cos_inc[veg[exits]] = np.abs(np.einsum("ij,ij->i", behind.normal, dirs_w[r]))
-        return t, cos_inc
+            t[r] = far + behind.t
+            cos_set[r] = np.abs(_dot(behind.normal, dirs_w[r]))
 
     def distance_to_mesh(self, points_world: F64) -> F64:
         """(N,) unsigned distance [m] from world points (N, 3) to the mesh."""
@@ -211,8 +194,9 @@ class Raycaster:
 
 
 class Relief:
-    """Unit-variance 3-D noise fixed in the world: a sum of plane waves of 0.3-2 m wavelength
-    (the relief a mesh leaves out: recessed windows and sills, car bodies, clods, bark)."""
+    """The waves of a unit-variance 3-D noise fixed in the world: a sum of plane waves of
+    0.3-2 m wavelength (the relief a mesh leaves out: recessed windows and sills, car bodies,
+    clods, bark). ``k`` (W, 3) wave vectors [rad/m], ``phase`` (W,) [rad]."""
 
     def __init__(self, rng: np.random.Generator, waves: int = 8) -> None:
         lam = np.exp(rng.uniform(np.log(0.3), np.log(2.0), waves))
@@ -220,10 +204,17 @@ class Relief:
         self.k = (2 * np.pi / lam[:, None] * k / np.linalg.norm(k, axis=1, keepdims=True)
                   ).astype(np.float32)
         self.phase = rng.uniform(0.0, 2 * np.pi, waves).astype(np.float32)
-        self.amp = np.float32(np.sqrt(2.0 / waves))
 
-    def __call__(self, p: F32) -> F32:
-        return (np.sin(p @ self.k.T + self.phase) * self.amp).sum(axis=1).astype(np.float32)
+        self._k_t = np.ascontiguousarray(self.k.T)
+
+    def __call__(self, p: F32, origin: F64) -> F32:
+        """(N,) the noise at points (N, 3) [m] given relative to ``origin`` (3,) [m] (the
+        phases are moved there in float64: the field stays fixed in the world to the mm)."""
+        phase = ((self.k.astype(np.float64) @ origin + self.phase) % (2 * np.pi))
+        arg = p @ self._k_t
+        arg += phase.astype(np.float32)
+        np.sin(arg, out=arg)
+        return arg.sum(axis=1) * np.float32(np.sqrt(2.0 / len(self.phase)))
 
 
 class _BeamGeometry:
@@ -250,6 +241,9 @@ class _BeamGeometry:
         self.offsets[:, 2] = np.repeat(self.heights, self.azimuths)
         self.range_bias = np.repeat(bias, self.azimuths).astype(np.float32)
         self.height_free = self.offsets[self.active, 2].copy()
+        self.offsets_free = self.offsets[self.active]
+        self.range_bias_free = self.range_bias[self.active]
+        self.dirs_stored_free = self.dirs_stored[self.active]
         self._true = (dirs_true[self.active], self._columns(dirs_true))
         self._stored = (self.dirs_stored[self.active], self._columns(self.dirs_stored))
 
@@ -267,7 +261,7 @@ class _BeamGeometry:
             dirs = _rotate(free, R32[0])
             orig = self.height_free[:, None] * R32[0, :, 2] + t32[0]
             return dirs, orig
-        dirs = np.einsum("abj,aij->abi", cols, R32).reshape(-1, 3)[self.active_cm]
+        dirs = np.matmul(cols, R32.transpose(0, 2, 1)).reshape(-1, 3)[self.active_cm]
         col = self.active_cm // self.beams
         orig = t32[col]
         if self.heights.any():
@@ -275,10 +269,28 @@ class _BeamGeometry:
         return dirs, orig
 
 
+@functools.cache
+def _blas_controller() -> Any:
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
+
+
+def _one_blas_thread() -> Any:
+    """A context in which BLAS runs on one thread: the scan's products are (M, 3) by (3, k),
+    which OpenBLAS's threads slow down by 10-50 times when the cores are busy (and the
+    simulator runs in processes of its own anyway)."""
+    return _blas_controller().limit(limits=1, user_api="blas")
+
+
 def _rotate(v: F32, R: F32) -> F32:
-    """(M, 3) vectors ``v`` turned by one rotation R (3, 3): v R^T, without BLAS (whose
-    threads only cost time for an inner dimension of 3)."""
-    return np.einsum("ij,kj->ik", v, R.astype(np.float32))
+    """(M, 3) vectors ``v`` turned by one rotation R (3, 3): v R^T."""
+    return v @ np.ascontiguousarray(R.T, np.float32)
+
+
+def _dot(a: F32, b: F32) -> F32:
+    """(M,) row-wise dot products of (M, 3) arrays."""
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
 
 
 def _jitter(d: F32, rng: np.random.Generator, sigma_rad: float) -> F32:
@@ -327,46 +339,11 @@ def _nearer(a: Hits, b: Hits) -> Hits:
                 np.where(closer, b.material, a.material))
 
 
-def _ground_cover(t: F32, mat: NDArray[np.uint8], cos_inc: F32, height_m: float,
-                  free_path_m: float, rng: np.random.Generator) -> tuple[F32, F32]:
-    """Returns from ground (soil and grass) come from a layer of grass ``height_m`` high on
-    it: the beam enters the layer (height_m / cos(incidence) before the soil) and returns an
-    exponential depth (mean ``free_path_m``) in, or from the soil when it gets through; a
-    return from a blade has the incidence of a random blade."""
-    grass = np.flatnonzero(mat == Material.GROUND)
-    if not len(grass):
-        return t, cos_inc
-    t, cos_inc = t.copy(), cos_inc.copy()
-    path = np.float32(height_m) / np.maximum(cos_inc[grass], np.float32(0.05))
-    depth = rng.exponential(free_path_m, len(grass)).astype(np.float32)
-    blade = depth < path
-    t[grass[blade]] -= path[blade] - depth[blade]
-    cos_inc[grass[blade]] = rng.uniform(0.0, 1.0, int(blade.sum())).astype(np.float32)
-    return t, cos_inc
-
-
-def _detected(t: F32, reflect: F32, cos_inc: F32, range_m: float, exponent: float,
-              spread: float, rng: np.random.Generator) -> NDArray[np.bool_]:
-    """Whether each echo comes back: Phi(ln(power / threshold) / spread), power =
-    reflectance cos(incidence)^exponent / t^2, threshold = 0.1 / range_m^2 (``range_m`` 0:
-    all)."""
-    if range_m <= 0.0:
-        return np.ones(len(t), bool)
-    log_power = (np.log(reflect * np.float32(range_m**2 / 0.1))
-                 + np.float32(exponent) * np.log(np.maximum(cos_inc, np.float32(1e-6)))
-                 - 2.0 * np.log(np.maximum(t, np.float32(0.1))))
-    return rng.standard_normal(len(t), dtype=np.float32) * np.float32(spread) < log_power
-
-
-def _range_noise(t: F32, cos_inc: F32, sigma0: float, growth: float, divergence_mrad: float,
-                 rng: np.random.Generator) -> F32:
-    """Gaussian range noise [m]: sigma^2 = sigma0^2 + (growth t / 100)^2
-    + (t tan(incidence) divergence / sqrt(12))^2 (SensorEffects)."""
-    var = np.full(len(t), sigma0**2, np.float32)
-    if growth > 0.0:
-        var += (np.float32(growth / 100.0) * t) ** 2
-    if divergence_mrad > 0.0:
-        cos = np.clip(cos_inc, 0.05, 1.0)
-        tan = np.sqrt(1.0 - cos**2) / cos
-        var += (t * tan * np.float32(divergence_mrad * 1e-3 / np.sqrt(12.0))) ** 2
-    return rng.standard_normal(len(t), dtype=np.float32) * np.sqrt(var)
+def _settings(e: SensorEffects, min_range_m: float, max_range_m: float) -> NDArray[np.float64]:
+    """The numbers ``shape_returns`` takes (its docstring), from the effects."""
+    log_c = np.log(e.detection_range_m**2 / 0.1) if e.detection_range_m > 0.0 else np.nan
+    return np.array([e.ground_cover_m if e.vegetation_free_path_m > 0.0 else 0.0,
+                     e.vegetation_free_path_m, log_c,
+                     e.incidence_exponent, e.detection_spread, e.dropout,
+                     e.range_noise_m**2, e.range_noise_growth_m / 100.0,
+                     e.beam_divergence_mrad * 1e-3 / np.sqrt(12.0), min_range_m, max_range_m])
