@@ -24,14 +24,17 @@ scans = [Scan(k, k * 10**8, np.c_[pts + [0.1 * k, 0, 0], np.zeros(2000)].astype(
          for k in range(2)]
 ndt = NdtAdapter()
 ndt.run(scans, Schedule.constant(ndt.space.defaults(), 2))  # the issue's case: an NDT run
-print("ok", bool(ok))
+from pipeline.sim.simulate import SimSpec, iter_scans, make_world
+spec = SimSpec("cave", 1, 2, "vlp16")  # the simulator's per-return kernel
+scan = next(iter_scans(make_world(spec), spec.sensor_model(), 1, motion=spec.motion))
+print("ok", bool(ok) and len(scan.points_lidar) > 0)
 """
 
 
 def test_kernels_cache_in_the_user_cache_dir_not_the_package(tmp_path: Path) -> None:
-    """A read-only copy of the package runs its cached numba kernels (the descriptor's, and
-    NDT's in an NDT run): cache files appear under $XDG_CACHE_HOME/adaptune/numba and none
-    inside the package."""
+    """A read-only copy of the package runs its cached numba kernels (the descriptor's, NDT's
+    in an NDT run, the simulator's in a simulated scan): cache files appear under
+    $XDG_CACHE_HOME/adaptune/numba and none inside the package."""
     pkg = tmp_path / "site"
     shutil.copytree(REPO / "pipeline", pkg / "pipeline",
                     ignore=shutil.ignore_patterns("__pycache__"))
@@ -50,7 +53,7 @@ def test_kernels_cache_in_the_user_cache_dir_not_the_package(tmp_path: Path) -> 
         assert written == []
         cached = {p.name.split(".")[1].split("-")[0]
                   for p in (tmp_path / "cache" / "adaptune" / "numba").rglob("*.nbi")}
-        assert {"voxel_moments_dense", "ndt_terms"} <= cached, cached
+        assert {"voxel_moments_dense", "ndt_terms", "shape_returns"} <= cached, cached
     finally:
         for path in [pkg, *pkg.rglob("*")]:
             path.chmod(path.stat().st_mode | stat.S_IWUSR)
