@@ -16,6 +16,7 @@ from helpers.verdict_data import world
 from pipeline.config import load_params, validate_section
 from pipeline.errors import ConfigError, InputError
 from pipeline.odometry.ndt import SPACE
+from pipeline.sim import GENERATOR_VERSION
 from pipeline.sim.dataset import SimulateSection
 from pipeline.sim.effects import SensorEffects
 from pipeline.verdict.headroom import (
@@ -98,9 +99,10 @@ def test_worlds_follow_the_draw_and_the_training_sensor_model() -> None:
 
 
 def test_another_world_generator_is_refused() -> None:
-    with pytest.raises(ConfigError, match=r"frozen with world generator 2, this code "
-                                          r"simulates version 1"):
-        check_generator(VerdictSection(world_generator=2))
+    other = GENERATOR_VERSION + 1
+    with pytest.raises(ConfigError, match=rf"frozen with world generator {other}, this code "
+                                          rf"simulates version {GENERATOR_VERSION}"):
+        check_generator(VerdictSection(world_generator=other))
 
 
 LABELS = ["cave", "cave", "street", "street"]
