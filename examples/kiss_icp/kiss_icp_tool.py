@@ -40,7 +40,8 @@ INTEGERS = ("max_points_per_voxel",)
 
 def kiss_config(params: dict[str, float], out_dir: Path) -> dict:
     """KISS-ICP's configuration for ``params``: untuned settings as adaptune's own kiss_icp
-    adapter has them (no deskewing, one thread)."""
+    adapter has them on scans without per-point time (no deskewing: the .bin files carry no
+    time; one thread)."""
     config: dict = {"out_dir": str(out_dir), "data": {"deskew": False},
                     "registration": {"max_num_threads": 1}}
     for name, value in params.items():
