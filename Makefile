@@ -21,7 +21,7 @@ $(STAMP): pyproject.toml
 # (3 measured 9:39, 10:20 and 10:34 idle, 2 measured 10:01: no better, and more CPU)
 TEST_WORKERS ?= 2
 test: setup
-	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile
+	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
 # the fuzz suite of tests/fuzz at length: FUZZ_EXAMPLES examples a target, random seeds
 # (make test runs it small and seeded); a failure prints the blob that replays it

@@ -1,6 +1,8 @@
 """From a folder of recordings to a model artifact (issue 34's target): in a fresh copy of the
-repository, a new user runs `adaptune init` on two ROS 2 bags and a folder of PCD scans, then
-`dvc repro` in the new project, and gets the model artifact and the evaluation.
+repository, a new user runs `adaptune init` on two ROS 2 bags and a folder of PCD scans, points
+the trials at their own odometry (the ``command`` adapter running an external process:
+tests/odometry/scripts/s2s_gicp.py), then `dvc repro` in the new project, and gets the model
+artifact and the evaluation; every stage builds the adapter with the configured options.
 
 The recordings are made here from real KITTI scans (every 8th point, 10 frames a recording):
 the ROS 2 bags with rosbags' own writer (sqlite3 and mcap storage; an Odometry and a
@@ -22,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from helpers.odometry_data import command_options
 from helpers.source_inputs import KittiFrames, load_kitti, write_bag, write_kitti_poses
 
 REPO = Path(__file__).resolve().parents[1]
@@ -72,10 +75,12 @@ def run(cwd: Path, env: dict[str, str], *args: str) -> str:
 
 
 def tiny(params: dict) -> dict:
-    """A first run's budget: 4 m sub-trajectories, 3 trials a recording, a small surrogate."""
+    """A first run's budget: 4 m sub-trajectories, 3 trials a recording, a small surrogate; the
+    user's own odometry through the ``command`` adapter."""
     params["base"]["length_m"] = 4.0
     params["descriptors"].update(pca_dim=4, range_bins=3, workers=1)
-    params["trials"].update(iterations=3, startup_trials=2, workers=1)
+    params["trials"].update(iterations=3, startup_trials=2, workers=1, algorithm="command",
+                            adapter_options=command_options())
     params["fixed"].update(iterations=2, warm_start=1, workers=1)
     params["surrogate"].update(n_sobol=16, cv_max_frames=20)
     params["devkit"]["lengths_m"] = [2.0, 4.0]
@@ -84,6 +89,7 @@ def tiny(params: dict) -> dict:
 
 
 def test_recordings_to_a_model_with_init_and_dvc_repro(kitti_root: Path, tmp_path: Path) -> None:
+    from pipeline.report.outputs import read_summary
     from pipeline.runtime import load_model
     from pipeline.sequence import SequenceReader
 
@@ -120,10 +126,11 @@ def test_recordings_to_a_model_with_init_and_dvc_repro(kitti_root: Path, tmp_pat
         with SequenceReader(project / f"data/recordings/{name}.mcap") as reader:
             assert len(reader) == 10
             np.testing.assert_allclose(reader.ground_truth(), kf.T_world_lidar, atol=1e-5)
-    model = load_model(project / "model", expected_algorithm="ndt")
+    model = load_model(project / "model", expected_algorithm="command")
+    assert model.names == ["max_correspondence_distance", "downsampling_resolution"]
     assert len(model.surrogate.rows_t) > 0
     assert set(model.novelty_fallback["per_sequence"]) == {"drive1", "drive2"}
-    metrics = json.loads((project / "metrics/evaluation.json").read_text())
-    assert list(metrics["sequences"]) == ["scans"]
+    metrics = read_summary(project / "metrics/evaluation.json")  # the figures and their record
+    assert list(metrics["sequences"]) == ["scans"] and metrics["algorithm"] == "command"
     assert all(0 < v < 100 for v in metrics["rte_pct"].values()), metrics["rte_pct"]
     assert "Stage 'evaluate' didn't change" in run(project, env, str(BIN / "dvc"), "repro")

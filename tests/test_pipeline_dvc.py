@@ -271,36 +271,6 @@ def test_metrics_and_plots_commands_read_the_outputs(repro: tuple[Path, str]) ->
     assert len(list((root / "dvc_plots" / "static").glob("*.png"))) == 6
 
 
-def test_the_command_adapter_runs_the_whole_pipeline(
-        repro: tuple[Path, str], tmp_path_factory: pytest.TempPathFactory) -> None:
-    """trials.algorithm=command (tests/odometry/scripts/s2s_gicp.py, an external process): the
-    stages after the data reach a model and an evaluation, every one of them building the
-    adapter with the configured trials.adapter_options."""
-    from pipeline.runtime import load_model
-
-    root = tmp_path_factory.mktemp("command") / "project"
-    shutil.copytree(repro[0], root, symlinks=True)  # the toy project: data, descriptors
-    params = yaml.safe_load((root / "params.yaml").read_text())
-    scripts = REPO / "tests" / "odometry" / "scripts"
-    params["trials"].update(algorithm="command", iterations=2, adapter_options={
-        "command": ["{python}", str(scripts / "s2s_gicp.py"), "{sequence}", "{schedule}",
-                    "{out}", "kitti"],
-        "space": str(scripts / "s2s_gicp_space.yaml")})
-    params["fixed"].update(iterations=1)
-    (root / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
-    log = dvc(root, "repro", "evaluate")
-    for stage in ("trials", "fixed", "rte", "surrogate", "adaptive", "evaluate"):
-        assert f"Running stage '{stage}'" in log
-    assert "Running stage 'simulate'" not in log and "Running stage 'descriptors'" not in log
-    from pipeline.report.outputs import read_summary
-
-    model = load_model(root / "model", expected_algorithm="command")
-    assert model.names == ["max_correspondence_distance", "downsampling_resolution"]
-    metrics = read_summary(root / "metrics/evaluation.json")
-    assert metrics["algorithm"] == "command"
-    assert all(v > 0 for v in metrics["rte_pct"].values())
-
-
 def test_metrics_and_plot_data_are_committed(repro: tuple[Path, str]) -> None:
     """metrics/, records/ and plots/ are in git, not ignored, not in the DVC cache: nothing left
     over."""
