@@ -97,7 +97,7 @@ class VerdictSection(Section):
     """
 
     suite: Literal["dev", "test"] = "test"
-    world_generator: int = Field(1, ge=1)
+    world_generator: int = Field(2, ge=1)
     suites: Suites = Suites()
     baseline: dict[str, float] = Field(
         default_factory=lambda: {"resolution": 4.0, "keyframe_interval": 4.0})
