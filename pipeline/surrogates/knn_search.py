@@ -11,8 +11,9 @@ trial vectors. The k nearest rows of (E_s, x) are among the pairs (one of the k 
 of x in X_g, one of the k nearest frames of E_s in group g): any other row is farther than k
 rows of the same frame (nearer trials) or of the same trial (nearer frames). The nearest trials
 of the candidate set are static (found once per selector); per selection only the k nearest
-frames of each group are found and the pairs merged (``pipeline.surrogates.knn_kernel`` in
-numba, ``knn_mean_numpy`` without numba).
+frames of each group are found and the k nearest pairs picked, ties by (group, trial, frame)
+(``pipeline.surrogates.knn_kernel.knn_mean`` in numba, ``knn_mean_numpy``'s stable sort
+without numba: the same bits).
 
 Risk (the selector's ``risk`` >= 0, pipeline/runtime.py): every search gives the value
 mean + risk * std of the k neighbours' targets (population std), ``canonical_value``; risk 0 is
@@ -255,14 +256,16 @@ def knn_mean_numpy(
 ) -> F64:
     """``pipeline.surrogates.knn_kernel.knn_mean`` in numpy (same arguments, same values): (n,).
 
-    Only the pairs (a, j) with (a + 1)(j + 1) <= k can be among a group's k nearest: a pair
-    farther down both sorted lists is beaten by the (a + 1)(j + 1) pairs above and left of it.
+    The k nearest rows are the k first pairs (trial a, frame j of group g) by distance, ties
+    by (g, a, j) (a stable sort of the pairs in that order). Only the pairs with
+    (a + 1)(j + 1) <= k can be among them: a pair farther down both sorted lists comes after
+    the (a + 1)(j + 1) - 1 pairs above and left of it.
     """
     a, j = np.array([(a, j) for a in range(k) for j in range(k) if (a + 1) * (j + 1) <= k]).T
     n = len(trial_d2)
     d2 = (trial_d2[:, :, a] + frame_d2[None, :, j]).reshape(n, -1)
     rows = (trial_pos[:, :, a] + frame_row0[None, :, j]).reshape(n, -1)
-    pick = np.argpartition(d2, k - 1, axis=1)[:, :k]
+    pick = np.argsort(d2, axis=1, kind="stable")[:, :k]
     return canonical_value(rows_t[np.take_along_axis(rows, pick, 1)], risk)
 
 
