@@ -1,8 +1,9 @@
-"""The numba kernel of the grouped kNN search (pipeline/surrogates/knn_search.py,
-``TrialGroups``): the value of the k nearest rows of many query points (``knn_mean``).
+"""The numba kernels of the grouped kNN search (pipeline/surrogates/knn_search.py,
+``TrialGroups``): the value of the k nearest rows of many query points (``knn_mean``) and the
+nearest trial vectors of a few query points (``nearest_trials``).
 
-Imported by the search on first use; without numba it uses ``knn_mean_numpy``, which gives the
-same values (tests/test_knn_kernel.py compares both, ties included;
+Imported by the search on first use; without numba it uses ``knn_mean_numpy`` and the groups'
+kd-trees, which give the same values (tests/test_knn_kernel.py compares both, ties included;
 tests/test_runtime.py compares them with scikit-learn's kNN over every row).
 
 The k nearest rows of a query point are the k smallest pairs (trial a of group g, frame j of
@@ -222,3 +223,154 @@ def _value(chosen: NDArray[np.float64], ordered: NDArray[np.float64], k: int,
         dev = ordered[i] - mean
         squares += dev * dev
     return mean + risk * np.sqrt(squares / k)
+
+
+NEAR_TIE = 1e-9
+"""Relative gap below which the k-th and the next trial of ``nearest_trials`` count as tied."""
+
+
+@numba.njit(cache=True, nogil=True)
+def nearest_trials(
+    points: NDArray[np.float64], trials: NDArray[np.float64], order: NDArray[np.int64],
+    leaf_start: NDArray[np.int64], leaf_box: NDArray[np.float64], k: int,
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]:  # pragma: no cover
+    """The k nearest trial vectors of each point in every group, as the groups' kd-trees give
+    them: squared distances and block positions (n, G, k) (ascending; inf and 0 past a
+    group's size) and whether that answer is sure (n,).
+
+    points (n, P); trials (G, T, P): each group's trial vectors leaf by leaf (order (G, T):
+    their positions in the group's block), leaf l of group g being
+    trials[g, leaf_start[g, l] : leaf_start[g, l + 1]] (L + 1 starts; empty leaves at the
+    end), inside the box leaf_box[g, l] = (lowest, highest) (2, P). The leaves are
+    visited nearest box first, until the nearest left is farther than the (k + 1)-th nearest
+    trial so far.
+
+    scipy's ``cKDTree.query`` returns the k nearest by the squared distance it sums (the same
+    sum here, ``_sqeuclidean``) as sqrt(sum), which the search squares again: so does this.
+    Its answer is the same as long as those sums do not tie: a point is not sure when, in some
+    group, two of its k nearest have the same sum (the tree's order between them is its own)
+    or the k-th and the next are within NEAR_TIE of each other (the tree's pruning rounds its
+    bounds); the search asks the tree for those points.
+    """
+    n, n_params = points.shape
+    n_groups, n_leaves = leaf_start.shape[0], leaf_start.shape[1] - 1
+    d2 = np.full((n, n_groups, k), np.inf)
+    pos = np.zeros((n, n_groups, k), np.int64)
+    sure = np.ones(n, np.bool_)
+    best_s = np.empty(k + 1)
+    best_t = np.empty(k + 1, np.int64)
+    bound = np.empty(n_leaves)
+    for i in range(n):
+        for g in range(n_groups):
+            size = leaf_start[g, n_leaves]
+            kk = min(k, size)
+            keep = min(kk + 1, size)
+            best_s[:keep] = np.inf
+            for leaf in range(n_leaves):
+                bound[leaf] = _box_gap(leaf_box, g, leaf, points, i, n_params)
+            while True:
+                nearest = -1
+                near = np.inf
+                for leaf in range(n_leaves):
+                    if bound[leaf] < near:
+                        near = bound[leaf]
+                        nearest = leaf
+                if nearest < 0 or near > best_s[keep - 1]:
+                    break  # every trial left is farther than the (k + 1)-th so far
+                bound[nearest] = np.inf
+                for t in range(leaf_start[g, nearest], leaf_start[g, nearest + 1]):
+                    s = _sqeuclidean(trials, g, t, points, i, n_params)
+                    if s >= best_s[keep - 1]:
+                        continue
+                    m = keep - 1
+                    while m > 0 and best_s[m - 1] > s:
+                        best_s[m] = best_s[m - 1]
+                        best_t[m] = best_t[m - 1]
+                        m -= 1
+                    best_s[m] = s
+                    best_t[m] = t
+            for a in range(kk):
+                r = np.sqrt(best_s[a])
+                d2[i, g, a] = r * r
+                pos[i, g, a] = order[g, best_t[a]]
+                if a > 0 and not best_s[a - 1] < best_s[a]:
+                    sure[i] = False
+            if keep > kk and not best_s[kk] - best_s[kk - 1] > NEAR_TIE * best_s[kk]:
+                sure[i] = False
+    return d2, pos, sure
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _box_gap(leaf_box: NDArray[np.float64], g: int, leaf: int, points: NDArray[np.float64],
+             i: int, n: int) -> float:  # pragma: no cover - compiled
+    """The squared distance of points[i] to the box leaf_box[g, leaf] (n coordinates), summed
+    as ``_sqeuclidean`` sums: no more than ``_sqeuclidean`` of any point in the box (every
+    gap is at most that point's coordinate difference, and the sums are in the same order);
+    inf for an empty box (lowest > highest)."""
+    acc0 = 0.0
+    acc1 = 0.0
+    acc2 = 0.0
+    acc3 = 0.0
+    p = 0
+    while p + 4 <= n:
+        d0 = _gap(leaf_box, g, leaf, points, i, p)
+        d1 = _gap(leaf_box, g, leaf, points, i, p + 1)
+        d2 = _gap(leaf_box, g, leaf, points, i, p + 2)
+        d3 = _gap(leaf_box, g, leaf, points, i, p + 3)
+        acc0 += d0 * d0
+        acc1 += d1 * d1
+        acc2 += d2 * d2
+        acc3 += d3 * d3
+        p += 4
+    s = acc0 + acc1 + acc2 + acc3
+    while p < n:
+        d = _gap(leaf_box, g, leaf, points, i, p)
+        s += d * d
+        p += 1
+    return s
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _gap(leaf_box: NDArray[np.float64], g: int, leaf: int, points: NDArray[np.float64], i: int,
+         p: int) -> float:  # pragma: no cover - compiled
+    """How far coordinate p of points[i] lies outside [lowest, highest] of the box (0 inside,
+    inf for an empty box)."""
+    low = leaf_box[g, leaf, 0, p]
+    high = leaf_box[g, leaf, 1, p]
+    x = points[i, p]
+    if low > high:
+        return np.inf
+    if x < low:
+        return low - x
+    if x > high:
+        return x - high
+    return 0.0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _sqeuclidean(trials: NDArray[np.float64], g: int, t: int, points: NDArray[np.float64],
+                 i: int, n: int) -> float:  # pragma: no cover - compiled
+    """|trials[g, t] - points[i]|^2 (n coordinates) summed as scipy's kd-tree sums it
+    (``sqeuclidean_distance_double``): four partial sums over blocks of four coordinates,
+    added in order, then the rest one by one."""
+    acc0 = 0.0
+    acc1 = 0.0
+    acc2 = 0.0
+    acc3 = 0.0
+    p = 0
+    while p + 4 <= n:
+        d0 = trials[g, t, p] - points[i, p]
+        d1 = trials[g, t, p + 1] - points[i, p + 1]
+        d2 = trials[g, t, p + 2] - points[i, p + 2]
+        d3 = trials[g, t, p + 3] - points[i, p + 3]
+        acc0 += d0 * d0
+        acc1 += d1 * d1
+        acc2 += d2 * d2
+        acc3 += d3 * d3
+        p += 4
+    s = acc0 + acc1 + acc2 + acc3
+    while p < n:
+        d = trials[g, t, p] - points[i, p]
+        s += d * d
+        p += 1
+    return s
