@@ -13,7 +13,7 @@ scans.
   kd-trees for the pattern search's probes), whose choices must be the same (asserted).
 Every figure is CPU time of the process (``time.process_time``, best of a few): on this shared
 2-core machine wall times move with the other processes' load, and CPU times less so (the
-selection and its reference are timed in turns, scan by scan).
+selection, its risk-aware twin and main's are timed in turns, scan by scan).
 """
 
 from __future__ import annotations
@@ -150,17 +150,17 @@ def run() -> list[Row]:
             fresh(s_, e)
         with merge_kernel():
             fresh(main, e)
-    times, before = [], []
-    for e in envs[::4]:  # interleaved: both see the same load
+    times, before, wary_times = [], [], []
+    for e in envs[::4]:  # in turns, scan by scan: all three see the same load
         times.append(best_of(lambda e=e: fresh(sel, e), repeat=5, clock=CPU))
         with merge_kernel():
             before.append(best_of(lambda e=e: fresh(main, e), repeat=5, clock=CPU))
+        wary_times.append(best_of(lambda e=e: fresh(wary, e), repeat=5, clock=CPU))
     for e in envs:  # the same choices, every scan
         chosen = fresh(sel, e)
         with merge_kernel():
             assert fresh(main, e) == chosen
     tree_times = [best_of(lambda e=e: fresh(tree, e), repeat=3, clock=CPU) for e in envs[::4]]
-    wary_times = [best_of(lambda e=e: fresh(wary, e), repeat=3, clock=CPU) for e in envs[::4]]
     exact = []
     for e in envs:
         nb = Neighbourhood(model.surrogate, environment_d2(model.env, e),
