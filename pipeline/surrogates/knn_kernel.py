@@ -152,18 +152,25 @@ def _pick(
     chosen (k,): a pair's rank is the number of pairs before it in that order."""
     q = 0
     for i in range(m):
-        di = pair_d[i]
-        rank = 0
-        same = 0
-        for i2 in range(m):
-            rank += pair_d[i2] < di
-            same += pair_d[i2] == di
-        if same > 1:  # ties: those gathered before it come first
-            for i2 in range(i):
-                rank += pair_d[i2] == di
-        if rank < k:
+        if _rank(pair_d, m, i) < k:
             chosen[q] = rows_t[pair_row[i]]
             q += 1
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _rank(values: NDArray[np.float64], n: int, i: int) -> int:  # pragma: no cover - compiled
+    """How many of values[:n] come before values[i] by value, then position (a stable sort's
+    place for it)."""
+    v = values[i]
+    rank = 0
+    same = 0
+    for i2 in range(n):
+        rank += values[i2] < v
+        same += values[i2] == v
+    if same > 1:  # equal values: those before it in the array come first
+        for i2 in range(i):
+            rank += values[i2] == v
+    return rank
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -202,16 +209,7 @@ def _value(chosen: NDArray[np.float64], ordered: NDArray[np.float64], k: int,
     """``knn_search.canonical_value`` of the k targets chosen (k,): sorted ascending by their
     ranks into ordered (k,), summed left to right; mean (+ risk * population std)."""
     for i in range(k):
-        v = chosen[i]
-        rank = 0
-        same = 0
-        for i2 in range(k):
-            rank += chosen[i2] < v
-            same += chosen[i2] == v
-        if same > 1:  # equal targets take the places after each other
-            for i2 in range(i):
-                rank += chosen[i2] == v
-        ordered[rank] = v
+        ordered[_rank(chosen, k, i)] = chosen[i]
     total = 0.0
     for i in range(k):
         total += ordered[i]
