@@ -194,13 +194,21 @@ def _merge(
                 d = da + frame_d2[g, j]
                 if d >= best_d[k - 1]:
                     break
-                m = k - 1
-                while m > 0 and best_d[m - 1] > d:
-                    best_d[m] = best_d[m - 1]
-                    best_row[m] = best_row[m - 1]
-                    m -= 1
-                best_d[m] = d
-                best_row[m] = frame_row0[g, j] + trial_pos[g, a]
+                _insert(best_d, best_row, k, d, frame_row0[g, j] + trial_pos[g, a])
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _insert(keys: NDArray[np.float64], items: NDArray[np.int64], n: int, key: float,
+            item: int) -> None:  # pragma: no cover - compiled
+    """(key, item) into the first n of keys, items (sorted by key), after every entry with an
+    equal key; the last entry drops out."""
+    m = n - 1
+    while m > 0 and keys[m - 1] > key:
+        keys[m] = keys[m - 1]
+        items[m] = items[m - 1]
+        m -= 1
+    keys[m] = key
+    items[m] = item
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -258,6 +266,7 @@ def nearest_trials(
     best_s = np.empty(k + 1)
     best_t = np.empty(k + 1, np.int64)
     bound = np.empty(n_leaves)
+    diff = np.empty(n_params)
     for i in range(n):
         for g in range(n_groups):
             size = leaf_start[g, n_leaves]
@@ -265,7 +274,7 @@ def nearest_trials(
             keep = min(kk + 1, size)
             best_s[:keep] = np.inf
             for leaf in range(n_leaves):
-                bound[leaf] = _box_gap(leaf_box, g, leaf, points, i, n_params)
+                bound[leaf] = _box_gap(leaf_box, g, leaf, points, i, n_params, diff)
             while True:
                 nearest = -1
                 near = np.inf
@@ -277,16 +286,10 @@ def nearest_trials(
                     break  # every trial left is farther than the (k + 1)-th so far
                 bound[nearest] = np.inf
                 for t in range(leaf_start[g, nearest], leaf_start[g, nearest + 1]):
-                    s = _sqeuclidean(trials, g, t, points, i, n_params)
+                    s = _sqeuclidean(trials, g, t, points, i, n_params, diff)
                     if s >= best_s[keep - 1]:
                         continue
-                    m = keep - 1
-                    while m > 0 and best_s[m - 1] > s:
-                        best_s[m] = best_s[m - 1]
-                        best_t[m] = best_t[m - 1]
-                        m -= 1
-                    best_s[m] = s
-                    best_t[m] = t
+                    _insert(best_s, best_t, keep, s, t)
             for a in range(kk):
                 r = np.sqrt(best_s[a])
                 d2[i, g, a] = r * r
@@ -300,32 +303,14 @@ def nearest_trials(
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _box_gap(leaf_box: NDArray[np.float64], g: int, leaf: int, points: NDArray[np.float64],
-             i: int, n: int) -> float:  # pragma: no cover - compiled
-    """The squared distance of points[i] to the box leaf_box[g, leaf] (n coordinates), summed
-    as ``_sqeuclidean`` sums: no more than ``_sqeuclidean`` of any point in the box (every
-    gap is at most that point's coordinate difference, and the sums are in the same order);
-    inf for an empty box (lowest > highest)."""
-    acc0 = 0.0
-    acc1 = 0.0
-    acc2 = 0.0
-    acc3 = 0.0
-    p = 0
-    while p + 4 <= n:
-        d0 = _gap(leaf_box, g, leaf, points, i, p)
-        d1 = _gap(leaf_box, g, leaf, points, i, p + 1)
-        d2 = _gap(leaf_box, g, leaf, points, i, p + 2)
-        d3 = _gap(leaf_box, g, leaf, points, i, p + 3)
-        acc0 += d0 * d0
-        acc1 += d1 * d1
-        acc2 += d2 * d2
-        acc3 += d3 * d3
-        p += 4
-    s = acc0 + acc1 + acc2 + acc3
-    while p < n:
-        d = _gap(leaf_box, g, leaf, points, i, p)
-        s += d * d
-        p += 1
-    return s
+             i: int, n: int, diff: NDArray[np.float64]) -> float:  # pragma: no cover - compiled
+    """The squared distance of points[i] to the box leaf_box[g, leaf] (n coordinates; diff (n,)
+    scratch), summed as ``_sqeuclidean`` sums: no more than ``_sqeuclidean`` of any point in
+    the box (every gap is at most that point's coordinate difference, and the sums are in the
+    same order); inf for an empty box (lowest > highest)."""
+    for p in range(n):
+        diff[p] = _gap(leaf_box, g, leaf, points, i, p)
+    return _tree_sum(diff, n)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -347,28 +332,32 @@ def _gap(leaf_box: NDArray[np.float64], g: int, leaf: int, points: NDArray[np.fl
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _sqeuclidean(trials: NDArray[np.float64], g: int, t: int, points: NDArray[np.float64],
-                 i: int, n: int) -> float:  # pragma: no cover - compiled
-    """|trials[g, t] - points[i]|^2 (n coordinates) summed as scipy's kd-tree sums it
-    (``sqeuclidean_distance_double``): four partial sums over blocks of four coordinates,
-    added in order, then the rest one by one."""
+                 i: int, n: int, diff: NDArray[np.float64]) -> float:  # pragma: no cover
+    """|trials[g, t] - points[i]|^2 (n coordinates; diff (n,) scratch), as scipy's kd-tree
+    sums it (``_tree_sum``)."""
+    for p in range(n):
+        diff[p] = trials[g, t, p] - points[i, p]
+    return _tree_sum(diff, n)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _tree_sum(diff: NDArray[np.float64], n: int) -> float:  # pragma: no cover - compiled
+    """The sum of diff[:n] squared in the order of scipy's kd-tree
+    (``sqeuclidean_distance_double``): four partial sums over blocks of four coordinates, added
+    in order, then the rest one by one."""
     acc0 = 0.0
     acc1 = 0.0
     acc2 = 0.0
     acc3 = 0.0
     p = 0
     while p + 4 <= n:
-        d0 = trials[g, t, p] - points[i, p]
-        d1 = trials[g, t, p + 1] - points[i, p + 1]
-        d2 = trials[g, t, p + 2] - points[i, p + 2]
-        d3 = trials[g, t, p + 3] - points[i, p + 3]
-        acc0 += d0 * d0
-        acc1 += d1 * d1
-        acc2 += d2 * d2
-        acc3 += d3 * d3
+        acc0 += diff[p] * diff[p]
+        acc1 += diff[p + 1] * diff[p + 1]
+        acc2 += diff[p + 2] * diff[p + 2]
+        acc3 += diff[p + 3] * diff[p + 3]
         p += 4
     s = acc0 + acc1 + acc2 + acc3
     while p < n:
-        d = trials[g, t, p] - points[i, p]
-        s += d * d
+        s += diff[p] * diff[p]
         p += 1
     return s
