@@ -73,18 +73,15 @@ def voxel_keys(points: F64, voxel_m: float) -> NDArray[np.int64]:
 
 
 def voxel_downsample(points: NDArray[np.floating], voxel_m: float) -> F64:
-    """Centroid of the points in every occupied voxel of side ``voxel_m``; (M, 3) float64,
-    ordered by voxel key."""
-    pts = np.asarray(points, dtype=np.float64)
-    if voxel_m <= 0 or len(pts) == 0:
-        return pts.copy()
-    keys = voxel_keys(pts, voxel_m)
-    order = np.argsort(keys)
-    sorted_keys = keys[order]
-    starts = np.flatnonzero(np.concatenate([[True], sorted_keys[1:] != sorted_keys[:-1]]))
-    sums = np.add.reduceat(pts[order], starts, axis=0)
-    counts = np.diff(np.append(starts, len(pts)))
-    return sums / counts[:, None]
+    """Centroid of the points (N, 3) [m] in every occupied voxel of side ``voxel_m``; (M, 3)
+    float64, ordered by voxel key (compiled: ``pipeline.odometry.voxel_kernel``)."""
+    from pipeline.odometry.voxel_kernel import sorted_centroids, voxel_keys_of
+
+    if voxel_m <= 0 or len(points) == 0:
+        return np.array(points, dtype=np.float64)
+    pts = np.ascontiguousarray(points)
+    keys = voxel_keys_of(pts, 1.0 / voxel_m)
+    return sorted_centroids(pts, keys, np.argsort(keys))
 
 
 class DownsampleCache:
