@@ -7,7 +7,7 @@ import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,9 +18,11 @@ from pipeline.io_utils import check_plain_name, refuse_input_as_output
 from pipeline.sequence import EnvLabel, Scan, SequenceInfo, SequenceWriter
 from pipeline.sim.effects import SensorEffects
 from pipeline.sim.kitti_world import KittiWorldEffects, check_kitti_args
-from pipeline.sim.raycast import Raycaster
 from pipeline.sim.sensors import SENSOR_TITLES, SensorModel, get_sensor
 from pipeline.sim.worlds import DEFAULT_SEGMENTS, WORLDS, World, build_world, check_world_args
+
+if TYPE_CHECKING:  # the caster (numba, open3d) loads on first use: params loading stays light
+    from pipeline.sim.raycast import Raycaster
 
 log = logging.getLogger(__name__)
 
@@ -114,6 +116,8 @@ def iter_scans(
     motion: MotionMode = "none",
 ) -> Iterator[Scan]:
     """Ray-cast scans of ``world`` (``scan_frame`` for each of ``frames``, default all)."""
+    from pipeline.sim.raycast import Raycaster
+
     caster = Raycaster(world.vertices, world.triangles, sensor, world.materials, world.seed)
     for k in frames if frames is not None else range(world.frames):
         yield scan_frame(caster, world, seed, k, motion)

@@ -39,7 +39,6 @@ from typing import Protocol, TypeAlias
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from pipeline.surrogates.base import Prediction
 
@@ -84,6 +83,8 @@ class Neighbourhood:
         self.t = model.rows_t[self.rows]
         # built for every selection and queried ~3000 times: the sliding-midpoint tree builds
         # in half the time of the balanced one and queries as fast (make bench)
+        from scipy.spatial import cKDTree  # on first use: the package's import stays light
+
         self.tree = cKDTree(pts, leafsize=32, balanced_tree=False, compact_nodes=False)
         self.x_scale = x_scale
         self.risk = risk
@@ -193,6 +194,8 @@ class TrialGroups:
         self.k = model.k
         self.x_scale = x_scale
         block_x = [model.rows_x[offsets[f[0]] : offsets[f[0] + 1]] for f in blocks]
+        from scipy.spatial import cKDTree
+
         self.trees = [cKDTree(x) for x in block_x]
         self.frame_table = np.full((len(blocks), max(map(len, blocks))), -1, np.int64)  # (G, F)
         for g, frames in enumerate(blocks):
