@@ -45,8 +45,9 @@ def tiny_params() -> dict[str, Any]:
     p["trials"].update(iterations=3, workers=1, startup_trials=2)
     p["fixed"].update(iterations=2)
     p["surrogate"].update(n_sobol=16, cv_max_frames=20)
-    p["generalize"].update(worlds=3, segments=[2, 2], segment_frames=[25, 25],
-                           sensors=["hdl32", "vlp16", "hdl64"], bootstrap=200, workers=2)
+    # two worlds of the sensors kept out of training, one replica (params.yaml has two)
+    p["generalize"].update(worlds=2, segments=[2, 2], segment_frames=[25, 25],
+                           sensors=["vlp16", "hdl64"], bootstrap=200, replicas=1, workers=2)
     return p
 
 
@@ -186,7 +187,7 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
 
 
 def test_generalize_scores_every_world_of_the_suite(repro: tuple[Path, str]) -> None:
-    """The generalize stage: three unseen worlds (one per sensor), three settings each."""
+    """The generalize stage: two unseen worlds (one per unseen sensor), three settings each."""
     from pipeline.generalization.summary import RATIOS
     from pipeline.odometry.base import Schedule
     from pipeline.report.outputs import read_summary
@@ -194,9 +195,9 @@ def test_generalize_scores_every_world_of_the_suite(repro: tuple[Path, str]) -> 
 
     root, log = repro
     m = read_summary(root / "metrics/generalization.json")
-    assert (m["suite"], m["seed_root"], m["worlds"]) == ("test", 90217, 3)
+    assert (m["suite"], m["seed_root"], m["worlds"]) == ("test", 90217, 2)
     worlds = m["per_world"]
-    assert [w["sensor"] for w in worlds.values()] == ["hdl32", "vlp16", "hdl64"]
+    assert [w["sensor"] for w in worlds.values()] == ["vlp16", "hdl64"]
     for name, w in worlds.items():
         assert len(w["segments"]) == 2 and w["frames"] == 50
         r = w["rte_pct"]
@@ -208,9 +209,9 @@ def test_generalize_scores_every_world_of_the_suite(repro: tuple[Path, str]) -> 
             assert len(read_trajectory(path)) == 50
         assert len(Schedule.read(root / f"results/generalization/adaptive/{name}/"
                                  "schedule.parquet")) == 50
-        # two replicas of every setting (params.yaml), the ratio of the medians of the runs
+        # one replica of every setting (tiny_params), the ratio of the medians of the runs
         runs = {s: [r[s], *w["replicas_rte_pct"][s]] for s in r}
-        assert all(len(v) == 3 and all(x > 0 for x in v) for v in runs.values())
+        assert all(len(v) == 2 and all(x > 0 for x in v) for v in runs.values())
         med = {s: float(np.median(v)) for s, v in runs.items()}
         assert w["replica_ratio"]["adaptive_vs_best"] == pytest.approx(
             med["adaptive"] / min(med["baseline"], med["fixed"]))
@@ -222,13 +223,13 @@ def test_generalize_scores_every_world_of_the_suite(repro: tuple[Path, str]) -> 
         assert s["worst"] == max(w["ratio"][ratio] for w in worlds.values())
         assert m["replica_summary"][ratio]["worst"] == max(
             w["replica_ratio"][ratio] for w in worlds.values())
-    assert m["replicas"] == 2 and m["noise"]["chance_ratio_p95"] >= 1.0
+    assert m["replicas"] == 1 and m["noise"]["chance_ratio_p95"] >= 1.0
     assert isinstance(m["summary"]["adaptive_vs_best"]["targets_met"], bool)  # the verdict
     rows = (root / "plots/generalization.csv").read_text().splitlines()
-    assert len(rows) == 4 and rows[0].startswith("world,segments,sensor,frames,")
+    assert len(rows) == 3 and rows[0].startswith("world,segments,sensor,frames,")
     assert rows[0].endswith(",replica_adaptive_vs_best")
     assert (root / "report/generalization.png").read_bytes()[:4] == b"\x89PNG"
-    assert "on the test suite (3 worlds)" in log
+    assert "on the test suite (2 worlds)" in log
 
 
 def test_second_repro_is_a_no_op(repro: tuple[Path, str]) -> None:
