@@ -17,23 +17,48 @@ from typing import Any, TypeVar
 from pipeline.errors import ConfigError
 
 R = TypeVar("R")
+THREADS_ENV = "ADAPTUNE_THREADS"
+"""The environment variable that caps the threads of one process's own parallel work
+(``process_threads``)."""
+
+
+def process_threads() -> int:
+    """Threads this process's own parallel work may use (a simulated scan's ray casting and
+    kernels): ``ADAPTUNE_THREADS`` where set (in a pool worker of ``open_executor``: its share
+    of the CPUs), else every CPU this process may run on."""
+    value = os.environ.get(THREADS_ENV, "")
+    if not value:
+        return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+            os.cpu_count() or 1)
+    if not value.isdigit() or int(value) < 1:
+        raise ConfigError(f"{THREADS_ENV} must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
+def _start_worker(parent_pid: int, threads: int) -> None:
+    """Initializer of a pool worker: ends with its parent, leaves Ctrl-C to it
+    (``pipeline.lifetime.become_pool_worker``) and uses ``threads`` threads of its own."""
+    from pipeline.lifetime import become_pool_worker
+
+    become_pool_worker(parent_pid)
+    os.environ[THREADS_ENV] = str(threads)
 
 
 @contextlib.contextmanager
 def open_executor(workers: int, dask: str | None = None) -> Iterator[Executor]:
     """A concurrent.futures Executor with ``workers`` processes, shut down on exit.
 
-    ``dask=None``: ProcessPoolExecutor (spawn context; its workers end with this process).
+    ``dask=None``: ProcessPoolExecutor (spawn context; its workers end with this process and
+    share this process's threads: ``process_threads() // workers`` each, at least 1).
     ``"local"``: a Dask LocalCluster (``workers`` processes, one thread each). An address: a
     client of that scheduler, whose workers may be started the plain way (``dask worker
     tcp://...``): trial servers are started with subprocess, which daemonic processes may do.
     """
     if dask is None:
-        from pipeline.lifetime import become_pool_worker
-
         pool = ProcessPoolExecutor(max_workers=workers,
                                    mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=become_pool_worker, initargs=(os.getpid(),))
+                                   initializer=_start_worker,
+                                   initargs=(os.getpid(), max(1, process_threads() // workers)))
         try:
             yield pool
         except BaseException:  # Ctrl-C, SIGTERM, an error: do not wait for running trials

@@ -33,8 +33,8 @@ print("ok", bool(ok) and len(scan.points_lidar) > 0)
 
 def test_kernels_cache_in_the_user_cache_dir_not_the_package(tmp_path: Path) -> None:
     """A read-only copy of the package runs its cached numba kernels (the descriptor's, NDT's
-    in an NDT run, the simulator's in a simulated scan): cache files appear under
-    $XDG_CACHE_HOME/adaptune/numba and none inside the package."""
+    in an NDT run, the simulator's in a simulated scan: rays, relief, returns): cache files
+    appear under $XDG_CACHE_HOME/adaptune/numba and none inside the package."""
     pkg = tmp_path / "site"
     shutil.copytree(REPO / "pipeline", pkg / "pipeline",
                     ignore=shutil.ignore_patterns("__pycache__"))
@@ -53,7 +53,8 @@ def test_kernels_cache_in_the_user_cache_dir_not_the_package(tmp_path: Path) -> 
         assert written == []
         cached = {p.name.split(".")[1].split("-")[0]
                   for p in (tmp_path / "cache" / "adaptune" / "numba").rglob("*.nbi")}
-        assert {"voxel_moments_dense", "ndt_terms", "shape_returns"} <= cached, cached
+        assert {"voxel_moments_dense", "ndt_terms", "shape_returns", "draw_uniforms", "turn_rays",
+                "rough_hits"} <= cached, cached
     finally:
         for path in [pkg, *pkg.rglob("*")]:
             path.chmod(path.stat().st_mode | stat.S_IWUSR)

@@ -16,26 +16,36 @@ range, range noise from range and incidence plus each laser's range offset. The 
 placed where the sensor believes the ray went (reported elevation, no jitter); its intensity is
 reflectance x cos(incidence). Moving objects (``movers``: a mesh at the scan's time) are cast
 beside the static world.
+
+The per-ray work is compiled (``rays_kernel``, ``relief_kernel``, ``returns_kernel``) and a
+scan uses ``threads`` threads (open3d's casting, the returns' kernels); its points do not
+depend on how many (docs/simulator.md, "Speed").
 """
 
 from __future__ import annotations
 
 import functools
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.errors import ConfigError
+from pipeline.executor import process_threads
 from pipeline.sim.effects import SensorEffects
 from pipeline.sim.materials import Material, reflectance_table, relief_table
-from pipeline.sim.returns_kernel import shape_returns
+from pipeline.sim.rays_kernel import turn_rays
+from pipeline.sim.relief_kernel import lay_relief, rough_hits, row_sums
+from pipeline.sim.returns_kernel import draw_uniforms, kept_rows, shape_returns
 from pipeline.sim.sensors import SensorModel
 
 F64 = NDArray[np.float64]
 F32 = NDArray[np.float32]
 REFLECTANCE = reflectance_table()
 RELIEF = relief_table()
+_NO_NOISE = np.zeros((0, 3), np.float32)
 VEGETATION_STEP_M = 0.01
 """How far past a foliage surface a ray is cast again [m]."""
 
@@ -51,15 +61,18 @@ class Hits:
 
 class Raycaster:
     """Casts scans of ``sensor`` against one mesh (``materials``: (T,) uint8 per triangle,
-    default ground; ``world_seed``: of the surfaces' relief). Build once per world, call
-    ``scan`` or ``sweep`` per frame.
+    default ground; ``world_seed``: of the surfaces' relief; ``threads``: of one scan, default
+    ``pipeline.executor.process_threads()``: every CPU in a main process, 1 in a pool worker
+    of a 2-core machine). Build once per world, call ``scan`` or ``sweep`` per frame. The
+    points do not depend on ``threads``.
 
     The mesh is shifted to a local origin so that float32 ray casting keeps mm precision
     far from the world origin.
     """
 
     def __init__(self, vertices: F64, triangles: NDArray[np.int64], sensor: SensorModel,
-                 materials: NDArray[np.uint8] | None = None, world_seed: int = 0) -> None:
+                 materials: NDArray[np.uint8] | None = None, world_seed: int = 0,
+                 threads: int | None = None) -> None:
         import open3d as o3d
 
         self.sensor = sensor
@@ -75,6 +88,9 @@ class Raycaster:
         self._beam = _BeamGeometry(sensor)
         self._bumps = Relief(np.random.default_rng([world_seed, 73]))
         self._settings = _settings(sensor.effects, sensor.min_range_m, sensor.max_range_m)
+        self.threads = process_threads() if threads is None else threads
+        if self.threads < 1:
+            raise ConfigError(f"threads must be >= 1, got {self.threads}")
 
     def scan(self, T_world_lidar: F64, rng: np.random.Generator,
              movers: tuple[F64, NDArray[np.int64]] | None = None) -> F32:
@@ -110,46 +126,74 @@ class Raycaster:
               compensate: bool) -> tuple[F32, NDArray[np.int64]]:
         """Fire every ray, column a from pose ``T_col[a]`` (one pose: all columns); the kept
         points (N, 4) (lidar frame at the firing, or at ``T_col[0]`` with ``compensate``) and
-        the azimuth column of each."""
+        the azimuth column of each. With ``threads`` > 1 the returns' random numbers are drawn
+        on a second thread while this one reads the relief, and the returns shaped by all."""
         g, e = self._beam, self.sensor.effects
         phase = rng.uniform(0.0, np.deg2rad(self.sensor.azimuth_step_deg))
         c, si = np.cos(phase), np.sin(phase)
         Rz = np.array([[c, -si, 0.0], [si, c, 0.0], [0.0, 0.0, 1.0]], np.float32)
         R = T_col[:, :3, :3] @ Rz.astype(np.float64)  # (A or 1, 3, 3): lidar at the firing
-        dirs_w, orig_w = g.world_rays(R, T_col[:, :3, 3] - self.origin)
+        noise = None
         if e.angle_jitter_deg > 0.0:  # isotropic: the same in any frame
-            dirs_w = _jitter(dirs_w, rng, np.deg2rad(e.angle_jitter_deg))
-        hits = self._cast(orig_w, dirs_w)
+            noise = rng.standard_normal((len(g.column_free), 3), dtype=np.float32)
+        rays = g.world_rays(R, T_col[:, :3, 3] - self.origin, noise=noise,
+                            sigma_rad=float(np.float32(np.deg2rad(e.angle_jitter_deg))))
+        orig_w, dirs_w = rays[:, :3], rays[:, 3:]
+        hits = self._cast_rays(rays)
         if movers is not None and len(movers[1]):
             hits = _nearer(hits, _cast_movers(self._o3d, movers[0] - self.origin, movers[1],
-                                              orig_w, dirs_w))
+                                              orig_w, dirs_w, self.threads))
         t, cos_set = hits.t, np.full(len(hits.t), -1.0, np.float32)
         if e.vegetation_free_path_m > 0.0:
             t = t.copy()
             self._foliage(t, cos_set, hits, orig_w, dirs_w, rng)
+        draw = (int(rng.integers(2**31)), t, hits.material, float(self._settings[0]))
+        drawn = (_helpers(self.threads - 1).submit(draw_uniforms, *draw) if self.threads > 1
+                 else None)
         if compensate and len(T_col) > 1:  # into the frame at the sweep's start
             T_rel = np.linalg.solve(T_col[0], T_col)  # (A, 4, 4) T_start_column
-            out_dirs, out_orig = g.world_rays(T_rel[:, :3, :3] @ Rz.astype(np.float64),
-                                              T_rel[:, :3, 3], stored=True)
+            out = g.world_rays(T_rel[:, :3, :3] @ Rz.astype(np.float64), T_rel[:, :3, 3],
+                               stored=True)
         else:
-            out_dirs, out_orig = _rotate(g.dirs_stored_free, Rz), g.offsets_free
+            out = g.world_rays(Rz[None].astype(np.float64), np.zeros((1, 3)), stored=True)
+        height = self._relief(t, hits.material, rays)
+        u = drawn.result() if drawn is not None else draw_uniforms(*draw)
+        kept, points = np.empty(len(t), np.bool_), np.empty((len(t), 4), np.float32)
+        self._in_parts(shape_returns, u, t, hits.normal, hits.material, cos_set, height,
+                       dirs_w, g.range_bias_free, out[:, 3:], out[:, :3], REFLECTANCE,
+                       self._settings, points, kept)
+        points, free = kept_rows(points, kept)
+        return points, g.column_free[free]
+
+    def _relief(self, t: F32, material: NDArray[np.uint8], rays: F32) -> F32:
+        """(M,) the height [m] of the surfaces' relief (fixed in the world) at the hits of
+        ``rays`` (M, 6) at ranges ``t`` (M,) on ``material`` (M,): 0 where none."""
         height = np.zeros(len(t), np.float32)
-        if e.surface_relief_m > 0.0:  # the surfaces' relief at the hits, fixed in the world
-            rough = np.flatnonzero(np.isfinite(t) & (RELIEF[hits.material] > 0.0))
-            hit_w = orig_w[rough] + dirs_w[rough] * t[rough, None]
-            height[rough] = self._bumps(hit_w, self.origin) * (
-                np.float32(e.surface_relief_m) * RELIEF[hits.material[rough]])
-        points, free = shape_returns(
-            int(rng.integers(2**31)), t, hits.normal, hits.material, cos_set, height, dirs_w,
-            g.range_bias_free, out_dirs, out_orig, REFLECTANCE, self._settings)
-        return points, g.active[free] % g.azimuths
+        relief_m = self.sensor.effects.surface_relief_m
+        if relief_m > 0.0:
+            rough, hit_w = rough_hits(rays, t, material, RELIEF)
+            lay_relief(height, rough, self._bumps(hit_w, self.origin), material, RELIEF,
+                       relief_m)
+        return height
+
+    def _in_parts(self, kernel: Any, *args: Any) -> None:
+        """``kernel(part, parts, *args)`` for every part of ``threads``, on as many threads."""
+        parts = self.threads
+        running = [_helpers(parts - 1).submit(kernel, p, parts, *args) for p in range(1, parts)]
+        kernel(0, parts, *args)
+        for job in running:
+            job.result()
 
     def _cast(self, origins: F32, dirs: F32) -> Hits:
         """Cast rays (M, 3) + (M, 3) against the world."""
         rays = np.empty((len(dirs), 6), np.float32)
         rays[:, :3] = origins
         rays[:, 3:] = dirs
-        hit = self.scene.cast_rays(self._o3d.core.Tensor.from_numpy(rays))
+        return self._cast_rays(rays)
+
+    def _cast_rays(self, rays: F32) -> Hits:
+        """Cast rays (M, 6) (origin, direction) against the world."""
+        hit = self.scene.cast_rays(self._o3d.core.Tensor.from_numpy(rays), nthreads=self.threads)
         t = hit["t_hit"].numpy()
         prim = hit["primitive_ids"].numpy()
         mat = np.zeros(len(t), np.uint8)
@@ -214,15 +258,15 @@ class Relief:
         arg = p @ self._k_t
         arg += phase.astype(np.float32)
         np.sin(arg, out=arg)
-        return arg.sum(axis=1) * np.float32(np.sqrt(2.0 / len(self.phase)))
+        return row_sums(arg) * np.float32(np.sqrt(2.0 / len(self.phase)))
 
 
 class _BeamGeometry:
     """The rays of one sensor unit (its calibration errors drawn once from
-    ``effects.unit_seed``): reported and true directions (B * A, 3) in the lidar frame at phase
-    0, laser origins (B * A, 3), each ray's range offset, and the rays the carrier leaves free
-    (``active``, beam-major; ``active_cm`` the same rays in column-major order, the layout in
-    which a sweep turns every column by its own rotation)."""
+    ``effects.unit_seed``), fixed for every scan: the rays the carrier leaves free (``active``,
+    beam-major indices; ``column_free`` the azimuth column of each), their reported and true
+    directions (M, 3) in the lidar frame at phase 0, their laser's height (M,) and range offset
+    (M,). A scan only turns them (``world_rays``)."""
 
     def __init__(self, sensor: SensorModel) -> None:
         e = sensor.effects
@@ -233,40 +277,34 @@ class _BeamGeometry:
         true_el = np.asarray(sensor.elevations_deg) - e.elevation_error_deg - el_err
         self.beams, self.azimuths = sensor.beams, sensor.azimuths
         self.active = np.flatnonzero(~sensor.hidden_rays())
-        self.active_cm = (self.active % self.azimuths) * self.beams + self.active // self.azimuths
-        self.dirs_stored = sensor.ray_directions()
+        self.column_free = self.active % self.azimuths
         dirs_true = sensor.ray_directions(elevations_deg=true_el, azimuth_offsets_deg=-az_err)
+        self._free = {False: dirs_true[self.active], True: sensor.ray_directions()[self.active]}
         self.heights = sensor.laser_heights().astype(np.float32)
-        self.offsets = np.zeros((len(dirs_true), 3), np.float32)
-        self.offsets[:, 2] = np.repeat(self.heights, self.azimuths)
-        self.range_bias = np.repeat(bias, self.azimuths).astype(np.float32)
-        self.height_free = self.offsets[self.active, 2].copy()
-        self.offsets_free = self.offsets[self.active]
-        self.range_bias_free = self.range_bias[self.active]
-        self.dirs_stored_free = self.dirs_stored[self.active]
-        self._true = (dirs_true[self.active], self._columns(dirs_true))
-        self._stored = (self.dirs_stored[self.active], self._columns(self.dirs_stored))
+        self.lifted = bool(self.heights.any())
+        self.height_free = self.heights[self.active // self.azimuths]
+        self.range_bias_free = bias.astype(np.float32)[self.active // self.azimuths]
 
-    def _columns(self, v: F32) -> F32:
-        """(A, B, 3) column-major copy of the beam-major (B * A, 3) ``v``."""
-        return np.ascontiguousarray(v.reshape(self.beams, self.azimuths, 3).transpose(1, 0, 2))
+    def world_rays(self, R: F64, t: F64, stored: bool = False, noise: F32 | None = None,
+                   sigma_rad: float = 0.0) -> F32:
+        """(M, 6) float32 origins and directions of the free rays (true ones, or as the sensor
+        reports them with ``stored``) fired from column poses (``R`` (A, 3, 3), ``t`` (A, 3);
+        or one pose (1, ...) for all columns); ``noise`` (M, 3) x ``sigma_rad``: the firings'
+        angle jitter added to the directions (an isotropic perturbation; its part along the ray
+        changes the length by a factor 1 + O(sigma^2), negligible at the jitters of a LiDAR)."""
+        free = self._free[stored]
+        rays = np.empty((len(free), 6), np.float32)
+        turn_rays(free, self.column_free, R.astype(np.float32), t.astype(np.float32),
+                  self.height_free, len(R) == 1 or self.lifted,
+                  _NO_NOISE if noise is None else noise, float(sigma_rad), rays)
+        return rays
 
-    def world_rays(self, R: F64, t: F64, stored: bool = False) -> tuple[F32, F32]:
-        """Directions and origins (M, 3) of the free rays (true ones, or as the sensor reports
-        them with ``stored``) fired from column poses (``R`` (A, 3, 3), ``t`` (A, 3); or one
-        pose (1, ...) for all columns)."""
-        free, cols = self._true if not stored else self._stored
-        R32, t32 = R.astype(np.float32), t.astype(np.float32)
-        if len(R) == 1:
-            dirs = _rotate(free, R32[0])
-            orig = self.height_free[:, None] * R32[0, :, 2] + t32[0]
-            return dirs, orig
-        dirs = np.matmul(cols, R32.transpose(0, 2, 1)).reshape(-1, 3)[self.active_cm]
-        col = self.active_cm // self.beams
-        orig = t32[col]
-        if self.heights.any():
-            orig = orig + self.height_free[:, None] * R32[col, :, 2]
-        return dirs, orig
+
+@functools.cache
+def _helpers(threads: int) -> ThreadPoolExecutor:
+    """``threads`` threads that share a scan's work with the one casting it (kept for the
+    process's life, idle between scans)."""
+    return ThreadPoolExecutor(threads, thread_name_prefix="raycast")
 
 
 @functools.cache
@@ -283,25 +321,13 @@ def _one_blas_thread() -> Any:
     return _blas_controller().limit(limits=1, user_api="blas")
 
 
-def _rotate(v: F32, R: F32) -> F32:
-    """(M, 3) vectors ``v`` turned by one rotation R (3, 3): v R^T."""
-    return v @ np.ascontiguousarray(R.T, np.float32)
-
-
 def _dot(a: F32, b: F32) -> F32:
     """(M,) row-wise dot products of (M, 3) arrays."""
     return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
 
 
-def _jitter(d: F32, rng: np.random.Generator, sigma_rad: float) -> F32:
-    """Directions ``d`` (M, 3) turned at random by N(0, sigma) about both axes across the
-    ray (an isotropic perturbation; its part along the ray changes the length by a factor
-    1 + O(sigma^2), negligible at the jitters of a LiDAR)."""
-    return d + rng.standard_normal(d.shape, dtype=np.float32) * np.float32(sigma_rad)
-
-
 def _cast_movers(o3d: object, vertices: F64, triangles: NDArray[np.int64], origins: F32,
-                 dirs: F32) -> Hits:
+                 dirs: F32, threads: int) -> Hits:
     """Cast the rays that pass within the bounding sphere of the movers' mesh against it
     (vehicles); the others miss."""
     centre = vertices.mean(axis=0)
@@ -313,19 +339,21 @@ def _cast_movers(o3d: object, vertices: F64, triangles: NDArray[np.int64], origi
     t = np.full(len(dirs), np.inf, np.float32)
     normal = np.zeros((len(dirs), 3), np.float32)
     if len(near):
-        hit = _cast_mesh(o3d, vertices, triangles, origins[near], dirs[near], Material.VEHICLE)
+        hit = _cast_mesh(o3d, vertices, triangles, origins[near], dirs[near], Material.VEHICLE,
+                         threads)
         t[near], normal[near] = hit.t, hit.normal
     return Hits(t, normal, np.full(len(dirs), Material.VEHICLE, np.uint8))
 
 
 def _cast_mesh(o3d: object, vertices: F64, triangles: NDArray[np.int64], origins: F32,
-               dirs: F32, material: Material) -> Hits:
-    """Cast rays against a small mesh of one material (the movers of a scan)."""
+               dirs: F32, material: Material, threads: int) -> Hits:
+    """Cast rays against a small mesh of one material (the movers of a scan) on ``threads``."""
     scene = o3d.t.geometry.RaycastingScene()  # type: ignore[attr-defined]
     scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)),  # type: ignore[attr-defined]
                         o3d.core.Tensor(triangles.astype(np.uint32)))  # type: ignore[attr-defined]
     rays = np.concatenate([origins, dirs], axis=1).astype(np.float32)
-    hit = scene.cast_rays(o3d.core.Tensor.from_numpy(rays))  # type: ignore[attr-defined]
+    hit = scene.cast_rays(o3d.core.Tensor.from_numpy(rays),  # type: ignore[attr-defined]
+                          nthreads=threads)
     t = hit["t_hit"].numpy()
     return Hits(t, hit["primitive_normals"].numpy(), np.full(len(t), material, np.uint8))
 
