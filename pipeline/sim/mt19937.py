@@ -6,7 +6,7 @@ Why: numba's own generator costs ~10 ns a number (a call into its C helpers and 
 thread looked up every time); this one fills doubles in blocks, ~4x faster read from the block,
 and a scan's returns draw 250-700 thousand of them in the one sequential part of the sensor
 model (``pipeline.sim.returns_kernel.draw_uniforms``). The stream is numba's, so the scans are
-what they were with ``np.random`` (tests/sim/test_mt19937.py).
+what they were with ``np.random`` (tests/sim/test_sim_kernels.py).
 
 A stream is three arrays: ``mt`` (624,) uint32 state, ``buf`` (312,) float64 doubles drawn,
 ``pos`` (1,) int64 the next one in ``buf``.
