@@ -41,13 +41,13 @@ def kernel_case(rng: np.random.Generator, n: int, groups: int, k: int,
 def test_knn_mean_is_the_stable_order_of_the_pairs(risk: float) -> None:
     """Random cases, most of them full of equal distances: the same bits as the numpy path's
     stable sort (the k first pairs by distance, then group, trial, frame), including points
-    whose pairs within the bound overflow the buffer (every distance equal) and points with
-    no bound (no group has k rows)."""
+    whose pairs all tie (every distance equal) and points with no bound (no group has k
+    rows)."""
     rng = np.random.default_rng(7)
     for case in range(120):
         k = int(rng.choice([1, 2, 3, 5, 8, 20]))
         args = kernel_case(rng, 30, int(rng.integers(1, 9)), k, int(rng.choice([2, 3, 10, 10**6])))
-        if case % 10 == 0:  # every pair at distance 0: the merge path
+        if case % 10 == 0:  # every pair at distance 0: the order alone decides
             args[0][:] = np.where(np.isfinite(args[0]), 0.0, np.inf)
             args[2][:] = np.where(np.isfinite(args[2]), 0.0, np.inf)
         fast, reference = knn_mean(*args, k, risk), knn_mean_numpy(*args, k, risk)

@@ -9,10 +9,12 @@ tests/test_runtime.py compares them with scikit-learn's kNN over every row).
 The k nearest rows of a query point are the k smallest pairs (trial a of group g, frame j of
 group g) by squared distance d = trial_d2 + frame_d2, ties ordered by (g, a, j): the order in
 which the merge before issue 33 met them, and the order of ``knn_mean_numpy``'s stable sort.
-``knn_mean`` finds them without merging: a bound tau >= the k-th distance, read off a few
-corners of the sorted lists, gathers the pairs within it (a few more than k), and their
-ranks by (d, order) pick the k. A point whose gathered pairs overflow the buffer is merged as
-before, its best list seeded at the bound.
+``knn_mean`` merges the pairs in that order into a sorted best list, each after the entries
+of its distance, within a bound tau >= the k-th distance read off a few corners of the sorted
+lists (until the list holds k pairs; then within its k-th). The bound leaves about 1.3 k pairs
+to merge, and the list grows from empty, so an insertion shifts only the pairs already in
+(faster than ranking the pairs within the bound, issue 33: docs/performance.md, "The online
+selection (issue 33)").
 """
 
 from __future__ import annotations
@@ -20,9 +22,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 from numpy.typing import NDArray
-
-GATHER = 3
-"""The buffer of gathered pairs holds GATHER * k of them (about 1.5 k are gathered)."""
 
 
 @numba.njit(cache=True, nogil=True)
@@ -51,22 +50,15 @@ def knn_mean(
     whole_a, whole_j = _corners(k, width, depth)
     half_a, half_j = _corners((k + 1) // 2, width, depth)
     out = np.empty(n)
-    cap = GATHER * k
-    pair_d = np.empty(cap)
-    pair_row = np.empty(cap, np.int64)
     best_d = np.empty(k)
     best_row = np.empty(k, np.int64)
     chosen = np.empty(k)
     ordered = np.empty(k)
     for c in range(n):
         tau = _bound(trial_d2[c], frame_d2, whole_a, whole_j, half_a, half_j)
-        m = _gather(trial_d2[c], trial_pos[c], frame_d2, frame_row0, tau, pair_d, pair_row)
-        if m >= 0:
-            _pick(pair_d, pair_row, m, rows_t, k, chosen)
-        else:  # more pairs within tau than the buffer holds: merge
-            _merge(trial_d2[c], trial_pos[c], frame_d2, frame_row0, tau, best_d, best_row)
-            for i in range(k):
-                chosen[i] = rows_t[best_row[i]]
+        _merge(trial_d2[c], trial_pos[c], frame_d2, frame_row0, tau, best_d, best_row)
+        for i in range(k):
+            chosen[i] = rows_t[best_row[i]]
         out[c] = _value(chosen, ordered, k, risk)
     return out
 
@@ -115,86 +107,44 @@ def _bound(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _gather(
-    trial_d2: NDArray[np.float64], trial_pos: NDArray[np.int64],
-    frame_d2: NDArray[np.float64], frame_row0: NDArray[np.int64], tau: float,
-    pair_d: NDArray[np.float64], pair_row: NDArray[np.int64],
-) -> int:  # pragma: no cover - compiled
-    """The pairs of one query point within tau, in (g, a, j) order, into pair_d / pair_row:
-    their number, or -1 when they do not fit (or tau is inf). Both lists are sorted, so a row
-    of trials (and a group) is left at its first pair beyond tau."""
-    if not tau < np.inf:
-        return -1
-    m = 0
-    for g in range(trial_d2.shape[0]):
-        for a in range(trial_d2.shape[1]):
-            da = trial_d2[g, a]
-            if da + frame_d2[g, 0] > tau:
-                break
-            for j in range(frame_d2.shape[1]):
-                d = da + frame_d2[g, j]
-                if d > tau:
-                    break
-                if m == len(pair_d):
-                    return -1
-                pair_d[m] = d
-                pair_row[m] = frame_row0[g, j] + trial_pos[g, a]
-                m += 1
-    return m
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _pick(
-    pair_d: NDArray[np.float64], pair_row: NDArray[np.int64], m: int,
-    rows_t: NDArray[np.float64], k: int, chosen: NDArray[np.float64],
-) -> None:  # pragma: no cover - compiled
-    """The targets of the k first of m gathered pairs by (distance, gathering order) into
-    chosen (k,): a pair's rank is the number of pairs before it in that order."""
-    q = 0
-    for i in range(m):
-        if _rank(pair_d, m, i) < k:
-            chosen[q] = rows_t[pair_row[i]]
-            q += 1
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _rank(values: NDArray[np.float64], n: int, i: int) -> int:  # pragma: no cover - compiled
-    """How many of values[:n] come before values[i] by value, then position (a stable sort's
-    place for it)."""
-    v = values[i]
-    rank = 0
-    same = 0
-    for i2 in range(n):
-        rank += values[i2] < v
-        same += values[i2] == v
-    if same > 1:  # equal values: those before it in the array come first
-        for i2 in range(i):
-            rank += values[i2] == v
-    return rank
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
 def _merge(
     trial_d2: NDArray[np.float64], trial_pos: NDArray[np.int64],
     frame_d2: NDArray[np.float64], frame_row0: NDArray[np.int64], tau: float,
     best_d: NDArray[np.float64], best_row: NDArray[np.int64],
 ) -> None:  # pragma: no cover - compiled
-    """The k nearest rows of one query point by a merge of its pairs in (g, a, j) order into a
-    sorted best list (best_d, best_row (k,)) seeded just above tau: a pair enters before the
-    first entry farther than it, so equal distances keep the merge's order."""
+    """The k nearest rows of one query point into best_d, best_row (k,), sorted by distance:
+    its pairs within tau (>= the k-th distance) merged in (g, a, j) order, each entering
+    after the entries of its distance, so equal distances keep the order of the module
+    docstring. Both lists are sorted, so a row of trials (and a group) is left at its first
+    pair beyond the limit: tau until k pairs are in, then the k-th so far (a pair equal to it
+    comes after it)."""
     k = len(best_d)
-    best_d[:] = np.nextafter(tau, np.inf)
-    best_row[:] = 0
+    limit = np.nextafter(tau, np.inf)
+    filled = 0
     for g in range(trial_d2.shape[0]):
         for a in range(trial_d2.shape[1]):
             da = trial_d2[g, a]
-            if da + frame_d2[g, 0] >= best_d[k - 1]:
+            if da + frame_d2[g, 0] >= limit:
                 break
             for j in range(frame_d2.shape[1]):
                 d = da + frame_d2[g, j]
-                if d >= best_d[k - 1]:
+                if d >= limit:
                     break
-                _insert(best_d, best_row, k, d, frame_row0[g, j] + trial_pos[g, a])
+                filled = _push(best_d, best_row, filled, d, frame_row0[g, j] + trial_pos[g, a])
+                if filled == k:
+                    limit = best_d[k - 1]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _push(keys: NDArray[np.float64], items: NDArray[np.int64], filled: int, key: float,
+          item: int) -> int:  # pragma: no cover - compiled
+    """(key, item) into the first ``filled`` of keys, items (sorted by key) after every entry
+    with an equal key, growing them up to their length (when full, the last entry drops out):
+    the new number filled."""
+    if filled < len(keys):
+        filled += 1
+    _insert(keys, items, filled, key, item)
+    return filled
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -229,6 +179,22 @@ def _value(chosen: NDArray[np.float64], ordered: NDArray[np.float64], k: int,
         dev = ordered[i] - mean
         squares += dev * dev
     return mean + risk * np.sqrt(squares / k)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _rank(values: NDArray[np.float64], n: int, i: int) -> int:  # pragma: no cover - compiled
+    """How many of values[:n] come before values[i] by value, then position (a stable sort's
+    place for it)."""
+    v = values[i]
+    rank = 0
+    same = 0
+    for i2 in range(n):
+        rank += values[i2] < v
+        same += values[i2] == v
+    if same > 1:  # equal values: those before it in the array come first
+        for i2 in range(i):
+            rank += values[i2] == v
+    return rank
 
 
 NEAR_TIE = 1e-9
