@@ -90,8 +90,11 @@ def merge_kernel() -> Iterator[None]:
 
     from pipeline.surrogates import knn_search
 
+    def merge(trial_d2: np.ndarray, trial_pos: np.ndarray, *rest: object) -> np.ndarray:
+        return knn_mean(trial_d2, trial_pos.astype(np.int64, copy=False), *rest)  # as before
+
     chosen = knn_search._knn_mean_kernel
-    knn_search._knn_mean_kernel = lambda: knn_mean
+    knn_search._knn_mean_kernel = lambda: merge
     try:
         yield
     finally:
@@ -138,6 +141,8 @@ def run() -> list[Row]:
     main = Selector(model, selection)  # the selection before issue 33's kernels (run())
     assert main.search.groups is not None
     main.search.groups.compiled = False  # the probes' nearest trials by the kd-trees
+    d2, pos = main.search.groups.candidate_trials  # their positions int64, as before
+    main.search.groups.candidate_trials = d2, pos.astype(np.int64)
     for s_ in (sel, tree, wary, main):
         s_.novelty_distance = float("inf")  # time the full search, never the novelty fallback
 

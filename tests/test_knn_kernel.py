@@ -32,7 +32,7 @@ def kernel_case(rng: np.random.Generator, n: int, groups: int, k: int,
         if rng.random() < 0.3:
             frame_d2[g, rng.integers(1, k + 1):] = np.inf
     rows_t = rng.integers(0, 7, 4000) * 0.25
-    trial_pos = rng.integers(0, 50, (n, groups, k))
+    trial_pos = rng.integers(0, 50, (n, groups, k)).astype(np.int32)
     frame_row0 = rng.integers(0, 3900, (groups, k))
     return trial_d2, trial_pos, frame_d2, frame_row0, rows_t
 

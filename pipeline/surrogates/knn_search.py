@@ -160,7 +160,7 @@ class TrialLeaves:
 
     def nearest(
         self, q: NDArray[np.float64], k: int
-    ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.int32], NDArray[np.bool_]]:
         """``knn_kernel.nearest_trials`` of the scaled points q (n, P), C-contiguous."""
         from pipeline.surrogates.knn_kernel import nearest_trials
 
@@ -200,7 +200,7 @@ class TrialGroups:
         self.leaves = TrialLeaves(block_x)
         self.candidates = candidates_u
         self.reuse = True
-        self._last: tuple[bytes, tuple[NDArray[np.float64], NDArray[np.int64]]] | None = None
+        self._last: tuple[bytes, tuple[NDArray[np.float64], NDArray[np.int32]]] | None = None
         self.compiled = False  # the trees, until the leaves are seen to agree with them
         self.candidate_trials = self.nearest_trials(candidates_u)
         self.compiled = self._leaves_agree(candidates_u)
@@ -223,10 +223,10 @@ class TrialGroups:
 
     def nearest_trials(
         self, U: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-        """Squared distances and block positions (n, G, k) of the k nearest trial vectors of
-        each unit point U (n, P) in every group (ascending; inf and 0 past a group's size);
-        read-only.
+    ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
+        """Squared distances and block positions (int32) (n, G, k) of the k nearest trial
+        vectors of each unit point U (n, P) in every group (ascending; inf and 0 past a group's
+        size); read-only.
 
         They do not depend on the environment: a selector over a window of W scans asks for
         the same points under each of them (the pattern search's probes, the parameters in
@@ -247,11 +247,11 @@ class TrialGroups:
 
     def _tree_trials(
         self, q: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
         """``nearest_trials`` of the scaled points q (n, P) by the groups' kd-trees."""
         n = len(q)
         d2 = np.full((n, len(self.trees), self.k), np.inf)
-        pos = np.zeros((n, len(self.trees), self.k), np.int64)
+        pos = np.zeros((n, len(self.trees), self.k), np.int32)
         for g, tree in enumerate(self.trees):
             kk = min(self.k, tree.n)
             dist, idx = tree.query(q, k=kk)
@@ -261,7 +261,7 @@ class TrialGroups:
 
     def _leaf_trials(
         self, q: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
         """``nearest_trials`` of the scaled points q (n, P) by the leaves
         (``knn_kernel.nearest_trials``), the trees' answer for the points it is not sure of
         (ties)."""
@@ -325,12 +325,12 @@ class GroupedNeighbourhood:
 
     def predict(self, U: NDArray[np.float64]) -> Prediction:
         """Prediction at unit points U (C, P), every value exact."""
-        t = self._mean(*self.groups.nearest_trials(U))
+        t = self.certified(U)
         return Prediction(t, np.ones(len(t), bool))
 
     def certified(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
         """``predict(U).t`` (every value is exact): (C,)."""
-        return self.predict(U).t
+        return self._mean(*self.groups.nearest_trials(U))
 
     def candidate_values(self, candidates: NDArray[np.float64]) -> NDArray[np.float64]:
         """``certified`` at the groups' candidate set (their nearest trials are known)."""
@@ -339,7 +339,7 @@ class GroupedNeighbourhood:
         return self._mean(*self.groups.candidate_trials)
 
     def _mean(
-        self, trial_d2: NDArray[np.float64], trial_pos: NDArray[np.int64]
+        self, trial_d2: NDArray[np.float64], trial_pos: NDArray[np.int32]
     ) -> NDArray[np.float64]:
         return _knn_mean_kernel()(
             trial_d2, trial_pos, self.frame_d2, self.frame_row0, self.groups.model.rows_t,
@@ -348,11 +348,12 @@ class GroupedNeighbourhood:
 
 
 F64: TypeAlias = NDArray[np.float64]
+I32: TypeAlias = NDArray[np.int32]
 I64: TypeAlias = NDArray[np.int64]
 
 
 def knn_mean_numpy(
-    trial_d2: F64, trial_pos: I64, frame_d2: F64, frame_row0: I64, rows_t: F64, k: int,
+    trial_d2: F64, trial_pos: I32, frame_d2: F64, frame_row0: I64, rows_t: F64, k: int,
     risk: float = 0.0,
 ) -> F64:
     """``pipeline.surrogates.knn_kernel.knn_mean`` in numpy (same arguments, same values): (n,).
