@@ -141,6 +141,7 @@ def run() -> list[Row]:
     main = Selector(model, selection)  # the selection before issue 33's kernels (run())
     assert main.search.groups is not None
     main.search.groups.compiled = False  # the probes' nearest trials by the kd-trees
+    main.reuse = False  # every round's probes searched, as before
     d2, pos = main.search.groups.candidate_trials  # their positions int64, as before
     main.search.groups.candidate_trials = d2, pos.astype(np.int64)
     for s_ in (sel, tree, wary, main):

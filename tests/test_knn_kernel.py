@@ -140,7 +140,7 @@ def test_the_fast_paths_choose_as_the_straightforward_ones(
             groups = sel.search.groups
             assert groups is not None and groups.compiled
             if not fast:
-                groups.compiled = groups.reuse = False
+                groups.compiled = groups.reuse = sel.reuse = False
                 monkeypatch.setattr(knn_search, "_knn_mean_kernel", lambda: knn_mean_numpy)
             picks = []
             for e in envs:
