@@ -296,18 +296,19 @@ class TrialGroups:
         """Squared E-distances and first rows (G, k) of each group's k nearest frames, given
         every frame's squared E-distance env_d2 (n_env,) (ascending; inf and 0 past a group's
         size)."""
-        table = self.frame_table
-        d2 = np.where(table >= 0, env_d2[table], np.inf)
+        table, rows = self.frame_table, np.arange(len(self.frame_table))[:, None]
+        frames = np.maximum(table, 0)  # padding -> frame 0
+        d2 = env_d2[frames]
+        d2[table < 0] = np.inf
         kk = min(self.k, table.shape[1])
-        pick = np.argpartition(d2, kk - 1, axis=1)[:, :kk] if table.shape[1] > kk else None
-        if pick is not None:
-            d2, table = np.take_along_axis(d2, pick, 1), np.take_along_axis(table, pick, 1)
+        if table.shape[1] > kk:
+            pick = np.argpartition(d2, kk - 1, axis=1)[:, :kk]
+            d2, frames = d2[rows, pick], frames[rows, pick]
         order = np.argsort(d2, axis=1, kind="stable")
         frame_d2 = np.full((len(table), self.k), np.inf)
         frame_row0 = np.zeros((len(table), self.k), np.int64)
-        frame_d2[:, :kk] = np.take_along_axis(d2, order, 1)
-        frames = np.maximum(np.take_along_axis(table, order, 1), 0)  # padding -> frame 0
-        frame_row0[:, :kk] = self.model.env_offsets[frames]
+        frame_d2[:, :kk] = d2[rows, order]
+        frame_row0[:, :kk] = self.model.env_offsets[frames[rows, order]]
         return frame_d2, frame_row0
 
 
