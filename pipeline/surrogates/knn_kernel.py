@@ -234,7 +234,7 @@ def nearest_trials(
     near_s = np.empty(k + 1)
     near_t = np.empty(k + 1, np.int64)
     bound = np.empty(n_leaves)
-    diff = np.empty(n_params)
+    box_point = np.empty(n_params)
     for i in range(n):
         for g in range(n_groups):
             size = leaf_start[g, n_leaves]
@@ -244,7 +244,7 @@ def nearest_trials(
             filled = 0
             limit = np.inf  # the (k + 1)-th nearest so far
             for leaf in range(n_leaves):
-                bound[leaf] = _box_gap(leaf_box, g, leaf, points, i, n_params, diff)
+                bound[leaf] = _box_gap(leaf_box, g, leaf, points, i, n_params, box_point)
             while True:
                 nearest = -1
                 near = np.inf
@@ -275,49 +275,41 @@ def nearest_trials(
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _box_gap(leaf_box: NDArray[np.float64], g: int, leaf: int, points: NDArray[np.float64],
-             i: int, n: int, diff: NDArray[np.float64]) -> float:  # pragma: no cover - compiled
-    """The squared distance of points[i] to the box leaf_box[g, leaf] (n coordinates; diff (n,)
-    scratch), summed as ``_sqeuclidean`` sums: no more than ``_sqeuclidean`` of any point in
-    the box (every gap is at most that point's coordinate difference, and the sums are in the
-    same order); inf for an empty box (lowest > highest)."""
+             i: int, n: int, near: NDArray[np.float64]) -> float:  # pragma: no cover - compiled
+    """The squared distance of points[i] to the box leaf_box[g, leaf] (n coordinates; near (n,)
+    scratch: the box's point nearest to it), summed as ``_sqeuclidean`` sums: no more than
+    ``_sqeuclidean`` of any point in the box (every difference is at most that point's, and
+    the sums are in the same order); inf for an empty box (lowest inf, highest -inf)."""
     for p in range(n):
-        diff[p] = _gap(leaf_box, g, leaf, points, i, p)
-    return _tree_sum(diff, n)
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _gap(leaf_box: NDArray[np.float64], g: int, leaf: int, points: NDArray[np.float64], i: int,
-         p: int) -> float:  # pragma: no cover - compiled
-    """How far coordinate p of points[i] lies outside [lowest, highest] of the box (0 inside,
-    inf for an empty box)."""
-    low = leaf_box[g, leaf, 0, p]
-    high = leaf_box[g, leaf, 1, p]
-    x = points[i, p]
-    if low > high:
-        return np.inf
-    if x < low:
-        return low - x
-    if x > high:
-        return x - high
-    return 0.0
+        near[p] = min(max(points[i, p], leaf_box[g, leaf, 0, p]), leaf_box[g, leaf, 1, p])
+    return _tree_sum(points[i], near, n)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _sqeuclidean(trials: NDArray[np.float64], g: int, t: int, points: NDArray[np.float64],
                  i: int, n: int) -> float:  # pragma: no cover - compiled
-    """|trials[g, t] - points[i]|^2 (n coordinates), as scipy's kd-tree sums it: the sum of
-    ``_tree_sum``, each difference taken where it is squared (a tenth faster than through a
-    scratch array; tests/test_knn_kernel.py checks it against the trees for P = 2, 3, 5)."""
+    """|trials[g, t] - points[i]|^2 (n coordinates), as scipy's kd-tree sums it
+    (``_tree_sum``)."""
+    return _tree_sum(trials[g, t], points[i], n)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _tree_sum(a: NDArray[np.float64], b: NDArray[np.float64],
+              n: int) -> float:  # pragma: no cover - compiled
+    """The sum of (a[p] - b[p])^2 over the first n coordinates in the order of scipy's kd-tree
+    (``sqeuclidean_distance_double``): four partial sums over blocks of four coordinates, added
+    in order, then the rest one by one (each difference taken where it is squared: a tenth
+    faster than through a scratch array)."""
     acc0 = 0.0
     acc1 = 0.0
     acc2 = 0.0
     acc3 = 0.0
     p = 0
     while p + 4 <= n:
-        d0 = trials[g, t, p] - points[i, p]
-        d1 = trials[g, t, p + 1] - points[i, p + 1]
-        d2 = trials[g, t, p + 2] - points[i, p + 2]
-        d3 = trials[g, t, p + 3] - points[i, p + 3]
+        d0 = a[p] - b[p]
+        d1 = a[p + 1] - b[p + 1]
+        d2 = a[p + 2] - b[p + 2]
+        d3 = a[p + 3] - b[p + 3]
         acc0 += d0 * d0
         acc1 += d1 * d1
         acc2 += d2 * d2
@@ -325,30 +317,7 @@ def _sqeuclidean(trials: NDArray[np.float64], g: int, t: int, points: NDArray[np
         p += 4
     s = acc0 + acc1 + acc2 + acc3
     while p < n:
-        d = trials[g, t, p] - points[i, p]
+        d = a[p] - b[p]
         s += d * d
-        p += 1
-    return s
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _tree_sum(diff: NDArray[np.float64], n: int) -> float:  # pragma: no cover - compiled
-    """The sum of diff[:n] squared in the order of scipy's kd-tree
-    (``sqeuclidean_distance_double``): four partial sums over blocks of four coordinates, added
-    in order, then the rest one by one."""
-    acc0 = 0.0
-    acc1 = 0.0
-    acc2 = 0.0
-    acc3 = 0.0
-    p = 0
-    while p + 4 <= n:
-        acc0 += diff[p] * diff[p]
-        acc1 += diff[p + 1] * diff[p + 1]
-        acc2 += diff[p + 2] * diff[p + 2]
-        acc3 += diff[p + 3] * diff[p + 3]
-        p += 4
-    s = acc0 + acc1 + acc2 + acc3
-    while p < n:
-        s += diff[p] * diff[p]
         p += 1
     return s
