@@ -9,8 +9,9 @@ scans.
   from the environment E_t (the descriptor is the row above) and also end to end from the
   scan; the references in the same run are the certified kd-tree search the runtime keeps for
   artifacts whose frames do not group, and the selection before issue 33's kernels
-  (main@6b0bde1: the merge kernel frozen in bench/reference/knn_merge_reference.py, the groups'
-  kd-trees for the pattern search's probes), whose choices must be the same (asserted).
+  (main@6b0bde1: the merge kernel frozen in bench/reference/knn_merge_reference.py on int64
+  block positions, the groups' kd-trees for the pattern search's probes, every round's probes
+  searched), whose choices must be the same (asserted).
 Every figure is CPU time of the process (``time.process_time``, best of a few): on this shared
 2-core machine wall times move with the other processes' load, and CPU times less so (the
 selection, its risk-aware twin and main's are timed in turns, scan by scan).
