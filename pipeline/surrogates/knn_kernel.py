@@ -51,7 +51,7 @@ def knn_mean(
     half_a, half_j = _corners((k + 1) // 2, width, depth)
     out = np.empty(n)
     best_d = np.empty(k)
-    best_row = np.empty(k, np.int64)
+    best_row = np.zeros(k, np.int64)  # valid rows even if fewer than k pairs (k > rows)
     chosen = np.empty(k)
     ordered = np.empty(k)
     for c in range(n):
