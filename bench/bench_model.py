@@ -9,8 +9,9 @@ scans.
   from the environment E_t (the descriptor is the row above) and also end to end from the
   scan; the references in the same run are the certified kd-tree search the runtime keeps for
   artifacts whose frames do not group, and the selection before issue 33's kernels
-  (main@6b0bde1: the merge kernel frozen in bench/reference/knn_merge_reference.py, the groups'
-  kd-trees for the pattern search's probes), whose choices must be the same (asserted).
+  (main@6b0bde1: the merge kernel frozen in bench/reference/knn_merge_reference.py on int64
+  block positions, the groups' kd-trees for the pattern search's probes, every round's probes
+  searched), whose choices must be the same (asserted).
 Every figure is CPU time of the process (``time.process_time``, best of a few): on this shared
 2-core machine wall times move with the other processes' load, and CPU times less so (the
 selection, its risk-aware twin and main's are timed in turns, scan by scan).
@@ -90,8 +91,11 @@ def merge_kernel() -> Iterator[None]:
 
     from pipeline.surrogates import knn_search
 
+    def merge(trial_d2: np.ndarray, trial_pos: np.ndarray, *rest: object) -> np.ndarray:
+        return knn_mean(trial_d2, trial_pos.astype(np.int64, copy=False), *rest)  # as before
+
     chosen = knn_search._knn_mean_kernel
-    knn_search._knn_mean_kernel = lambda: knn_mean
+    knn_search._knn_mean_kernel = lambda: merge
     try:
         yield
     finally:
@@ -138,6 +142,9 @@ def run() -> list[Row]:
     main = Selector(model, selection)  # the selection before issue 33's kernels (run())
     assert main.search.groups is not None
     main.search.groups.compiled = False  # the probes' nearest trials by the kd-trees
+    main.reuse = False  # every round's probes searched, as before
+    d2, pos = main.search.groups.candidate_trials  # their positions int64, as before
+    main.search.groups.candidate_trials = d2, pos.astype(np.int64)
     for s_ in (sel, tree, wary, main):
         s_.novelty_distance = float("inf")  # time the full search, never the novelty fallback
 

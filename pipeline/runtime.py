@@ -272,6 +272,7 @@ class Selector:
         self.last_stamp_ns: int | None = None
         self.last: dict[str, Any] = {}
         self.selections = 0
+        self.reuse = True  # the pattern search keeps known probes' values (off: searched again)
 
     @property
     def current(self) -> Params:
@@ -364,8 +365,17 @@ class Selector:
         return np.mean([nb.predict(U).t for nb, _ in self.recent], axis=0)
 
     def _certified(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``_predict`` where every value is certified exact, inf elsewhere: (C,)."""
-        return np.mean([nb.certified(U) for nb, _ in self.recent], axis=0)
+        """``_predict`` where every value is certified exact, inf elsewhere: (C,).
+
+        The scans' values are summed in window order, then divided by W: what numpy's mean
+        over them does for C >= 2 points, and for each point the same bits whatever other
+        points are asked with it (numpy sums a single point's W values pairwise, another
+        order from W = 9 on), so ``_refine`` may ask for some of its probes only."""
+        values = [nb.certified(U) for nb, _ in self.recent]
+        total = values[0].copy()
+        for v in values[1:]:
+            total += v
+        return total / len(values)
 
     def _order(self, t: NDArray[np.float64], U: NDArray[np.float64],
                first: int | None = None) -> NDArray[np.intp]:
@@ -386,29 +396,47 @@ class Selector:
         return order if first is None else order[:first]
 
     def _search(self) -> tuple[NDArray[np.float64], float, float]:
+        """Step 5: the best candidates by the window's mean value, refined by the pattern
+        search; the best point (P,), its value and the fraction of certified candidates."""
         t = np.mean([values for _, values in self.recent], axis=0)
         exact_frac = float(np.isfinite(t).mean())
         if exact_frac == 0.0:  # nothing certified: fall back to the approximate values
             t = self._predict(self.candidates)
         n = min(self.n_starts, len(t))
         starts = self._order(t, self.candidates, first=n)
-        best_u, best_t = self.candidates[starts].copy(), t[starts].copy()
-        step = 0.5 / max(2.0, len(self.candidates) ** (1.0 / self.candidates.shape[1]))
-        p = self.candidates.shape[1]
-        eye = np.vstack([np.eye(p), -np.eye(p)])
-        for _ in range(self.refine_iters):
-            probes = self.model.snap(np.clip((best_u[:, None, :] + step * eye[None])
-                                             .reshape(-1, p), *self.box))
-            pt = self._certified(probes).reshape(n, 2 * p)
-            j = np.argmin(pt, axis=1)
-            better = pt[np.arange(n), j] < best_t - TIE_TOL  # a real improvement, not rounding
-            if better.any():
-                best_u[better] = probes.reshape(n, 2 * p, p)[better, j[better]]
-                best_t[better] = pt[better, j[better]]
-            else:
-                step /= 2.0
+        best_u, best_t = self._refine(self.candidates[starts].copy(), t[starts].copy())
         i = int(self._order(best_t, best_u)[0])
         return best_u[i], float(best_t[i]), exact_frac
+
+    def _refine(self, best_u: NDArray[np.float64],
+                best_t: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The pattern search (step 5) from the n starts best_u (n, P) of values best_t (n,):
+        ``refine_iters`` rounds probing +-step along every coordinate of each start; a start
+        moves to its best probe when that is better by more than TIE_TOL, and the step halves
+        after a round where none moved. The starts and their values after the last round.
+
+        A start that did not move in a round where another one did has the same probes in the
+        next round: their values are kept, not searched again (``reuse``; the same values: a
+        point's value does not depend on the other points asked, ``Query``)."""
+        n, p = best_u.shape
+        step = 0.5 / max(2.0, len(self.candidates) ** (1.0 / p))
+        eye = np.vstack([np.eye(p), -np.eye(p)])
+        probes = np.empty((n, 2 * p, p))
+        pt = np.empty((n, 2 * p))
+        ask = np.ones(n, bool)  # the starts whose probes' values are not known
+        for _ in range(self.refine_iters):
+            around = (best_u[ask][:, None, :] + step * eye[None]).reshape(-1, p)
+            probes[ask] = self.model.snap(np.clip(around, *self.box)).reshape(-1, 2 * p, p)
+            pt[ask] = self._certified(probes[ask].reshape(-1, p)).reshape(-1, 2 * p)
+            j = np.argmin(pt, axis=1)
+            moved = pt[np.arange(n), j] < best_t - TIE_TOL  # a real improvement, not rounding
+            if moved.any():
+                best_u[moved] = probes[moved, j[moved]]
+                best_t[moved] = pt[moved, j[moved]]
+            else:
+                step /= 2.0
+            ask = moved if self.reuse and moved.any() else np.ones(n, bool)
+        return best_u, best_t
 
     def schedule(self, reader: Any) -> Any:
         """The Schedule of a whole recorded sequence (a SequenceReader): a selection every

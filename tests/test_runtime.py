@@ -296,27 +296,40 @@ def test_shared_nearest_trials_give_the_same_schedule(
     model_dir: Path, tmp_path: Path, kitti_root: Path, window: int, risk: float
 ) -> None:
     """The nearest trials of the pattern search's probes are found once for the whole window
-    (``TrialGroups.reuse``), not once per scan of it: the schedule is the one of the search
-    that finds them for every scan, bit for bit (the default refinement, no hysteresis)."""
+    (``TrialGroups.reuse``), not once per scan of it, and the probes of a start that did not
+    move are not asked again in the next round (``Selector.reuse``): the schedule is the one
+    of the search that does neither, bit for bit (the default refinement, no hysteresis), with
+    fewer points asked."""
     from pipeline.selection import SelectionSettings
+
+    class Counting(Selector):
+        """A Selector counting the points its pattern search asks the window for."""
+
+        asked = 0
+
+        def _certified(self, U: np.ndarray) -> np.ndarray:
+            self.asked += len(U)
+            return super()._certified(U)
 
     seq = tmp_path / "s.mcap"
     write_tiny_sequence(seq, kitti_root, "10", n=10, step=2)
     model = load_model(model_dir)
-    schedules = []
+    schedules, asked = [], []
     for reuse in (False, True):
-        sel = Selector(model, SelectionSettings(period_s=0.05, hysteresis=0.0, window=window,
-                                                  risk=risk))
+        sel = Counting(model, SelectionSettings(period_s=0.05, hysteresis=0.0, window=window,
+                                                risk=risk))
         sel.novelty_distance = float("inf")  # every scan searched
         assert sel.search.groups is not None
-        sel.search.groups.reuse = reuse
+        sel.search.groups.reuse = sel.reuse = reuse
         with SequenceReader(seq) as reader:
             schedules.append(sel.schedule(reader))
+        asked.append(sel.asked)
     old, new = schedules
     assert old.values.keys() == new.values.keys()
     for name in old.values:
         assert old.values[name].tobytes() == new.values[name].tobytes(), name
     assert len(old.changes()) > 1  # the schedule does select (not the defaults throughout)
+    assert asked[1] < asked[0]
 
 
 def test_first_of_the_order_are_those_of_the_whole_order(model_dir: Path) -> None:

@@ -66,7 +66,9 @@ def environment_d2(env: NDArray[np.float64], e_s: NDArray[np.float64]) -> NDArra
 
 @runtime_checkable
 class Query(Protocol):
-    """The surrogate at one environment E_s: predictions at unit parameter points U (C, P)."""
+    """The surrogate at one environment E_s: predictions at unit parameter points U (C, P),
+    each point's value independent of the other points of U (the selector keeps the values of
+    points it asks again: ``pipeline.runtime.Selector._refine``)."""
 
     rows_searched: int
 

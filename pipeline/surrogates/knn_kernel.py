@@ -9,10 +9,12 @@ tests/test_runtime.py compares them with scikit-learn's kNN over every row).
 The k nearest rows of a query point are the k smallest pairs (trial a of group g, frame j of
 group g) by squared distance d = trial_d2 + frame_d2, ties ordered by (g, a, j): the order in
 which the merge before issue 33 met them, and the order of ``knn_mean_numpy``'s stable sort.
-``knn_mean`` finds them without merging: a bound tau >= the k-th distance, read off a few
-corners of the sorted lists, gathers the pairs within it (a few more than k), and their
-ranks by (d, order) pick the k. A point whose gathered pairs overflow the buffer is merged as
-before, its best list seeded at the bound.
+``knn_mean`` merges the pairs in that order into a sorted best list, each after the entries
+of its distance, within a bound tau >= the k-th distance read off a few corners of the sorted
+lists (until the list holds k pairs; then within its k-th). The bound leaves about 1.3 k pairs
+to merge, and the list grows from empty, so an insertion shifts only the pairs already in
+(faster than ranking the pairs within the bound, issue 33: docs/performance.md, "The online
+selection (issue 33)").
 """
 
 from __future__ import annotations
@@ -21,14 +23,11 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-GATHER = 3
-"""The buffer of gathered pairs holds GATHER * k of them (about 1.5 k are gathered)."""
-
 
 @numba.njit(cache=True, nogil=True)
 def knn_mean(
     trial_d2: NDArray[np.float64],
-    trial_pos: NDArray[np.int64],
+    trial_pos: NDArray[np.int32],
     frame_d2: NDArray[np.float64],
     frame_row0: NDArray[np.int64],
     rows_t: NDArray[np.float64],
@@ -38,35 +37,28 @@ def knn_mean(
     """Mean (+ risk * std) of the targets of the k nearest rows of each query point: (n,).
 
     trial_d2, trial_pos (n, G, k): squared distances (ascending, inf-padded) and block positions
-    of each query's k nearest trial vectors in group g; frame_d2, frame_row0 (G, k): squared
-    E-distances (ascending, inf-padded) and first rows of the group's k nearest frames; rows_t
-    (M,) the targets. A row's squared joint distance is trial_d2 + frame_d2; the k nearest are
-    those of the module docstring (ties by group, trial, frame). The value is
-    ``knn_search.canonical_value`` of their k targets (the same bits for the same neighbours,
-    whatever order they were found in): their mean, plus risk times their population std when
-    risk > 0.
+    (int32: half the bytes of int64 to read) of each query's k nearest trial vectors in group
+    g; frame_d2, frame_row0 (G, k): squared E-distances (ascending, inf-padded) and first rows
+    of the group's k nearest frames; rows_t (M,) the targets. A row's squared joint distance
+    is trial_d2 + frame_d2; the k nearest are those of the module docstring (ties by group,
+    trial, frame). The value is ``knn_search.canonical_value`` of their k targets (the same
+    bits for the same neighbours, whatever order they were found in): their mean, plus risk
+    times their population std when risk > 0.
     """
     n, width = trial_d2.shape[0], trial_d2.shape[2]
     depth = frame_d2.shape[1]
     whole_a, whole_j = _corners(k, width, depth)
     half_a, half_j = _corners((k + 1) // 2, width, depth)
     out = np.empty(n)
-    cap = GATHER * k
-    pair_d = np.empty(cap)
-    pair_row = np.empty(cap, np.int64)
     best_d = np.empty(k)
-    best_row = np.empty(k, np.int64)
+    best_row = np.zeros(k, np.int64)  # valid rows even if fewer than k pairs (k > rows)
     chosen = np.empty(k)
     ordered = np.empty(k)
     for c in range(n):
         tau = _bound(trial_d2[c], frame_d2, whole_a, whole_j, half_a, half_j)
-        m = _gather(trial_d2[c], trial_pos[c], frame_d2, frame_row0, tau, pair_d, pair_row)
-        if m >= 0:
-            _pick(pair_d, pair_row, m, rows_t, k, chosen)
-        else:  # more pairs within tau than the buffer holds: merge
-            _merge(trial_d2[c], trial_pos[c], frame_d2, frame_row0, tau, best_d, best_row)
-            for i in range(k):
-                chosen[i] = rows_t[best_row[i]]
+        _merge(trial_d2[c], trial_pos[c], frame_d2, frame_row0, tau, best_d, best_row)
+        for i in range(k):
+            chosen[i] = rows_t[best_row[i]]
         out[c] = _value(chosen, ordered, k, risk)
     return out
 
@@ -101,6 +93,8 @@ def _bound(
     low1 = np.inf
     low2 = np.inf
     for g in range(trial_d2.shape[0]):
+        if trial_d2[g, 0] + frame_d2[g, 0] >= min(tau, low2):
+            continue  # no corner of the group is nearer (nor its lines of trials read)
         for f in range(len(whole_a)):
             tau = min(tau, trial_d2[g, whole_a[f]] + frame_d2[g, whole_j[f]])
         half = np.inf
@@ -115,86 +109,44 @@ def _bound(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _gather(
-    trial_d2: NDArray[np.float64], trial_pos: NDArray[np.int64],
-    frame_d2: NDArray[np.float64], frame_row0: NDArray[np.int64], tau: float,
-    pair_d: NDArray[np.float64], pair_row: NDArray[np.int64],
-) -> int:  # pragma: no cover - compiled
-    """The pairs of one query point within tau, in (g, a, j) order, into pair_d / pair_row:
-    their number, or -1 when they do not fit (or tau is inf). Both lists are sorted, so a row
-    of trials (and a group) is left at its first pair beyond tau."""
-    if not tau < np.inf:
-        return -1
-    m = 0
-    for g in range(trial_d2.shape[0]):
-        for a in range(trial_d2.shape[1]):
-            da = trial_d2[g, a]
-            if da + frame_d2[g, 0] > tau:
-                break
-            for j in range(frame_d2.shape[1]):
-                d = da + frame_d2[g, j]
-                if d > tau:
-                    break
-                if m == len(pair_d):
-                    return -1
-                pair_d[m] = d
-                pair_row[m] = frame_row0[g, j] + trial_pos[g, a]
-                m += 1
-    return m
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _pick(
-    pair_d: NDArray[np.float64], pair_row: NDArray[np.int64], m: int,
-    rows_t: NDArray[np.float64], k: int, chosen: NDArray[np.float64],
-) -> None:  # pragma: no cover - compiled
-    """The targets of the k first of m gathered pairs by (distance, gathering order) into
-    chosen (k,): a pair's rank is the number of pairs before it in that order."""
-    q = 0
-    for i in range(m):
-        if _rank(pair_d, m, i) < k:
-            chosen[q] = rows_t[pair_row[i]]
-            q += 1
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _rank(values: NDArray[np.float64], n: int, i: int) -> int:  # pragma: no cover - compiled
-    """How many of values[:n] come before values[i] by value, then position (a stable sort's
-    place for it)."""
-    v = values[i]
-    rank = 0
-    same = 0
-    for i2 in range(n):
-        rank += values[i2] < v
-        same += values[i2] == v
-    if same > 1:  # equal values: those before it in the array come first
-        for i2 in range(i):
-            rank += values[i2] == v
-    return rank
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
 def _merge(
-    trial_d2: NDArray[np.float64], trial_pos: NDArray[np.int64],
+    trial_d2: NDArray[np.float64], trial_pos: NDArray[np.int32],
     frame_d2: NDArray[np.float64], frame_row0: NDArray[np.int64], tau: float,
     best_d: NDArray[np.float64], best_row: NDArray[np.int64],
 ) -> None:  # pragma: no cover - compiled
-    """The k nearest rows of one query point by a merge of its pairs in (g, a, j) order into a
-    sorted best list (best_d, best_row (k,)) seeded just above tau: a pair enters before the
-    first entry farther than it, so equal distances keep the merge's order."""
+    """The k nearest rows of one query point into best_d, best_row (k,), sorted by distance:
+    its pairs within tau (>= the k-th distance) merged in (g, a, j) order, each entering
+    after the entries of its distance, so equal distances keep the order of the module
+    docstring. Both lists are sorted, so a row of trials (and a group) is left at its first
+    pair beyond the limit: tau until k pairs are in, then the k-th so far (a pair equal to it
+    comes after it)."""
     k = len(best_d)
-    best_d[:] = np.nextafter(tau, np.inf)
-    best_row[:] = 0
+    limit = np.nextafter(tau, np.inf)
+    filled = 0
     for g in range(trial_d2.shape[0]):
         for a in range(trial_d2.shape[1]):
             da = trial_d2[g, a]
-            if da + frame_d2[g, 0] >= best_d[k - 1]:
+            if da + frame_d2[g, 0] >= limit:
                 break
             for j in range(frame_d2.shape[1]):
                 d = da + frame_d2[g, j]
-                if d >= best_d[k - 1]:
+                if d >= limit:
                     break
-                _insert(best_d, best_row, k, d, frame_row0[g, j] + trial_pos[g, a])
+                filled = _push(best_d, best_row, filled, d, frame_row0[g, j] + trial_pos[g, a])
+                if filled == k:
+                    limit = best_d[k - 1]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _push(keys: NDArray[np.float64], items: NDArray[np.int64], filled: int, key: float,
+          item: int) -> int:  # pragma: no cover - compiled
+    """(key, item) into the first ``filled`` of keys, items (sorted by key) after every entry
+    with an equal key, growing them up to their length (when full, the last entry drops out):
+    the new number filled."""
+    if filled < len(keys):
+        filled += 1
+    _insert(keys, items, filled, key, item)
+    return filled
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -231,6 +183,22 @@ def _value(chosen: NDArray[np.float64], ordered: NDArray[np.float64], k: int,
     return mean + risk * np.sqrt(squares / k)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _rank(values: NDArray[np.float64], n: int, i: int) -> int:  # pragma: no cover - compiled
+    """How many of values[:n] come before values[i] by value, then position (a stable sort's
+    place for it)."""
+    v = values[i]
+    rank = 0
+    same = 0
+    for i2 in range(n):
+        rank += values[i2] < v
+        same += values[i2] == v
+    if same > 1:  # equal values: those before it in the array come first
+        for i2 in range(i):
+            rank += values[i2] == v
+    return rank
+
+
 NEAR_TIE = 1e-9
 """Relative gap below which the k-th and the next trial of ``nearest_trials`` count as tied."""
 
@@ -239,7 +207,7 @@ NEAR_TIE = 1e-9
 def nearest_trials(
     points: NDArray[np.float64], trials: NDArray[np.float64], order: NDArray[np.int64],
     leaf_start: NDArray[np.int64], leaf_box: NDArray[np.float64], k: int,
-) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]:  # pragma: no cover
+) -> tuple[NDArray[np.float64], NDArray[np.int32], NDArray[np.bool_]]:  # pragma: no cover
     """The k nearest trial vectors of each point in every group, as the groups' kd-trees give
     them: squared distances and block positions (n, G, k) (ascending; inf and 0 past a
     group's size) and whether that answer is sure (n,).
@@ -261,20 +229,22 @@ def nearest_trials(
     n, n_params = points.shape
     n_groups, n_leaves = leaf_start.shape[0], leaf_start.shape[1] - 1
     d2 = np.full((n, n_groups, k), np.inf)
-    pos = np.zeros((n, n_groups, k), np.int64)
+    pos = np.zeros((n, n_groups, k), np.int32)
     sure = np.ones(n, np.bool_)
-    best_s = np.empty(k + 1)
-    best_t = np.empty(k + 1, np.int64)
+    near_s = np.empty(k + 1)
+    near_t = np.empty(k + 1, np.int64)
     bound = np.empty(n_leaves)
-    diff = np.empty(n_params)
+    box_point = np.empty(n_params)
     for i in range(n):
         for g in range(n_groups):
             size = leaf_start[g, n_leaves]
             kk = min(k, size)
             keep = min(kk + 1, size)
-            best_s[:keep] = np.inf
+            best_s, best_t = near_s[:keep], near_t[:keep]
+            filled = 0
+            limit = np.inf  # the (k + 1)-th nearest so far
             for leaf in range(n_leaves):
-                bound[leaf] = _box_gap(leaf_box, g, leaf, points, i, n_params, diff)
+                bound[leaf] = _box_gap(leaf_box, g, leaf, points, i, n_params, box_point)
             while True:
                 nearest = -1
                 near = np.inf
@@ -282,14 +252,16 @@ def nearest_trials(
                     if bound[leaf] < near:
                         near = bound[leaf]
                         nearest = leaf
-                if nearest < 0 or near > best_s[keep - 1]:
+                if nearest < 0 or near > limit:
                     break  # every trial left is farther than the (k + 1)-th so far
                 bound[nearest] = np.inf
                 for t in range(leaf_start[g, nearest], leaf_start[g, nearest + 1]):
-                    s = _sqeuclidean(trials, g, t, points, i, n_params, diff)
-                    if s >= best_s[keep - 1]:
+                    s = _sqeuclidean(trials, g, t, points, i, n_params)
+                    if s >= limit:
                         continue
-                    _insert(best_s, best_t, keep, s, t)
+                    filled = _push(best_s, best_t, filled, s, t)
+                    if filled == keep:
+                        limit = best_s[keep - 1]
             for a in range(kk):
                 r = np.sqrt(best_s[a])
                 d2[i, g, a] = r * r
@@ -303,61 +275,49 @@ def nearest_trials(
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _box_gap(leaf_box: NDArray[np.float64], g: int, leaf: int, points: NDArray[np.float64],
-             i: int, n: int, diff: NDArray[np.float64]) -> float:  # pragma: no cover - compiled
-    """The squared distance of points[i] to the box leaf_box[g, leaf] (n coordinates; diff (n,)
-    scratch), summed as ``_sqeuclidean`` sums: no more than ``_sqeuclidean`` of any point in
-    the box (every gap is at most that point's coordinate difference, and the sums are in the
-    same order); inf for an empty box (lowest > highest)."""
+             i: int, n: int, near: NDArray[np.float64]) -> float:  # pragma: no cover - compiled
+    """The squared distance of points[i] to the box leaf_box[g, leaf] (n coordinates; near (n,)
+    scratch: the box's point nearest to it), summed as ``_sqeuclidean`` sums: no more than
+    ``_sqeuclidean`` of any point in the box (every difference is at most that point's, and
+    the sums are in the same order); inf for an empty box (lowest inf, highest -inf)."""
     for p in range(n):
-        diff[p] = _gap(leaf_box, g, leaf, points, i, p)
-    return _tree_sum(diff, n)
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _gap(leaf_box: NDArray[np.float64], g: int, leaf: int, points: NDArray[np.float64], i: int,
-         p: int) -> float:  # pragma: no cover - compiled
-    """How far coordinate p of points[i] lies outside [lowest, highest] of the box (0 inside,
-    inf for an empty box)."""
-    low = leaf_box[g, leaf, 0, p]
-    high = leaf_box[g, leaf, 1, p]
-    x = points[i, p]
-    if low > high:
-        return np.inf
-    if x < low:
-        return low - x
-    if x > high:
-        return x - high
-    return 0.0
+        near[p] = min(max(points[i, p], leaf_box[g, leaf, 0, p]), leaf_box[g, leaf, 1, p])
+    return _tree_sum(points[i], near, n)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _sqeuclidean(trials: NDArray[np.float64], g: int, t: int, points: NDArray[np.float64],
-                 i: int, n: int, diff: NDArray[np.float64]) -> float:  # pragma: no cover
-    """|trials[g, t] - points[i]|^2 (n coordinates; diff (n,) scratch), as scipy's kd-tree
-    sums it (``_tree_sum``)."""
-    for p in range(n):
-        diff[p] = trials[g, t, p] - points[i, p]
-    return _tree_sum(diff, n)
+                 i: int, n: int) -> float:  # pragma: no cover - compiled
+    """|trials[g, t] - points[i]|^2 (n coordinates), as scipy's kd-tree sums it
+    (``_tree_sum``)."""
+    return _tree_sum(trials[g, t], points[i], n)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _tree_sum(diff: NDArray[np.float64], n: int) -> float:  # pragma: no cover - compiled
-    """The sum of diff[:n] squared in the order of scipy's kd-tree
+def _tree_sum(a: NDArray[np.float64], b: NDArray[np.float64],
+              n: int) -> float:  # pragma: no cover - compiled
+    """The sum of (a[p] - b[p])^2 over the first n coordinates in the order of scipy's kd-tree
     (``sqeuclidean_distance_double``): four partial sums over blocks of four coordinates, added
-    in order, then the rest one by one."""
+    in order, then the rest one by one (each difference taken where it is squared: a tenth
+    faster than through a scratch array)."""
     acc0 = 0.0
     acc1 = 0.0
     acc2 = 0.0
     acc3 = 0.0
     p = 0
     while p + 4 <= n:
-        acc0 += diff[p] * diff[p]
-        acc1 += diff[p + 1] * diff[p + 1]
-        acc2 += diff[p + 2] * diff[p + 2]
-        acc3 += diff[p + 3] * diff[p + 3]
+        d0 = a[p] - b[p]
+        d1 = a[p + 1] - b[p + 1]
+        d2 = a[p + 2] - b[p + 2]
+        d3 = a[p + 3] - b[p + 3]
+        acc0 += d0 * d0
+        acc1 += d1 * d1
+        acc2 += d2 * d2
+        acc3 += d3 * d3
         p += 4
     s = acc0 + acc1 + acc2 + acc3
     while p < n:
-        s += diff[p] * diff[p]
+        d = a[p] - b[p]
+        s += d * d
         p += 1
     return s

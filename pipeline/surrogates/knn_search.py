@@ -161,7 +161,7 @@ class TrialLeaves:
 
     def nearest(
         self, q: NDArray[np.float64], k: int
-    ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.int32], NDArray[np.bool_]]:
         """``knn_kernel.nearest_trials`` of the scaled points q (n, P), C-contiguous."""
         from pipeline.surrogates.knn_kernel import nearest_trials
 
@@ -203,7 +203,7 @@ class TrialGroups:
         self.leaves = TrialLeaves(block_x)
         self.candidates = candidates_u
         self.reuse = True
-        self._last: tuple[bytes, tuple[NDArray[np.float64], NDArray[np.int64]]] | None = None
+        self._last: tuple[bytes, tuple[NDArray[np.float64], NDArray[np.int32]]] | None = None
         self.compiled = False  # the trees, until the leaves are seen to agree with them
         self.candidate_trials = self.nearest_trials(candidates_u)
         self.compiled = self._leaves_agree(candidates_u)
@@ -226,10 +226,10 @@ class TrialGroups:
 
     def nearest_trials(
         self, U: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-        """Squared distances and block positions (n, G, k) of the k nearest trial vectors of
-        each unit point U (n, P) in every group (ascending; inf and 0 past a group's size);
-        read-only.
+    ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
+        """Squared distances and block positions (int32) (n, G, k) of the k nearest trial
+        vectors of each unit point U (n, P) in every group (ascending; inf and 0 past a group's
+        size); read-only.
 
         They do not depend on the environment: a selector over a window of W scans asks for
         the same points under each of them (the pattern search's probes, the parameters in
@@ -250,11 +250,11 @@ class TrialGroups:
 
     def _tree_trials(
         self, q: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
         """``nearest_trials`` of the scaled points q (n, P) by the groups' kd-trees."""
         n = len(q)
         d2 = np.full((n, len(self.trees), self.k), np.inf)
-        pos = np.zeros((n, len(self.trees), self.k), np.int64)
+        pos = np.zeros((n, len(self.trees), self.k), np.int32)
         for g, tree in enumerate(self.trees):
             kk = min(self.k, tree.n)
             dist, idx = tree.query(q, k=kk)
@@ -264,7 +264,7 @@ class TrialGroups:
 
     def _leaf_trials(
         self, q: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
         """``nearest_trials`` of the scaled points q (n, P) by the leaves
         (``knn_kernel.nearest_trials``), the trees' answer for the points it is not sure of
         (ties)."""
@@ -299,18 +299,19 @@ class TrialGroups:
         """Squared E-distances and first rows (G, k) of each group's k nearest frames, given
         every frame's squared E-distance env_d2 (n_env,) (ascending; inf and 0 past a group's
         size)."""
-        table = self.frame_table
-        d2 = np.where(table >= 0, env_d2[table], np.inf)
+        table, rows = self.frame_table, np.arange(len(self.frame_table))[:, None]
+        frames = np.maximum(table, 0)  # padding -> frame 0
+        d2 = env_d2[frames]
+        d2[table < 0] = np.inf
         kk = min(self.k, table.shape[1])
-        pick = np.argpartition(d2, kk - 1, axis=1)[:, :kk] if table.shape[1] > kk else None
-        if pick is not None:
-            d2, table = np.take_along_axis(d2, pick, 1), np.take_along_axis(table, pick, 1)
+        if table.shape[1] > kk:
+            pick = np.argpartition(d2, kk - 1, axis=1)[:, :kk]
+            d2, frames = d2[rows, pick], frames[rows, pick]
         order = np.argsort(d2, axis=1, kind="stable")
         frame_d2 = np.full((len(table), self.k), np.inf)
         frame_row0 = np.zeros((len(table), self.k), np.int64)
-        frame_d2[:, :kk] = np.take_along_axis(d2, order, 1)
-        frames = np.maximum(np.take_along_axis(table, order, 1), 0)  # padding -> frame 0
-        frame_row0[:, :kk] = self.model.env_offsets[frames]
+        frame_d2[:, :kk] = d2[rows, order]
+        frame_row0[:, :kk] = self.model.env_offsets[frames[rows, order]]
         return frame_d2, frame_row0
 
 
@@ -328,12 +329,12 @@ class GroupedNeighbourhood:
 
     def predict(self, U: NDArray[np.float64]) -> Prediction:
         """Prediction at unit points U (C, P), every value exact."""
-        t = self._mean(*self.groups.nearest_trials(U))
+        t = self.certified(U)
         return Prediction(t, np.ones(len(t), bool))
 
     def certified(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
         """``predict(U).t`` (every value is exact): (C,)."""
-        return self.predict(U).t
+        return self._mean(*self.groups.nearest_trials(U))
 
     def candidate_values(self, candidates: NDArray[np.float64]) -> NDArray[np.float64]:
         """``certified`` at the groups' candidate set (their nearest trials are known)."""
@@ -342,7 +343,7 @@ class GroupedNeighbourhood:
         return self._mean(*self.groups.candidate_trials)
 
     def _mean(
-        self, trial_d2: NDArray[np.float64], trial_pos: NDArray[np.int64]
+        self, trial_d2: NDArray[np.float64], trial_pos: NDArray[np.int32]
     ) -> NDArray[np.float64]:
         return _knn_mean_kernel()(
             trial_d2, trial_pos, self.frame_d2, self.frame_row0, self.groups.model.rows_t,
@@ -351,11 +352,12 @@ class GroupedNeighbourhood:
 
 
 F64: TypeAlias = NDArray[np.float64]
+I32: TypeAlias = NDArray[np.int32]
 I64: TypeAlias = NDArray[np.int64]
 
 
 def knn_mean_numpy(
-    trial_d2: F64, trial_pos: I64, frame_d2: F64, frame_row0: I64, rows_t: F64, k: int,
+    trial_d2: F64, trial_pos: I32, frame_d2: F64, frame_row0: I64, rows_t: F64, k: int,
     risk: float = 0.0,
 ) -> F64:
     """``pipeline.surrogates.knn_kernel.knn_mean`` in numpy (same arguments, same values): (n,).
