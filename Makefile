@@ -18,7 +18,8 @@ $(STAMP): pyproject.toml
 
 # the suite in TEST_WORKERS processes (pytest-xdist), a test file per process so that a file's
 # module fixtures (the DVC projects of tests/test_pipeline_dvc.py) are built once; 2 on 2 cores
-# (3 measured 9:39, 10:20 and 10:34 idle, 2 measured 10:01: no better, and more CPU)
+# (3 were no faster than 2 in three idle runs on 2 cores, and used more CPU); the slow modules
+# go out first (tests/conftest.py's order, --no-loadscope-reorder)
 TEST_WORKERS ?= 2
 test: setup
 	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder

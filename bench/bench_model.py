@@ -8,10 +8,12 @@ scans.
   TPE-like (clustered per sequence), and the RTE depends on both. The selection is timed
   from the environment E_t (the descriptor is the row above) and also end to end from the
   scan; the references in the same run are the certified kd-tree search the runtime keeps for
-  artifacts whose frames do not group, and the grouped search that finds the nearest trials of
-  the pattern search's probes once for every scan of the window (the code before issue 33).
+  artifacts whose frames do not group, and the selection before issue 33's kernels
+  (main@6b0bde1: the merge kernel frozen in bench/reference/knn_merge_reference.py, the groups'
+  kd-trees for the pattern search's probes), whose choices must be the same (asserted).
 Every figure is CPU time of the process (``time.process_time``, best of a few): on this shared
-2-core machine wall times move with the other processes' load.
+2-core machine wall times move with the other processes' load, and CPU times less so (the
+selection, its risk-aware twin and main's are timed in turns, scan by scan).
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ from __future__ import annotations
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -79,6 +83,21 @@ def synthetic_rows(
     return TrainingRows(E, U, y, seqs, frames, trials), pca
 
 
+@contextmanager
+def merge_kernel() -> Iterator[None]:
+    """The grouped search on the merge kernel before issue 33 (bench/reference)."""
+    from reference.knn_merge_reference import knn_mean
+
+    from pipeline.surrogates import knn_search
+
+    chosen = knn_search._knn_mean_kernel
+    knn_search._knn_mean_kernel = lambda: knn_mean
+    try:
+        yield
+    finally:
+        knn_search._knn_mean_kernel = chosen
+
+
 def run() -> list[Row]:
     from pipeline.descriptors import NdtHistogram
     from pipeline.odometry.registry import get_adapter
@@ -116,23 +135,32 @@ def run() -> list[Row]:
     sel = Selector(model, selection)
     tree = Selector(model, selection, grouped=False)  # the reference: the certified kd-tree
     wary = Selector(model, selection.replace(risk=0.5))  # mean + 0.5 std of the k targets
-    every_scan = Selector(model, selection)  # the probes' nearest trials found for every scan
-    assert every_scan.search.groups is not None
-    every_scan.search.groups.reuse = False
-    for s_ in (sel, tree, wary, every_scan):
+    main = Selector(model, selection)  # the selection before issue 33's kernels (run())
+    assert main.search.groups is not None
+    main.search.groups.compiled = False  # the probes' nearest trials by the kd-trees
+    for s_ in (sel, tree, wary, main):
         s_.novelty_distance = float("inf")  # time the full search, never the novelty fallback
 
-    def fresh(selector: Selector, e: np.ndarray) -> None:
+    def fresh(selector: Selector, e: np.ndarray) -> dict[str, float]:
         selector.current_u = None  # no hysteresis: a full selection every time
-        selector.select_environment(e)
+        return selector.select_environment(e)
 
     for e in envs[:selection.window]:  # a full window before the first timed selection
-        for s_ in (sel, tree, wary, every_scan):
+        for s_ in (sel, tree, wary):
             fresh(s_, e)
-    times = [best_of(lambda e=e: fresh(sel, e), repeat=3, clock=CPU) for e in envs[::4]]
-    before = [best_of(lambda e=e: fresh(every_scan, e), repeat=3, clock=CPU) for e in envs[::4]]
+        with merge_kernel():
+            fresh(main, e)
+    times, before, wary_times = [], [], []
+    for e in envs[::4]:  # in turns, scan by scan: all three see the same load
+        times.append(best_of(lambda e=e: fresh(sel, e), repeat=5, clock=CPU))
+        with merge_kernel():
+            before.append(best_of(lambda e=e: fresh(main, e), repeat=5, clock=CPU))
+        wary_times.append(best_of(lambda e=e: fresh(wary, e), repeat=5, clock=CPU))
+    for e in envs:  # the same choices, every scan
+        chosen = fresh(sel, e)
+        with merge_kernel():
+            assert fresh(main, e) == chosen
     tree_times = [best_of(lambda e=e: fresh(tree, e), repeat=3, clock=CPU) for e in envs[::4]]
-    wary_times = [best_of(lambda e=e: fresh(wary, e), repeat=3, clock=CPU) for e in envs[::4]]
     exact = []
     for e in envs:
         nb = Neighbourhood(model.surrogate, environment_d2(model.env, e),
@@ -152,8 +180,8 @@ def run() -> list[Row]:
             f"window W = {selection.window}, k = {model.surrogate.k}, CPU",
             1e3 * float(np.median(times)),
             "ms",
-            f"paper 700 ms; the probes' nearest trials found for every scan of the window "
-            f"(before issue 33, same run) {1e3 * float(np.median(before)):.2f} ms",
+            f"paper 700 ms; before issue 33's kernels (main@6b0bde1, same run, same choices) "
+            f"{1e3 * float(np.median(before)):.2f} ms",
             "<= 5 ms",
         ),
         Row(

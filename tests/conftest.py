@@ -7,6 +7,7 @@ a failure instead, so CI never goes green without the real data.
 from __future__ import annotations
 
 import os
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -27,9 +28,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     rest, each group by its number of tests (xdist's own order). `make test` hands modules out
     in this order (``--dist loadfile --no-loadscope-reorder``): the longest jobs start first and
     the short ones fill the gaps at the end, so no worker starts a three-minute module last."""
-    per_module: dict[str, int] = {}
-    for item in items:
-        per_module[item.nodeid.split("::")[0]] = per_module.get(item.nodeid.split("::")[0], 0) + 1
+    per_module = Counter(item.nodeid.split("::")[0] for item in items)
     items.sort(key=lambda item: (item.get_closest_marker("slow") is None,
                                  -per_module[item.nodeid.split("::")[0]]))
 

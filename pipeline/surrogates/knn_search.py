@@ -11,8 +11,11 @@ trial vectors. The k nearest rows of (E_s, x) are among the pairs (one of the k 
 of x in X_g, one of the k nearest frames of E_s in group g): any other row is farther than k
 rows of the same frame (nearer trials) or of the same trial (nearer frames). The nearest trials
 of the candidate set are static (found once per selector); per selection only the k nearest
-frames of each group are found and the pairs merged (``pipeline.surrogates.knn_kernel`` in
-numba, ``knn_mean_numpy`` without numba).
+frames of each group are found and the k nearest pairs picked, ties by (group, trial, frame)
+(``pipeline.surrogates.knn_kernel.knn_mean`` in numba, ``knn_mean_numpy``'s stable sort
+without numba: the same bits). The nearest trials of the few points of a pattern-search round
+are found in numba too (``TrialLeaves``, ``knn_kernel.nearest_trials``), exactly as the
+groups' kd-trees find them, which answer whenever that is not sure (ties).
 
 Risk (the selector's ``risk`` >= 0, pipeline/runtime.py): every search gives the value
 mean + risk * std of the k neighbours' targets (population std), ``canonical_value``; risk 0 is
@@ -120,6 +123,59 @@ class Neighbourhood:
 
 
 MAX_GROUPS = 64  # beyond this many frame groups the search uses Neighbourhood
+LEAF_POINTS = 64
+"""``TrialGroups.nearest_trials`` of at most this many points (the pattern search's probes)
+searches the leaves (``knn_kernel.nearest_trials``): a kd-tree query costs about 35 us a call
+and group before it searches anything. More points (the candidates, the cross-validation's
+rows) ask the trees."""
+LEAF_TRIALS = 16
+"""The most trial vectors in one leaf of ``TrialLeaves``."""
+
+
+class TrialLeaves:
+    """Each group's trial vectors in leaves of at most LEAF_TRIALS, split at the median of
+    their widest coordinate, with the box around each leaf: what ``knn_kernel.nearest_trials``
+    searches. trials (G, T, P) leaf by leaf (zero-padded), order (G, T) their positions in the
+    group's block, starts (G, L + 1), boxes (G, L, 2, P) (lowest, highest; empty: inf, -inf).
+    """
+
+    def __init__(self, block_x: list[NDArray[np.float64]]) -> None:
+        """block_x: each group's trial vectors (T_g, P), in block order."""
+        leaves = [_split(x, np.arange(len(x))) for x in block_x]
+        n_leaves = max(map(len, leaves))
+        n_params = block_x[0].shape[1]
+        self.trials = np.zeros((len(block_x), max(map(len, block_x)), n_params))
+        self.order = np.zeros(self.trials.shape[:2], np.int64)
+        self.starts = np.zeros((len(block_x), n_leaves + 1), np.int64)
+        self.boxes = np.empty((len(block_x), n_leaves, 2, n_params))
+        self.boxes[:, :, 0], self.boxes[:, :, 1] = np.inf, -np.inf
+        for g, (x, parts) in enumerate(zip(block_x, leaves, strict=True)):
+            order = np.concatenate(parts)
+            self.order[g, : len(x)] = order
+            self.trials[g, : len(x)] = x[order]
+            self.starts[g, 1:] = len(x)
+            self.starts[g, 1 : len(parts) + 1] = np.cumsum([len(p) for p in parts])
+            for leaf, part in enumerate(parts):
+                self.boxes[g, leaf] = x[part].min(axis=0), x[part].max(axis=0)
+
+    def nearest(
+        self, q: NDArray[np.float64], k: int
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]:
+        """``knn_kernel.nearest_trials`` of the scaled points q (n, P), C-contiguous."""
+        from pipeline.surrogates.knn_kernel import nearest_trials
+
+        return nearest_trials(q, self.trials, self.order, self.starts, self.boxes, k)
+
+
+def _split(x: NDArray[np.float64], idx: NDArray[np.intp]) -> list[NDArray[np.intp]]:
+    """The positions idx of trial vectors x (T, P) in leaves of at most LEAF_TRIALS: halves at
+    the median of the widest coordinate, recursively."""
+    if len(idx) <= LEAF_TRIALS:
+        return [idx]
+    dim = int(np.argmax(np.ptp(x[idx], axis=0)))
+    idx = idx[np.argsort(x[idx, dim], kind="stable")]
+    half = len(idx) // 2
+    return _split(x, idx[:half]) + _split(x, idx[half:])
 
 
 class TrialGroups:
@@ -136,14 +192,18 @@ class TrialGroups:
         self.model = model
         self.k = model.k
         self.x_scale = x_scale
-        self.trees = [cKDTree(model.rows_x[offsets[f[0]] : offsets[f[0] + 1]]) for f in blocks]
+        block_x = [model.rows_x[offsets[f[0]] : offsets[f[0] + 1]] for f in blocks]
+        self.trees = [cKDTree(x) for x in block_x]
         self.frame_table = np.full((len(blocks), max(map(len, blocks))), -1, np.int64)  # (G, F)
         for g, frames in enumerate(blocks):
             self.frame_table[g, : len(frames)] = frames
+        self.leaves = TrialLeaves(block_x)
         self.candidates = candidates_u
         self.reuse = True
         self._last: tuple[bytes, tuple[NDArray[np.float64], NDArray[np.int64]]] | None = None
+        self.compiled = False  # the trees, until the leaves are seen to agree with them
         self.candidate_trials = self.nearest_trials(candidates_u)
+        self.compiled = self._leaves_agree(candidates_u)
 
     @classmethod
     def build(cls, model: KnnRows, candidates_u: NDArray[np.float64],
@@ -171,22 +231,64 @@ class TrialGroups:
         They do not depend on the environment: a selector over a window of W scans asks for
         the same points under each of them (the pattern search's probes, the parameters in
         force), so the last answer is kept and given again for the same U (``reuse``; off, it
-        is computed every time: the same arrays)."""
+        is computed every time: the same arrays). A few points are searched in the leaves
+        (``compiled``, LEAF_POINTS; off: the trees, the same arrays)."""
         key = np.ascontiguousarray(U, np.float64).tobytes()  # P is fixed: the bytes give n
         if self.reuse and self._last is not None and self._last[0] == key:
             return self._last[1]
-        n = len(U)
+        q = np.ascontiguousarray(U * self.x_scale, np.float64)
+        if self.compiled and len(q) <= LEAF_POINTS:
+            d2, pos = self._leaf_trials(q)
+        else:
+            d2, pos = self._tree_trials(q)
+        d2.flags.writeable = pos.flags.writeable = False
+        self._last = (key, (d2, pos))
+        return d2, pos
+
+    def _tree_trials(
+        self, q: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """``nearest_trials`` of the scaled points q (n, P) by the groups' kd-trees."""
+        n = len(q)
         d2 = np.full((n, len(self.trees), self.k), np.inf)
         pos = np.zeros((n, len(self.trees), self.k), np.int64)
-        q = U * self.x_scale
         for g, tree in enumerate(self.trees):
             kk = min(self.k, tree.n)
             dist, idx = tree.query(q, k=kk)
             d2[:, g, :kk] = np.reshape(dist, (n, kk)) ** 2
             pos[:, g, :kk] = np.reshape(idx, (n, kk))
-        d2.flags.writeable = pos.flags.writeable = False
-        self._last = (key, (d2, pos))
         return d2, pos
+
+    def _leaf_trials(
+        self, q: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """``nearest_trials`` of the scaled points q (n, P) by the leaves
+        (``knn_kernel.nearest_trials``), the trees' answer for the points it is not sure of
+        (ties)."""
+        d2, pos, sure = self.leaves.nearest(q, self.k)
+        if not sure.all():
+            d2[~sure], pos[~sure] = self._tree_trials(q[~sure])
+        return d2, pos
+
+    def _leaves_agree(self, candidates_u: NDArray[np.float64]) -> bool:
+        """True when numba is there and ``knn_kernel.nearest_trials`` gives the trees' answer
+        to the bit at the first 256 candidates (``candidate_trials``) and at 256 random points,
+        where it is sure: its sums are the trees' (a scipy built to fuse multiply-adds would
+        differ)."""
+        try:
+            import pipeline.surrogates.knn_kernel  # noqa: F401
+        except ImportError:  # pragma: no cover - numba is a dependency of the pipeline
+            return False
+        random_q = np.random.default_rng(0).random((256, candidates_u.shape[1])) * self.x_scale
+        agree = True
+        for q, (tree_d2, tree_pos) in (
+            (candidates_u[:256] * self.x_scale, [a[:256] for a in self.candidate_trials]),
+            (random_q, self._tree_trials(random_q)),
+        ):
+            d2, pos, sure = self.leaves.nearest(np.ascontiguousarray(q, np.float64), self.k)
+            agree &= np.array_equal(d2[sure], tree_d2[sure])
+            agree &= np.array_equal(pos[sure], tree_pos[sure])
+        return bool(agree)
 
     def nearest_frames(
         self, env_d2: NDArray[np.float64]
@@ -255,14 +357,16 @@ def knn_mean_numpy(
 ) -> F64:
     """``pipeline.surrogates.knn_kernel.knn_mean`` in numpy (same arguments, same values): (n,).
 
-    Only the pairs (a, j) with (a + 1)(j + 1) <= k can be among a group's k nearest: a pair
-    farther down both sorted lists is beaten by the (a + 1)(j + 1) pairs above and left of it.
+    The k nearest rows are the k first pairs (trial a, frame j of group g) by distance, ties
+    by (g, a, j) (a stable sort of the pairs in that order). Only the pairs with
+    (a + 1)(j + 1) <= k can be among them: a pair farther down both sorted lists comes after
+    the (a + 1)(j + 1) - 1 pairs above and left of it.
     """
     a, j = np.array([(a, j) for a in range(k) for j in range(k) if (a + 1) * (j + 1) <= k]).T
     n = len(trial_d2)
     d2 = (trial_d2[:, :, a] + frame_d2[None, :, j]).reshape(n, -1)
     rows = (trial_pos[:, :, a] + frame_row0[None, :, j]).reshape(n, -1)
-    pick = np.argpartition(d2, k - 1, axis=1)[:, :k]
+    pick = np.argsort(d2, axis=1, kind="stable")[:, :k]
     return canonical_value(rows_t[np.take_along_axis(rows, pick, 1)], risk)
 
 
