@@ -17,7 +17,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.odometry.common import KEY_MAX, KEY_OFFSET
+from pipeline.odometry.ndt_kernel import _voxel_key
 
 _PAIRWISE_BLOCK = 128
 """numpy's PW_BLOCKSIZE: above it the pairwise sum splits in two."""
@@ -28,15 +28,11 @@ def voxel_keys_of(points: NDArray[np.floating], inv_voxel: float
                   ) -> NDArray[np.int64]:  # pragma: no cover - compiled
     """(N,) int64 packed keys (``common.pack_keys``) of the voxels holding ``points`` (N, 3)
     [m], float32 or float64 (taken as float64), ``inv_voxel`` = 1 / voxel side [1/m]."""
-    n = points.shape[0]
-    keys = np.empty(n, np.int64)
-    for i in range(n):
-        key = np.int64(0)
-        for axis in range(3):
-            idx = np.int64(np.floor(np.float64(points[i, axis]) * inv_voxel)) + KEY_OFFSET
-            idx = min(max(idx, np.int64(0)), np.int64(KEY_MAX))
-            key = (key << np.int64(21)) | idx
-        keys[i] = key
+    no_offset = np.zeros((1, 3), np.int64)
+    keys = np.empty(points.shape[0], np.int64)
+    for i in range(points.shape[0]):  # the voxel map's own key of a point (ndt_kernel)
+        keys[i] = _voxel_key(np.float64(points[i, 0]), np.float64(points[i, 1]),
+                             np.float64(points[i, 2]), inv_voxel, no_offset, 0)
     return keys
 
 
