@@ -46,7 +46,7 @@ bench: setup
 
 # dvc runs the stages' `adaptune ...` commands: the venv's bin must be on PATH
 repro: setup
-	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro
+	PATH="$(abspath $(BIN)):$$PATH" $(BIN)/dvc repro
 
 # The coverage model's verdict (issue 29; docs/results/verdict-protocol.md): the second pipeline,
 # verdict/dvc.yaml with verdict/params.yaml. `make verdict` trains the coverage model (every
@@ -55,11 +55,11 @@ repro: setup
 # in-distribution suite. A dev suite: `dvc exp run verdict/dvc.yaml:verdict_id -S
 # verdict/params.yaml:verdict.suite=dev`.
 verdict: setup
-	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro verdict/dvc.yaml:verdict_id \
+	PATH="$(abspath $(BIN)):$$PATH" $(BIN)/dvc repro verdict/dvc.yaml:verdict_id \
 		verdict/dvc.yaml:verdict_ood
 
 verdict-headroom: setup
-	PATH="$(CURDIR)/$(BIN):$$PATH" $(BIN)/dvc repro verdict/dvc.yaml:headroom
+	PATH="$(abspath $(BIN)):$$PATH" $(BIN)/dvc repro verdict/dvc.yaml:headroom
 
 # the docs pages that quote metrics/*.json (docs/results/toy.md, the README's result), rendered
 # from the committed metrics, dvc.lock and docs/results/runs.yaml; a test checks they are current
@@ -85,7 +85,7 @@ kitti: setup
 	for a in $(KITTI_ALGORITHMS); do \
 	  $(BIN)/adaptune kitti-preset $(KITTI_SOURCE) --algorithm $$a $(KITTI_OPTS) \
 	    > $(KITTI_OUT)/$$a.args && \
-	  PATH="$(CURDIR)/$(BIN):$$PATH" xargs -a $(KITTI_OUT)/$$a.args -d '\n' $(BIN)/dvc exp run evaluate generalize && \
+	  PATH="$(abspath $(BIN)):$$PATH" xargs -a $(KITTI_OUT)/$$a.args -d '\n' $(BIN)/dvc exp run evaluate generalize && \
 	  cp metrics/evaluation.json $(KITTI_OUT)/metrics/$$a.json && \
 	  cp records/evaluation.json $(KITTI_OUT)/records/$$a.json || exit 1; \
 	done

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import ast
 import os
 import shutil
 import stat
@@ -17,24 +18,43 @@ import numpy as np
 from pipeline.descriptors.ndt_histogram_kernel import voxel_moments_dense
 pts = np.random.default_rng(0).normal(0, 5, (2000, 3)).astype(np.float32)
 ok = voxel_moments_dense(pts, 1.0, 50.0, 3, 10**6)[0]
-from pipeline.odometry.base import Schedule
-from pipeline.odometry.ndt import NdtAdapter
-from pipeline.sequence import Scan
-scans = [Scan(k, k * 10**8, np.c_[pts + [0.1 * k, 0, 0], np.zeros(2000)].astype(np.float32))
-         for k in range(2)]
-ndt = NdtAdapter()
-ndt.run(scans, Schedule.constant(ndt.space.defaults(), 2))  # the issue's case: an NDT run
-from pipeline.sim.simulate import SimSpec, iter_scans, make_world
-spec = SimSpec("cave", 1, 2, "vlp16")  # the simulator's per-return kernel
-scan = next(iter_scans(make_world(spec), spec.sensor_model(), 1, motion=spec.motion))
-print("ok", bool(ok) and len(scan.points_lidar) > 0)
+print("ok", bool(ok))
 """
+"""One kernel compiled in the read-only copy: the cache folder is set once for every kernel
+(pipeline/__init__.py), and each kernel opts in with ``cache=True``
+(test_every_kernel_is_compiled_with_the_cache); compiling all of them there took 41 s."""
+
+
+def njit_calls(path: Path) -> list[ast.Call]:
+    """The ``numba.njit(...)`` / ``njit(...)`` decorator calls of a module."""
+    calls = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            for dec in node.decorator_list:
+                target = dec.func if isinstance(dec, ast.Call) else dec
+                name = target.attr if isinstance(target, ast.Attribute) else getattr(
+                    target, "id", "")
+                if name in ("njit", "jit"):
+                    calls.append(dec)
+    return calls
+
+
+def test_every_kernel_is_compiled_with_the_cache() -> None:
+    """Every numba kernel of the package is ``njit(cache=True, ...)``: compiled once into the
+    user cache folder, not at every start of a process (and never beside the module)."""
+    kernels = {path: njit_calls(path) for path in sorted((REPO / "pipeline").rglob("*.py"))}
+    found = [(path, call) for path, calls in kernels.items() for call in calls]
+    assert len(found) >= 40, "the kernels were not found: is numba still the compiler?"
+    uncached = [f"{path.relative_to(REPO)}:{call.lineno}" for path, call in found
+                if not (isinstance(call, ast.Call) and any(
+                    k.arg == "cache" and isinstance(k.value, ast.Constant) and k.value.value is True
+                    for k in call.keywords))]
+    assert uncached == []
 
 
 def test_kernels_cache_in_the_user_cache_dir_not_the_package(tmp_path: Path) -> None:
-    """A read-only copy of the package runs its cached numba kernels (the descriptor's, NDT's
-    in an NDT run, the simulator's in a simulated scan: rays, relief, returns): cache files
-    appear under $XDG_CACHE_HOME/adaptune/numba and none inside the package."""
+    """A read-only copy of the package runs a cached numba kernel (the descriptor's): its cache
+    files appear under $XDG_CACHE_HOME/adaptune/numba and none inside the package."""
     pkg = tmp_path / "site"
     shutil.copytree(REPO / "pipeline", pkg / "pipeline",
                     ignore=shutil.ignore_patterns("__pycache__"))
@@ -53,8 +73,7 @@ def test_kernels_cache_in_the_user_cache_dir_not_the_package(tmp_path: Path) -> 
         assert written == []
         cached = {p.name.split(".")[1].split("-")[0]
                   for p in (tmp_path / "cache" / "adaptune" / "numba").rglob("*.nbi")}
-        assert {"voxel_moments_dense", "ndt_terms", "shape_returns", "draw_uniforms", "turn_rays",
-                "rough_hits"} <= cached, cached
+        assert "voxel_moments_dense" in cached, cached
     finally:
         for path in [pkg, *pkg.rglob("*")]:
             path.chmod(path.stat().st_mode | stat.S_IWUSR)
