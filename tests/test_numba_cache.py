@@ -42,8 +42,8 @@ def njit_calls(path: Path) -> list[ast.Call]:
 def test_every_kernel_is_compiled_with_the_cache() -> None:
     """Every numba kernel of the package is ``njit(cache=True, ...)``: compiled once into the
     user cache folder, not at every start of a process (and never beside the module)."""
-    kernels = {path: njit_calls(path) for path in sorted((REPO / "pipeline").rglob("*.py"))}
-    found = [(path, call) for path, calls in kernels.items() for call in calls]
+    found = [(path, call) for path in sorted((REPO / "pipeline").rglob("*.py"))
+             for call in njit_calls(path)]
     assert len(found) >= 40, "the kernels were not found: is numba still the compiler?"
     uncached = [f"{path.relative_to(REPO)}:{call.lineno}" for path, call in found
                 if not (isinstance(call, ast.Call) and any(
