@@ -26,6 +26,9 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+PORTFOLIO: dict[str, Any] = {"rows": "portfolio", "n_sobol": 0, "w_x": 1000.0}
+"""The portfolio's rows, its members as the only candidates, members kept apart (w_x)."""
+
 VARIANTS: dict[str, tuple[dict[str, Any], dict[str, Any]]] = {
     # name: (surrogate section changes: a refit; select settings changes)
     "default": ({}, {}),
@@ -36,6 +39,11 @@ VARIANTS: dict[str, tuple[dict[str, Any], dict[str, Any]]] = {
     "fallback_fixed_trust_0.25": ({"novelty_fallback": "fixed"}, {"trust_radius": 0.25}),
     "fallback_fixed_risk_0.5": ({"novelty_fallback": "fixed"}, {"risk": 0.5}),
     "fallback_fixed_anchor_0.1": ({"novelty_fallback": "fixed"}, {"anchor_margin": 0.1}),
+    # the portfolio selector (pipeline.portfolio): the members only, each predicted from
+    # its own runs at the k nearest training frames (needs the rte stage's --portfolio)
+    "portfolio_k20": ({**PORTFOLIO, "k": 20}, {"refine_iters": 0}),
+    "portfolio_k100": ({**PORTFOLIO, "k": 100}, {"refine_iters": 0}),
+    "portfolio_k350": ({**PORTFOLIO, "k": 350}, {"refine_iters": 0}),
 }
 
 

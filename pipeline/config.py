@@ -93,6 +93,7 @@ SECTIONS: dict[str, str] = {
     "descriptors": "pipeline.descriptors.dataset:DescriptorsSection",
     "trials": "pipeline.tuning.smbo:TrialsSection",
     "fixed": "pipeline.tuning.smbo:FixedSection",
+    "portfolio": "pipeline.portfolio:PortfolioSection",
     "devkit": "pipeline.metrics.section:DevkitSection",
     "surrogate": "pipeline.surrogates.section:SurrogateSection",
     "select": "pipeline.config:SelectSection",

@@ -17,6 +17,25 @@ JOIN environment AS e USING (sequence, frame)
 JOIN trials AS t USING (study, algorithm, sequence, trial)
 WHERE r.study = 'trials' AND t.status IN ('ok', 'pruned');
 
+-- Training rows of the portfolio selector (surrogate.rows: portfolio; pipeline.portfolio):
+-- one row per (algorithm, sequence, member, frame) of the study 'portfolio', every member at
+-- every frame that any member scored on that sequence, with the columns of surrogate_rows. A
+-- failed member has y = its objective (the failure penalty) at all of them, so that a set that
+-- fails in an environment is never chosen there; its partial rows are not used.
+CREATE VIEW portfolio_rows AS
+WITH frames AS (SELECT DISTINCT algorithm, sequence, frame FROM rte_frames
+                WHERE study = 'portfolio'),
+     members AS (SELECT * FROM trials WHERE study = 'portfolio' AND status IN ('ok', 'failed')),
+     scored AS (SELECT algorithm, sequence, trial AS scored_trial, frame AS scored_frame,
+                       t_err_pct FROM rte_frames WHERE study = 'portfolio')
+SELECT algorithm, sequence, COLUMNS('^(trial|frame|e[0-9]+|p_.+)$'),
+       CASE WHEN m.status = 'ok' THEN s.t_err_pct ELSE m.objective END AS y
+FROM frames AS f
+JOIN members AS m USING (algorithm, sequence)
+JOIN environment AS e USING (sequence, frame)
+LEFT JOIN scored AS s ON s.algorithm = f.algorithm AND s.sequence = f.sequence
+     AND s.scored_trial = m.trial AND s.scored_frame = f.frame;
+
 -- RTE per environment label: each rte_frames row with the label of its start frame.
 CREATE VIEW rte_labelled AS
 SELECT r.*, l.label

@@ -35,6 +35,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export": ("stages.export:export", "Export a trajectory as KITTI or TUM text."),
     "run": ("stages.run:run", "Run an odometry algorithm once (fixed params or a schedule)."),
     "trials": ("stages.trials:trials", "SMBO (hyperopt TPE) trials of an odometry algorithm."),
+    "portfolio": ("stages.portfolio:portfolio",
+                  "Run a portfolio of parameter sets on every training sequence."),
     "params": ("stages.params:params", "The parameters an algorithm tunes: ranges, defaults."),
     "rte": ("stages.rte:rte", "Score trials into the DuckDB results database."),
     "descriptors": ("stages.descriptors:descriptors", "Environment descriptors of every frame."),
@@ -63,9 +65,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "stages.verdict:verdict",
         "The coverage model on a suite of unseen worlds (verdict/dvc.yaml stage).",
     ),
+    "oracles": (
+        "stages.verdict:oracles",
+        "Run the oracles on the in-distribution suite's worlds (verdict/dvc.yaml stage).",
+    ),
     "headroom": (
         "stages.verdict:headroom",
-        "Oracles and the closed gap of the in-distribution suite (verdict/dvc.yaml stage).",
+        "Oracles against SBS and the closed gap of the in-distribution suite (verdict/dvc.yaml "
+        "stage).",
     ),
     "ingest-set": (
         "stages.ingest:ingest_set",

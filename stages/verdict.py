@@ -1,10 +1,12 @@
-"""``adaptune verdict`` and ``adaptune headroom``: the coverage model's suites (verdict/dvc.yaml).
+"""``adaptune verdict``, ``oracles`` and ``headroom``: the coverage model's suites
+(verdict/dvc.yaml).
 
 ``verdict --family id|ood`` simulates the worlds of the family's suite (``verdict.suite``:
 ``test`` by default, ``dev`` where choices are made), runs baseline, fixed and adaptive on each
-with their replicas and writes the metrics, the plot data and the figure; ``headroom`` runs the
-oracle's candidate set and the oracles on the in-distribution suite and writes the closed gap
-(``pipeline.verdict`` documents both).
+with their replicas and writes the metrics, the plot data and the figure; ``oracles`` runs the
+oracle's candidate set and the oracles on the in-distribution suite (they do not depend on the
+selector); ``headroom`` scores them and the suite's adaptive against SBS and writes the closed
+gap (``pipeline.verdict`` documents them).
 """
 
 from __future__ import annotations
@@ -50,18 +52,32 @@ def _num(v: float | None) -> str:
 @click.command()
 @params_option
 @dir_option("--fixed", "fixed_dir", help="Joint SMBO output (SBS, the fixed parameters).")
-@dir_option("--suite", "suite_dir", help="The in-distribution suite's runs (verdict --family id).")
 @dir_option("--out", "runs_dir", help="Folder for every world's oracle runs.")
+def oracles(params_path: Path, fixed_dir: Path, runs_dir: Path) -> None:
+    """Run the oracles (cross-fitted and class) on every in-distribution world."""
+    from pipeline.verdict.report import HeadroomPaths, load_settings, run_oracles
+
+    section, settings = load_settings(params_path)
+    runs = run_oracles(HeadroomPaths(fixed_dir, runs_dir), section, settings)
+    click.echo(f"oracles on {len(runs)} worlds of the id {section.suite} suite -> {runs_dir}",
+               err=True)
+
+
+@click.command()
+@params_option
+@dir_option("--fixed", "fixed_dir", help="Joint SMBO output (SBS, the fixed parameters).")
+@dir_option("--suite", "suite_dir", help="The in-distribution suite's runs (verdict --family id).")
+@dir_option("--oracles", "runs_dir", help="The oracles' runs (adaptune oracles).")
 @file_option("--metrics", "metrics_path", help="Metrics JSON to write.")
 @file_option("--figure", "figure_path", help="PNG to write.")
 def headroom(params_path: Path, fixed_dir: Path, suite_dir: Path, runs_dir: Path,
              metrics_path: Path, figure_path: Path) -> None:
     """The oracles of the in-distribution suite against SBS, and the gap adaptive closes."""
-    from pipeline.verdict.report import HeadroomPaths, load_settings, run_headroom_study
+    from pipeline.verdict.report import HeadroomPaths, load_settings, score_headroom
 
     section, settings = load_settings(params_path)
-    m = run_headroom_study(HeadroomPaths(fixed_dir, suite_dir, runs_dir, metrics_path,
-                                         figure_path), section, settings)
+    m = score_headroom(HeadroomPaths(fixed_dir, runs_dir, suite_dir, metrics_path,
+                                     figure_path), section, settings)
     o, gap = m["ratios"]["oracle_vs_sbs"], m["closed_gap"]["oracle"]
     click.echo(f"{m['algorithm']} on the id {m['suite']} suite ({m['worlds']} worlds): "
                f"cross-fitted oracle / SBS {_num(o['geomean'])} ({_num(o['low'])}-"

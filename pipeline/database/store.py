@@ -35,8 +35,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-STUDIES = ("trials", "fixed")
-"""Names of the SMBO outputs the database takes (per-sequence SMBO, joint SMBO)."""
+STUDIES = ("trials", "fixed", "portfolio")
+"""Names of the trials outputs the database takes (per-sequence SMBO, joint SMBO, the
+portfolio study: ``pipeline.portfolio``)."""
 
 
 @dataclass
@@ -59,7 +60,8 @@ def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapp
     sequences_dir: data/sequences (``*.mcap`` and optionally index.json with the splits);
     length_m: L of the rte_frames segments [m] (params ``base.length_m``); devkit: the
     rte_kitti segments (params ``devkit``);
-    studies: study name ('trials' | 'fixed') -> SMBO output folder (pipeline.tuning.layout);
+    studies: study name ('trials' | 'fixed' | 'portfolio') -> its trials output folder
+    (pipeline.tuning.layout);
     descriptors / environment: the descriptor Parquet files, or None for empty tables.
     """
     import duckdb

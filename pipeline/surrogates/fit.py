@@ -132,7 +132,7 @@ def build_model(
 
     registered(section.model)  # a misspelt model fails before the rows are read
     pca = Pca.load(inputs.pca)
-    algo, space, rows = read_training_rows(inputs.db, algorithm, space_of)
+    algo, space, rows = read_training_rows(inputs.db, algorithm, space_of, section.rows)
     fitted = fit_surrogate(rows, space, section)
     fallback, record = novelty_fallback(inputs.db, algo, space, section.novelty_fallback)
     descriptor = (

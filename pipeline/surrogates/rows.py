@@ -1,5 +1,6 @@
 """The training rows of the surrogate: q_ij = [E_i, x_j] -> y_ij, read from the results
-database (its ``surrogate_rows`` view; docs/design.md, "Formats")."""
+database (its ``surrogate_rows`` view, or ``portfolio_rows`` for the portfolio selector;
+docs/design.md, "Formats")."""
 
 from __future__ import annotations
 
@@ -43,11 +44,17 @@ class TrainingRows:
             raise InputError(f"surrogate rows: {int(bad.sum())} rows with NaN/inf values")
 
 
+ROW_VIEWS = {"trials": "surrogate_rows", "portfolio": "portfolio_rows"}
+"""params ``surrogate.rows`` -> the database view its rows come from (schemas/views.sql)."""
+
+
 def read_training_rows(
-    db_path: str | Path, algorithm: str | None, space_of: Callable[[str], Any]
+    db_path: str | Path, algorithm: str | None, space_of: Callable[[str], Any],
+    source: str = "trials",
 ) -> tuple[str, list[dict[str, Any]], TrainingRows]:
-    """Rows of the ``surrogate_rows`` view of ``db_path`` for ``algorithm`` (None: the only one
-    in the view). ``space_of(name)`` -> ParameterSpace. Returns (algorithm, space json, rows)."""
+    """Rows of the view of ``source`` (``ROW_VIEWS``) of ``db_path`` for ``algorithm`` (None:
+    the only one in the view). ``space_of(name)`` -> ParameterSpace. Returns (algorithm, space
+    json, rows)."""
     import duckdb
 
     db_path = Path(db_path)
@@ -58,19 +65,20 @@ def read_training_rows(
     except duckdb.Error as exc:
         raise InputError(f"{db_path}: not a DuckDB database ({exc})") from None
     try:
-        algorithm = _choose_algorithm(con, db_path, algorithm)
+        view = ROW_VIEWS[source]
+        algorithm = _choose_algorithm(con, db_path, algorithm, view)
         space = space_of(algorithm)
-        cols = [r[0] for r in con.execute("DESCRIBE surrogate_rows").fetchall()]
+        cols = [r[0] for r in con.execute(f"DESCRIBE {view}").fetchall()]
         e_cols = sorted(
             (c for c in cols if c[0] == "e" and c[1:].isdigit()), key=lambda c: int(c[1:])
         )
         p_cols = [f"p_{n}" for n in space.names]
         missing = [c for c in p_cols if c not in cols]
         if missing:
-            raise InputError(f"{db_path}: surrogate_rows has no column {missing[0]}")
+            raise InputError(f"{db_path}: {view} has no column {missing[0]}")
         sql = (
             f"SELECT sequence, trial, frame, {', '.join(e_cols)}, {', '.join(p_cols)}, y "
-            "FROM surrogate_rows WHERE algorithm = ? AND y IS NOT NULL "
+            f"FROM {view} WHERE algorithm = ? AND y IS NOT NULL "
             "ORDER BY sequence, frame, trial"
         )
         table = con.execute(sql, [algorithm]).fetchnumpy()
@@ -89,7 +97,7 @@ def read_training_rows(
     return algorithm, space.to_json(), rows
 
 
-def _choose_algorithm(con: Any, db_path: Path, algorithm: str | None) -> str:
+def _choose_algorithm(con: Any, db_path: Path, algorithm: str | None, view: str) -> str:
     """``algorithm``, or the only one of the view; errors name what the view holds."""
     import duckdb
 
@@ -97,17 +105,17 @@ def _choose_algorithm(con: Any, db_path: Path, algorithm: str | None) -> str:
         algos = [
             r[0]
             for r in con.execute(
-                "SELECT DISTINCT algorithm FROM surrogate_rows ORDER BY 1"
+                f"SELECT DISTINCT algorithm FROM {view} ORDER BY 1"
             ).fetchall()
         ]
     except duckdb.Error as exc:
         raise InputError(
-            f"{db_path}: no surrogate_rows view ({str(exc).splitlines()[0]})"
+            f"{db_path}: no {view} view ({str(exc).splitlines()[0]})"
         ) from None
     if algorithm is None:
         if len(algos) != 1:
             raise ConfigError(
-                f"{db_path}: surrogate_rows holds algorithms {algos}; choose one with --algorithm"
+                f"{db_path}: {view} holds algorithms {algos}; choose one with --algorithm"
             )
         return str(algos[0])
     if algorithm not in algos:

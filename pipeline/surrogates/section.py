@@ -1,6 +1,13 @@
-"""params.yaml ``surrogate``: how the model is fitted (its type, k, scalings, target,
-candidates, cross-validation, novelty guard). The selector's runtime settings are params
-``select`` (``pipeline.selection``): changing them refits nothing.
+"""params.yaml ``surrogate``: how the model is fitted (its type, k, training rows,
+scalings, target, candidates, cross-validation, novelty guard).
+
+``rows``: ``trials``, the per-sequence SMBO's rows (the paper's; view ``surrogate_rows``), or
+``portfolio``, every member of the portfolio study at every training frame (view
+``portfolio_rows``; ``pipeline.portfolio``): with ``n_sobol: 0`` the candidates are
+then the members, and a ``w_x`` that puts the members farther apart than any two frames makes
+each member's prediction the mean over the k nearest frames of that member's own runs. The
+selector's runtime settings are params ``select`` (``pipeline.selection``): changing them
+refits nothing.
 
 ``model`` names a surrogate of the registry ``pipeline.surrogates.SURROGATES``; the name is
 checked where the model is fitted (``pipeline.surrogates.surrogate_class``), so that this
@@ -30,6 +37,7 @@ class SurrogateSection(Section):
     scalings and the target, pipeline/surrogates/novelty.py the novelty guard)."""
 
     model: str = "knn"
+    rows: Literal["trials", "portfolio"] = "trials"
     k: int = Field(20, ge=1)
     w_e: float = Field(1.0, gt=0)
     w_x: float = Field(1.0, gt=0)

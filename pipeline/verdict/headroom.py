@@ -24,7 +24,6 @@ second, which needs every world's candidates, simulates them again and runs the 
 
 from __future__ import annotations
 
-import itertools
 import json
 import logging
 import math
@@ -54,18 +53,13 @@ def candidate_set(grid: Mapping[str, Sequence[float]], baseline: Params, fixed: 
                   space: Any) -> list[Params]:
     """The frozen grid's product, the baseline and the fixed set (validated against the
     studies' space; duplicates once, in that order)."""
+    from pipeline.portfolio import distinct_sets, grid_sets
+
     names = list(space.names)
     if set(grid) != set(names):
         raise InputError(f"verdict.oracle: the grid's parameters {sorted(grid)} are not the "
                          f"studies' {sorted(names)}")
-    sets = [dict(zip(names, values, strict=True))
-            for values in itertools.product(*(grid[n] for n in names))]
-    out: list[Params] = []
-    for params in [*sets, baseline, fixed]:
-        checked = {k: float(v) for k, v in space.validate(params).items()}
-        if checked not in out:
-            out.append(checked)
-    return out
+    return distinct_sets(space, [*grid_sets({n: grid[n] for n in names}), baseline, fixed])
 
 
 def held_schedule(labels: Sequence[str], stamps_ns: NDArray[np.int64],

@@ -99,37 +99,60 @@ def run_verdict(paths: VerdictPaths, family: str, section: VerdictSection,
 
 @dataclass(frozen=True)
 class HeadroomPaths:
-    """Inputs and outputs of the ``headroom`` stage (all from verdict/dvc.yaml)."""
+    """Inputs and outputs of the ``oracles`` and ``headroom`` stages (verdict/dvc.yaml)."""
 
     fixed: Path  # results/fixed (the joint study: SBS)
-    suite: Path  # results/suites/id (the suite's runs: SBS and adaptive per world)
-    runs: Path  # results/headroom: every world's oracle runs
-    metrics: Path  # metrics/headroom.json
-    figure: Path  # report/headroom.png
+    runs: Path  # results/headroom: every world's oracle runs (the oracles stage's output)
+    suite: Path | None = None  # results/suites/id (SBS and adaptive per world)
+    metrics: Path | None = None  # metrics/headroom.json
+    figure: Path | None = None  # report/headroom.png
 
 
-def run_headroom_study(paths: HeadroomPaths, section: VerdictSection,
-                       settings: RunSettings) -> dict[str, Any]:
-    """The oracles on the in-distribution suite ``section.suite`` and the closed gap
-    (``pipeline.verdict.headroom``); write the metrics and the figure, return the metrics."""
-    from pipeline.report.outputs import write_json
-    from pipeline.verdict.headroom import candidate_set, headroom_metrics, run_headroom
-    from pipeline.verdict.runs import read_results
+def run_oracles(paths: HeadroomPaths, section: VerdictSection,
+                settings: RunSettings) -> list[WorldResult]:
+    """The oracles' runs on every world of the in-distribution suite ``section.suite``
+    (``pipeline.verdict.headroom.run_headroom``) into ``paths.runs``. They do not depend on the
+    selector, so a new selector re-scores the headroom without running them again."""
+    from pipeline.verdict.headroom import candidate_set, run_headroom
     from pipeline.verdict.worlds import suite_worlds
 
     worlds = suite_worlds(section, "id", settings.template)
+    inputs, _ = suite_inputs(None, paths.fixed, section, settings)
+    candidates = candidate_set(section.oracle, inputs.baseline, inputs.fixed, inputs.space)
+    return run_headroom(worlds, inputs, candidates, settings.selection.period_s, paths.runs,
+                        section.workers)[1]
+
+
+def score_headroom(paths: HeadroomPaths, section: VerdictSection,
+                   settings: RunSettings) -> dict[str, Any]:
+    """The oracles against SBS and the closed gap of the suite's adaptive, from the oracles'
+    runs (``run_oracles``) and the suite's; write the metrics and the figure, return the
+    metrics."""
+    from pipeline.report.outputs import write_json
+    from pipeline.verdict.headroom import candidate_set, headroom_metrics
+    from pipeline.verdict.runs import read_results
+    from pipeline.verdict.worlds import suite_worlds
+
+    assert paths.suite and paths.metrics and paths.figure, "the headroom stage's paths"
     inputs, study = suite_inputs(None, paths.fixed, section, settings)
     candidates = candidate_set(section.oracle, inputs.baseline, inputs.fixed, inputs.space)
-    _, oracles = run_headroom(worlds, inputs, candidates, settings.selection.period_s,
-                              paths.runs, section.workers)
+    by_name = {r.name: r for r in read_results(paths.runs)}
+    names = [w.name for w in suite_worlds(section, "id", settings.template)]
+    missing = [n for n in names if n not in by_name]
+    if missing:
+        raise InputError(f"{paths.runs}: no oracle runs of the worlds {missing[:3]}"
+                         f"{' ...' if len(missing) > 3 else ''} (run the oracles stage with "
+                         "the same verdict section first)")
+    oracles = [by_name[n] for n in names]  # the suite's order: the bootstrap's
     header = {"algorithm": inputs.algorithm, "family": "id", "suite": section.suite,
               "seed_root": section.root("id"), "world_generator": section.world_generator,
               "replicas": section.replicas, "baseline": inputs.baseline,
               "fixed": inputs.fixed, "fixed_study": study, "confidence": section.confidence}
-    metrics = headroom_metrics(read_results(paths.suite), oracles, candidates, header,
-                               section.confidence, section.resamples, section.root("id"))
+    suite = read_results(paths.suite)
+    metrics = headroom_metrics(suite, oracles, candidates, header, section.confidence,
+                               section.resamples, section.root("id"))
     write_json(paths.metrics, metrics)
-    headroom_figure(read_results(paths.suite), oracles, metrics, paths.figure)
+    headroom_figure(suite, oracles, metrics, paths.figure)
     return metrics
 
 

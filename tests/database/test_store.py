@@ -41,7 +41,7 @@ class World:
     def args(self, db: Path, *extra: str) -> list[str]:
         return ["rte", "--params", str(self.params), "--sequences", str(self.root / "seq"),
                 "--trials", str(self.root / "trials"), "--fixed", str(self.root / "fixed"),
-                "--db", str(db), *extra]
+                "--portfolio", str(self.root / "portfolio"), "--db", str(db), *extra]
 
 
 def make_world(root: Path) -> World:
@@ -59,6 +59,8 @@ def make_world(root: Path) -> World:
         "trials": write_study(root / "trials", "gicp", stamped, 4, ["max_corr_m", "kf_m"]),
         "fixed": write_study(root / "fixed", "gicp", stamped, 3, ["max_corr_m", "kf_m"],
                              seed=7, joint=True),
+        "portfolio": write_study(root / "portfolio", "gicp", stamped, 3,
+                                 ["max_corr_m", "kf_m"], seed=11),
     }
     write_study(root / "trials", "ndt", {"cave_0": stamped["cave_0"]}, 2, ["resolution_m"], seed=3)
     params = root / "params.yaml"
@@ -107,7 +109,8 @@ def test_rte_frames_equal_per_frame_rte(world: World) -> None:
             np.testing.assert_allclose(got["r_err_deg_per_m"], np.degrees(r_err[has]),
                                        rtol=1e-9, atol=1e-9)
             checked += 1
-    assert checked == 2 * 3 + 2 * 2  # ok trials only: trial 1 failed without a trajectory
+    # ok trials only: trial 1 failed without a trajectory
+    assert checked == 2 * 3 + 2 * 2 + 2 * 2
 
 
 def test_segment_end_after_standstill(world: World) -> None:
@@ -148,7 +151,7 @@ def test_trials_table_and_summary(world: World) -> None:
     assert set(cols[10:-2]) == {"p_max_corr_m", "p_kf_m", "p_resolution_m"}
     rows = con.execute("SELECT study, algorithm, sequence, trial, status, mean_rte_pct, "
                        "rte_frames, p_resolution_m FROM trials ORDER BY ALL").fetchall()
-    assert len(rows) == 4 * 2 + 3 + 2
+    assert len(rows) == 4 * 2 + 3 + 2 + 3 * 2  # trials, fixed, ndt trials, portfolio
     for study, algorithm, sequence, trial, status, mean, n, p_res in rows:
         if status == "failed":
             assert mean is None and n == 0
@@ -187,6 +190,38 @@ def test_sequences_labels_views_and_schema_info(world: World) -> None:
                       "surrogate_rows GROUP BY ALL HAVING count(*) > 1)").fetchone()[0]
     assert dup == 0
     assert con.execute("SELECT count(*) FROM descriptors").fetchone()[0] == 0
+
+
+def test_portfolio_rows_hold_every_member_at_every_frame(world: World) -> None:
+    """The portfolio selector's rows: every member of the portfolio study at every frame any
+    member scored, an ok member at its per-frame RTE, the failed one (trial 1, no trajectory)
+    at its objective, the failure penalty, on all of those frames; read_training_rows reads them
+    with surrogate.rows = portfolio."""
+    from pipeline.odometry.base import ParameterSpace, ParamSpec
+
+    con = connect(world)
+    space = ParameterSpace((ParamSpec("max_corr_m", 0, 10, 1), ParamSpec("kf_m", 0, 10, 1)))
+    for sequence, gt in world.gts.items():
+        t_err = {trial: per_frame_rte(gt, world.estimates["portfolio"][(sequence, trial)],
+                                      LENGTH_M)[0] for trial in (0, 2)}
+        frames = np.flatnonzero(np.isfinite(t_err[0]))
+        assert len(frames) > 0
+        for trial in (0, 1, 2):
+            got = con.execute("SELECT frame, y, p_max_corr_m FROM portfolio_rows WHERE "
+                              "algorithm = 'gicp' AND sequence = ? AND trial = ? ORDER BY frame",
+                              [sequence, trial]).fetchnumpy()
+            assert np.array_equal(got["frame"], frames)
+            assert np.all(got["p_max_corr_m"] == float(trial))
+            want = np.full(len(frames), 100.0) if trial == 1 else t_err[trial][frames]
+            np.testing.assert_allclose(got["y"], want, rtol=1e-9)
+    _, _, rows = read_training_rows(world.root / "adaptune.duckdb", "gicp", lambda a: space,
+                                    "portfolio")
+    assert len(rows.y) == 3 * sum(np.isfinite(per_frame_rte(gt, gt, LENGTH_M)[0]).sum()
+                                  for gt in world.gts.values())
+    assert np.sort(rows.y)[-1] == 100.0
+    _, _, trial_rows = read_training_rows(world.root / "adaptune.duckdb", "gicp",
+                                          lambda a: space)
+    assert not np.any(trial_rows.y == 100.0)  # the SMBO's failed trials give no rows
 
 
 def test_read_trials_tables_unions_parameters(world: World) -> None:

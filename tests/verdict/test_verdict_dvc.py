@@ -90,6 +90,10 @@ def test_every_stage_ran_and_wrote_its_metrics(project: tuple[Path, str]) -> Non
         assert all(len(w["runs_rte_pct"]["adaptive"]) == 2 for w in m["per_world"].values())
         assert m["pooled"]["fixed"]["sub_trajectories"] > 0
         assert (root / "verdict" / "report" / f"{family}.png").stat().st_size > 0
+    # the oracles' runs do not depend on the selector: a new one re-scores the headroom alone
+    assert not {"model", "results/suites/id"} & set(stages["oracles"]["deps"])
+    assert not [p for p in stages["oracles"]["params"] if p.startswith("select.")
+                and p != "select.period_s"]
     h = json.loads((metrics / "headroom.json").read_text())
     assert h["worlds"] == 2 and len(h["candidates"]) in (3, 4)  # 2 grid sets, baseline, fixed
     assert set(h["closed_gap"]) == {"oracle", "class_oracle"}

@@ -1,0 +1,38 @@
+"""``adaptune portfolio``: every member of the portfolio run on every training sequence (dvc
+stage ``portfolio`` of the coverage model; ``pipeline.portfolio``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from stages.common import dir_option, params_option, sequences_option
+
+
+@click.command()
+@params_option
+@sequences_option
+@dir_option("--out", "out_dir", help="Output folder (results/portfolio).")
+@dir_option("--fixed", "fixed_dir", required=False,
+            help="The joint study's output, whose best set joins the portfolio "
+                 "(portfolio.fixed).")
+def portfolio(params_path: Path | None, sequence_dir: Path, out_dir: Path,
+              fixed_dir: Path | None) -> None:
+    """Run the portfolio's parameter sets on every training sequence into OUT."""
+    from pipeline.config import BaseSection, load_section
+    from pipeline.evaluate.runs import best_fixed_params
+    from pipeline.portfolio import PortfolioSection, run_portfolio
+    from pipeline.sequence_index import read_index
+    from pipeline.tuning.smbo import TrialsSection
+
+    settings = load_section(params_path, "trials", TrialsSection)
+    section = load_section(params_path, "portfolio", PortfolioSection)
+    seed = load_section(params_path, "base", BaseSection).seed
+    fixed = (best_fixed_params(fixed_dir, settings.algorithm)[1]
+             if fixed_dir is not None and section.fixed else None)
+    paths = read_index(sequence_dir).paths(settings.split)
+    for s in run_portfolio(paths, out_dir, settings, section, seed, fixed):
+        click.echo(f"{s.algorithm} {s.sequence}: {s.trials} sets ({s.ran} run now), "
+                   f"{s.failed} failed, best {s.best_objective:.4g} % (set {s.best_trial})",
+                   err=True)
