@@ -44,7 +44,12 @@ def tiny_params() -> dict[str, Any]:
     """The repository's params.yaml with a few frames, a few trials and a short L."""
     p = yaml.safe_load((REPO / "params.yaml").read_text())
     p["base"]["length_m"] = TINY_L_M
-    p["simulate"].update(train={"cave": 1, "street": 1}, train_frames=50, validation_frames=60)
+    # the sequences simulated and evaluated in the stage's own process (workers=1), not in two
+    # spawned ones that import and compile numba's kernels again: the same files for any workers
+    # (tests/sim/test_simulate_set.py, tests/test_adaptive_evaluate.py)
+    p["simulate"].update(train={"cave": 1, "street": 1}, train_frames=50, validation_frames=60,
+                         workers=1)
+    p["evaluate"].update(workers=1)
     p["descriptors"].update(workers=1, pca_dim=4, range_bins=3)  # 27 values: not the default 90
     p["trials"].update(iterations=3, workers=1, startup_trials=2)
     p["fixed"].update(iterations=2)

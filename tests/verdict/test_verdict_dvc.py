@@ -28,7 +28,7 @@ def tiny_params() -> dict[str, Any]:
     p = yaml.safe_load((REPO / "verdict" / "params.yaml").read_text())
     p["base"]["length_m"] = 4.0
     p["simulate"].update(train={"cave": 1, "open": 1, "street": 1}, train_frames=40,
-                         train_sensors=["vlp16"])
+                         train_sensors=["vlp16"], workers=1)  # in the stage's process
     p["descriptors"].update(workers=1, pca_dim=4, range_bins=3)
     p["trials"].update(iterations=3, workers=1, startup_trials=2)
     p["fixed"].update(iterations=2, warm_start=1)
