@@ -55,10 +55,10 @@ def _num(v: float | None) -> str:
 @dir_option("--out", "runs_dir", help="Folder for every world's oracle runs.")
 def oracles(params_path: Path, fixed_dir: Path, runs_dir: Path) -> None:
     """Run the oracles (cross-fitted and class) on every in-distribution world."""
-    from pipeline.verdict.report import HeadroomPaths, load_settings, run_oracles
+    from pipeline.verdict.report import load_settings, run_oracles
 
     section, settings = load_settings(params_path)
-    runs = run_oracles(HeadroomPaths(fixed_dir, runs_dir), section, settings)
+    runs = run_oracles(fixed_dir, runs_dir, section, settings)
     click.echo(f"oracles on {len(runs)} worlds of the id {section.suite} suite -> {runs_dir}",
                err=True)
 

@@ -97,30 +97,31 @@ def run_verdict(paths: VerdictPaths, family: str, section: VerdictSection,
     return metrics
 
 
-@dataclass(frozen=True)
-class HeadroomPaths:
-    """Inputs and outputs of the ``oracles`` and ``headroom`` stages (verdict/dvc.yaml)."""
-
-    fixed: Path  # results/fixed (the joint study: SBS)
-    runs: Path  # results/headroom: every world's oracle runs (the oracles stage's output)
-    suite: Path | None = None  # results/suites/id (SBS and adaptive per world)
-    metrics: Path | None = None  # metrics/headroom.json
-    figure: Path | None = None  # report/headroom.png
-
-
-def run_oracles(paths: HeadroomPaths, section: VerdictSection,
+def run_oracles(fixed_dir: Path, runs_dir: Path, section: VerdictSection,
                 settings: RunSettings) -> list[WorldResult]:
     """The oracles' runs on every world of the in-distribution suite ``section.suite``
-    (``pipeline.verdict.headroom.run_headroom``) into ``paths.runs``. They do not depend on the
-    selector, so a new selector re-scores the headroom without running them again."""
+    (``pipeline.verdict.headroom.run_headroom``) into ``runs_dir``, SBS from the joint study in
+    ``fixed_dir``. They do not depend on the selector, so a new selector re-scores the headroom
+    (``score_headroom``) without running them again."""
     from pipeline.verdict.headroom import candidate_set, run_headroom
     from pipeline.verdict.worlds import suite_worlds
 
     worlds = suite_worlds(section, "id", settings.template)
-    inputs, _ = suite_inputs(None, paths.fixed, section, settings)
+    inputs, _ = suite_inputs(None, fixed_dir, section, settings)
     candidates = candidate_set(section.oracle, inputs.baseline, inputs.fixed, inputs.space)
-    return run_headroom(worlds, inputs, candidates, settings.selection.period_s, paths.runs,
+    return run_headroom(worlds, inputs, candidates, settings.selection.period_s, runs_dir,
                         section.workers)[1]
+
+
+@dataclass(frozen=True)
+class HeadroomPaths:
+    """Inputs and outputs of the ``headroom`` stage (verdict/dvc.yaml)."""
+
+    fixed: Path  # results/fixed (the joint study: SBS)
+    oracles: Path  # results/headroom: every world's oracle runs (the oracles stage's output)
+    suite: Path  # results/suites/id (SBS and adaptive per world)
+    metrics: Path  # metrics/headroom.json
+    figure: Path  # report/headroom.png
 
 
 def score_headroom(paths: HeadroomPaths, section: VerdictSection,
@@ -133,14 +134,13 @@ def score_headroom(paths: HeadroomPaths, section: VerdictSection,
     from pipeline.verdict.runs import read_results
     from pipeline.verdict.worlds import suite_worlds
 
-    assert paths.suite and paths.metrics and paths.figure, "the headroom stage's paths"
     inputs, study = suite_inputs(None, paths.fixed, section, settings)
     candidates = candidate_set(section.oracle, inputs.baseline, inputs.fixed, inputs.space)
-    by_name = {r.name: r for r in read_results(paths.runs)}
+    by_name = {r.name: r for r in read_results(paths.oracles)}
     names = [w.name for w in suite_worlds(section, "id", settings.template)]
     missing = [n for n in names if n not in by_name]
     if missing:
-        raise InputError(f"{paths.runs}: no oracle runs of the worlds {missing[:3]}"
+        raise InputError(f"{paths.oracles}: no oracle runs of the worlds {missing[:3]}"
                          f"{' ...' if len(missing) > 3 else ''} (run the oracles stage with "
                          "the same verdict section first)")
     oracles = [by_name[n] for n in names]  # the suite's order: the bootstrap's
