@@ -58,7 +58,10 @@ def portfolio_members(space: ParameterSpace, section: PortfolioSection,
     empty = [n for n, values in section.grid.items() if not values]
     if empty:
         raise ConfigError(f"portfolio.grid.{empty[0]} must list at least one value, got []")
-    members = grid_sets(section.grid)
+    try:
+        members = distinct_sets(space, grid_sets(section.grid))
+    except ConfigError as exc:  # a grid value out of range: name the setting
+        raise ConfigError(f"portfolio.grid: {exc}") from None
     if section.fixed:
         if fixed is None:
             raise ConfigError("portfolio.fixed needs the joint study's output (--fixed DIR)")

@@ -33,7 +33,7 @@ def test_members_are_the_grid_product_then_the_fixed_set_without_repeats() -> No
 @pytest.mark.parametrize(("grid", "fixed", "message"), [
     ({"nope": [1.0]}, False, "portfolio.grid: unknown parameter 'nope' (known: bias, gain"),
     ({"bias": []}, False, "portfolio.grid.bias must list at least one value, got []"),
-    ({"bias": [2.0]}, False, "bias"),
+    ({"bias": [2.0]}, False, "portfolio.grid: bias must be in [-1.0, 1.0], got 2.0"),
     ({}, True, "portfolio.fixed needs the joint study's output"),
 ])
 def test_bad_members_name_the_setting(grid: dict[str, list[float]], fixed: bool,
@@ -58,3 +58,31 @@ def test_every_member_runs_whole_on_every_sequence(sequences: list[Path],
                         key=lambda r: r.trial)
         assert [r.params for r in trials] == [SPACE.defaults(), *members]
         assert [r.status for r in trials] == ["ok"] * 3
+
+
+@pytest.mark.parametrize(("portfolio", "message"), [
+    ("{grid: {nope: [1.0]}, fixed: false}",
+     "portfolio.grid: unknown parameter 'nope' (known: resolution, keyframe_interval)"),
+    ("{grid: {resolution: []}, fixed: false}",
+     "portfolio.grid.resolution must list at least one value, got []"),
+    ("{grid: {resolution: [0.5]}, fixed: false}",
+     "portfolio.grid: resolution must be in [1.0, 10.0], got 0.5"),
+    ("{grid: {resolution: [2.0]}, fixed: true}", "portfolio.fixed needs the joint study's"),
+])
+def test_the_cli_turns_a_bad_portfolio_into_one_line(tmp_path: Path, portfolio: str,
+                                                     message: str) -> None:
+    """``adaptune portfolio`` (NDT, the default algorithm): the bad setting is one line and
+    exit code 1 before any sequence is read (the one listed is not even MCAP), and nothing is
+    written."""
+    from helpers.evaluation_data import cli_fails
+
+    from pipeline.sequence_index import write_index
+
+    params = tmp_path / "params.yaml"
+    params.write_text(f"portfolio: {portfolio}\n")
+    write_index(tmp_path / "seqs", {"train": ["a"]})
+    (tmp_path / "seqs" / "a.mcap").write_bytes(b"not an mcap file")
+    out = tmp_path / "portfolio"
+    cli_fails(["portfolio", "--params", str(params), "--sequences", str(tmp_path / "seqs"),
+               "--out", str(out)], message)
+    assert not out.exists()
