@@ -44,6 +44,7 @@ VARIANTS: dict[str, tuple[dict[str, Any], dict[str, Any]]] = {
     "portfolio_k20": ({**PORTFOLIO, "k": 20}, {"refine_iters": 0}),
     "portfolio_k100": ({**PORTFOLIO, "k": 100}, {"refine_iters": 0}),
     "portfolio_k350": ({**PORTFOLIO, "k": 350}, {"refine_iters": 0}),
+    "portfolio_k1000": ({**PORTFOLIO, "k": 1000}, {"refine_iters": 0}),  # a 5x tuning set
 }
 
 
