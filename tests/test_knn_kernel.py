@@ -16,7 +16,7 @@ from pipeline.runtime import Model, Selector, load_model
 from pipeline.selection import SelectionSettings
 from pipeline.surrogates import knn_search
 from pipeline.surrogates.knn import KnnSurrogate
-from pipeline.surrogates.knn_kernel import knn_mean
+from pipeline.surrogates.knn_kernel import _sorting_network, knn_mean
 from pipeline.surrogates.knn_search import TrialGroups, knn_mean_numpy
 
 
@@ -45,7 +45,7 @@ def test_knn_mean_is_the_stable_order_of_the_pairs(risk: float) -> None:
     rows)."""
     rng = np.random.default_rng(7)
     for case in range(120):
-        k = int(rng.choice([1, 2, 3, 5, 8, 20]))
+        k = int(rng.choice([1, 2, 3, 5, 8, 20, 33]))
         args = kernel_case(rng, 30, int(rng.integers(1, 9)), k, int(rng.choice([2, 3, 10, 10**6])))
         if case % 10 == 0:  # every pair at distance 0: the order alone decides
             args[0][:] = np.where(np.isfinite(args[0]), 0.0, np.inf)
@@ -58,6 +58,27 @@ def test_knn_mean_is_the_stable_order_of_the_pairs(risk: float) -> None:
     frame_d2[:, 2:] = np.inf
     args = (trial_d2, trial_pos, frame_d2, frame_row0, rows_t)
     assert knn_mean(*args, 20, risk).tobytes() == knn_mean_numpy(*args, 20, risk).tobytes()
+
+
+def apply_network(n: int, values: np.ndarray) -> np.ndarray:
+    """The compare-exchanges of ``_sorting_network(n)`` applied to every row of values (m, n)."""
+    out = values.copy()
+    for a, b in zip(*_sorting_network(n), strict=True):
+        out[:, a], out[:, b] = np.minimum(out[:, a], out[:, b]), np.maximum(out[:, a], out[:, b])
+    return out
+
+
+def test_the_sorting_network_sorts_any_values() -> None:
+    """Every 0-1 sequence of up to 14 values is sorted, which proves the network sorts any
+    values of that length (Knuth's 0-1 principle); random values with ties for the lengths of
+    the kernel's k past that."""
+    for n in range(1, 15):
+        zero_one = (np.arange(2**n)[:, None] >> np.arange(n)) & 1
+        assert np.array_equal(apply_network(n, zero_one), np.sort(zero_one, axis=1)), n
+    rng = np.random.default_rng(3)
+    for n in (20, 33, 100, 350, 1000):
+        values = rng.integers(0, 9, (50, n)) * 0.5
+        assert np.array_equal(apply_network(n, values), np.sort(values, axis=1)), n
 
 
 def random_knn(rng: np.random.Generator, n_params: int, grid: int | None, k: int = 5,
