@@ -1,0 +1,94 @@
+"""Leave one training sequence out: how well the portfolio selector's choice carries over
+(issue 29; docs/results/selector-dev.md).
+
+Not a `make bench` module: ``python experiments/portfolio_loso.py --db
+PROJECT/results/adaptune.duckdb [--k 20,100,350]``, after ``adaptune rte --portfolio`` built
+the database. It reads the ``portfolio_rows`` view (every member of the portfolio at every
+training frame, y the RTE [%] of the sub-trajectory from that frame), then for every training
+sequence held out and every frame of it chooses the member as the portfolio selector does
+(``surrogate.rows: portfolio``, members only, their own runs kept apart): the lowest mean
+log1p(y) over the k frames of the other sequences nearest in the environment E (one scale for
+every dimension, as ``pipeline.surrogates.fit`` scales it, so the nearest frames are the same).
+Printed per k: the mean over the held-out frames of the chosen member's y, against the single
+best member of the other sequences (the portfolio's SBS) and the best member of each held-out
+frame (the frame oracle). A proxy of the dev suite, not a replacement: a frame's y is one sub-
+trajectory of a run with one set, not a schedule's run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def frame_table(db: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """E (F, D) of every training frame, y (F, M) of every member there [%], the sequence
+    (F,) of each frame; members by trial number (trial i is member i in every sequence)."""
+    from pipeline.odometry.base import ParameterSpace
+    from pipeline.surrogates.rows import read_training_rows
+    from pipeline.tuning.table import read_space
+
+    def space_of(algorithm: str) -> ParameterSpace:  # the portfolio's trials hold the space
+        return read_space(db.parent / "portfolio", algorithm)
+
+    _, _, rows = read_training_rows(db, None, space_of, "portfolio")
+    keys = np.char.add(np.char.add(rows.sequences.astype(str), ":"), rows.frames.astype(str))
+    frames, frame_of = np.unique(keys, return_inverse=True)
+    members = np.unique(rows.trials)
+    y = np.full((len(frames), len(members)), np.nan)
+    y[frame_of, np.searchsorted(members, rows.trials)] = rows.y
+    if np.isnan(y).any():
+        raise SystemExit(f"{db}: {int(np.isnan(y).sum())} (frame, member) cells without a row")
+    first = np.zeros(len(frames), np.int64)
+    first[frame_of[::-1]] = np.arange(len(frame_of))[::-1]
+    return rows.E[first], y, rows.sequences.astype(str)[first]
+
+
+def loso(E: np.ndarray, y: np.ndarray, seq: np.ndarray, ks: list[int]) -> dict[str, float]:
+    """Mean y of the chosen member over every held-out frame, per k; the SBS's and the frame
+    oracle's beside them."""
+    from scipy.spatial import cKDTree
+
+    t = np.log1p(np.maximum(y, 0.0))
+    chosen = {k: [] for k in ks}
+    sbs, oracle = [], []
+    for s in np.unique(seq):
+        held, train = seq == s, seq != s
+        tree = cKDTree(E[train])
+        kmax = min(max(ks), int(train.sum()))
+        _, idx = tree.query(E[held], k=kmax)
+        idx = idx.reshape(int(held.sum()), kmax)
+        cum = np.cumsum(t[train][idx], axis=1)  # (frames, kmax, members)
+        for k in ks:
+            kk = min(k, kmax)
+            pick = np.argmin(cum[:, kk - 1, :], axis=1)
+            chosen[k].append(y[held][np.arange(int(held.sum())), pick])
+        sbs.append(y[held][:, int(np.argmin(t[train].mean(axis=0)))])
+        oracle.append(y[held].min(axis=1))
+    out = {f"k{k}": float(np.mean(np.concatenate(v))) for k, v in chosen.items()}
+    out["sbs"] = float(np.mean(np.concatenate(sbs)))
+    out["frame_oracle"] = float(np.mean(np.concatenate(oracle)))
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--db", type=Path, required=True)
+    parser.add_argument("--k", default="20,100,350,700,1000,1400,3000")
+    args = parser.parse_args()
+    E, y, seq = frame_table(args.db)
+    ks = [int(k) for k in args.k.split(",")]
+    result = loso(E, y, seq, ks)
+    print(f"{args.db}: {len(np.unique(seq))} sequences, {len(E)} frames, {y.shape[1]} members; "
+          "mean RTE [%] of the member chosen per held-out frame (leave one sequence out)")
+    for name, value in result.items():
+        print(f"  {name:14s} {value:.3f}")
+
+
+if __name__ == "__main__":
+    main()
