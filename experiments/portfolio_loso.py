@@ -10,9 +10,10 @@ sequence held out and every frame of it chooses the member as the portfolio sele
 log1p(y) over the k frames of the other sequences nearest in the environment E (one scale for
 every dimension, as ``pipeline.surrogates.fit`` scales it, so the nearest frames are the same).
 Printed per k: the mean over the held-out frames of the chosen member's y, against the single
-best member of the other sequences (the portfolio's SBS) and the best member of each held-out
-frame (the frame oracle). A proxy of the dev suite, not a replacement: a frame's y is one sub-
-trajectory of a run with one set, not a schedule's run.
+best member of the other sequences (the portfolio's SBS), the best of the other sequences'
+frames of the held-out frame's environment label (a perfect classifier's choice) and the best
+member of each held-out frame (the frame oracle). A proxy of the dev suite, not a replacement:
+a frame's y is one sub- trajectory of a run with one set, not a schedule's run.
 """
 
 from __future__ import annotations
@@ -26,9 +27,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
-def frame_table(db: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def frame_table(db: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """E (F, D) of every training frame, y (F, M) of every member there [%], the sequence
-    (F,) of each frame; members by trial number (trial i is member i in every sequence)."""
+    and the environment label (F,) of each frame; members by trial number (trial i is member
+    i in every sequence)."""
+    import duckdb
+
     from pipeline.odometry.base import ParameterSpace
     from pipeline.surrogates.rows import read_training_rows
     from pipeline.tuning.table import read_space
@@ -46,17 +50,27 @@ def frame_table(db: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise SystemExit(f"{db}: {int(np.isnan(y).sum())} (frame, member) cells without a row")
     first = np.zeros(len(frames), np.int64)
     first[frame_of[::-1]] = np.arange(len(frame_of))[::-1]
-    return rows.E[first], y, rows.sequences.astype(str)[first]
+    con = duckdb.connect(str(db), read_only=True)
+    labels = dict(((s, f), lab) for s, f, lab in
+                  con.execute("SELECT sequence, frame, label FROM frame_labels").fetchall())
+    con.close()
+    seq = rows.sequences.astype(str)[first]
+    label = np.array([labels.get((s, int(f)), "") for s, f in zip(seq, rows.frames[first],
+                                                                   strict=True)])
+    return rows.E[first], y, seq, label
 
 
-def loso(E: np.ndarray, y: np.ndarray, seq: np.ndarray, ks: list[int]) -> dict[str, float]:
-    """Mean y of the chosen member over every held-out frame, per k; the SBS's and the frame
-    oracle's beside them."""
+def loso(E: np.ndarray, y: np.ndarray, seq: np.ndarray, label: np.ndarray,
+         ks: list[int]) -> dict[str, float]:
+    """Mean y of the chosen member over every held-out frame, per k; beside them the SBS's,
+    the label's (the member best on the other sequences' frames of the held-out frame's true
+    environment label: a perfect environment classifier's choice, as the class oracle) and the
+    frame oracle's."""
     from scipy.spatial import cKDTree
 
     t = np.log1p(np.maximum(y, 0.0))
     chosen = {k: [] for k in ks}
-    sbs, oracle = [], []
+    sbs, oracle, by_label = [], [], []
     for s in np.unique(seq):
         held, train = seq == s, seq != s
         tree = cKDTree(E[train])
@@ -69,9 +83,13 @@ def loso(E: np.ndarray, y: np.ndarray, seq: np.ndarray, ks: list[int]) -> dict[s
             pick = np.argmin(cum[:, kk - 1, :], axis=1)
             chosen[k].append(y[held][np.arange(int(held.sum())), pick])
         sbs.append(y[held][:, int(np.argmin(t[train].mean(axis=0)))])
+        best = {lab: int(np.argmin(t[train & (label == lab)].mean(axis=0)))
+                for lab in np.unique(label[held]) if (train & (label == lab)).any()}
+        by_label.append(np.array([y[i, best.get(label[i], 0)] for i in np.flatnonzero(held)]))
         oracle.append(y[held].min(axis=1))
     out = {f"k{k}": float(np.mean(np.concatenate(v))) for k, v in chosen.items()}
     out["sbs"] = float(np.mean(np.concatenate(sbs)))
+    out["label"] = float(np.mean(np.concatenate(by_label)))
     out["frame_oracle"] = float(np.mean(np.concatenate(oracle)))
     return out
 
@@ -81,9 +99,9 @@ def main() -> None:
     parser.add_argument("--db", type=Path, required=True)
     parser.add_argument("--k", default="20,100,350,700,1000,1400,3000")
     args = parser.parse_args()
-    E, y, seq = frame_table(args.db)
+    E, y, seq, label = frame_table(args.db)
     ks = [int(k) for k in args.k.split(",")]
-    result = loso(E, y, seq, ks)
+    result = loso(E, y, seq, label, ks)
     print(f"{args.db}: {len(np.unique(seq))} sequences, {len(E)} frames, {y.shape[1]} members; "
           "mean RTE [%] of the member chosen per held-out frame (leave one sequence out)")
     for name, value in result.items():
