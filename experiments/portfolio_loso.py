@@ -98,8 +98,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--db", type=Path, required=True)
     parser.add_argument("--k", default="20,100,350,700,1000,1400,3000")
+    parser.add_argument("--first", type=int, default=None,
+                        help="Only the sequences <world>_<i> with i < FIRST (a learning curve).")
     args = parser.parse_args()
     E, y, seq, label = frame_table(args.db)
+    if args.first is not None:
+        keep = np.array([int(s.rsplit("_", 1)[1]) < args.first for s in seq])
+        E, y, seq, label = E[keep], y[keep], seq[keep], label[keep]
     ks = [int(k) for k in args.k.split(",")]
     result = loso(E, y, seq, label, ks)
     print(f"{args.db}: {len(np.unique(seq))} sequences, {len(E)} frames, {y.shape[1]} members; "
