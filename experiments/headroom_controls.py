@@ -15,6 +15,7 @@ sub-trajectories per label (switching costs not paid: a proxy of the stitched ru
   single set chosen on 39 worlds instead of the joint study's 12 training sequences;
 - **class**: per label, the candidate best on the other worlds with that label (the class
   oracle's choice, ``pipeline.verdict.headroom.class_choice``);
+- **class and sensor**: the same from the other worlds of the world's sensor only;
 - **label oracle**: per label, the world's own best candidate on this replica (in-sample: an
   upper bound with the replica's luck in it).
 
@@ -49,7 +50,8 @@ def read_worlds(headroom: Path) -> tuple[list[dict], list[dict[str, float]]]:
         scored = np.isfinite(np.asarray(table["oracle/0"], np.float64))
         labels = np.asarray(table["label"])[scored]
         counts = {lab: int((labels == lab).sum()) for lab in c["selection_replica_rte_pct"]}
-        worlds.append({"name": d.name, "counts": counts,
+        sensor = json.loads((d / "world.json").read_text())["sensor"]
+        worlds.append({"name": d.name, "counts": counts, "sensor": sensor,
                        "label_rte": {lab: np.asarray(v, np.float64)
                                      for lab, v in c["selection_replica_rte_pct"].items()}})
     if candidates is None:
@@ -78,13 +80,16 @@ def controls(worlds: list[dict], sbs: int) -> dict[str, np.ndarray]:
     whole = [whole_world(w) for w in worlds]
     runs = [CandidateRuns(w["name"], {lab: list(v) for lab, v in w["label_rte"].items()}, {},
                           None) for w in worlds]  # type: ignore[arg-type]
-    out: dict[str, list[float]] = {"sbs": [], "constant": [], "class": [], "label_oracle": []}
+    out: dict[str, list[float]] = {"sbs": [], "constant": [], "class": [], "class_sensor": [],
+                                   "label_oracle": []}
     for i, w in enumerate(worlds):
         others = [np.log(v / np.median(v)) for j, v in enumerate(whole)
                   if j != i and np.isfinite(v).all() and (v > 0).all()]
         out["sbs"].append(whole[i][sbs])
         out["constant"].append(whole[i][int(np.argmin(np.mean(others, axis=0)))])
         out["class"].append(world_rte(w, class_choice(w["name"], runs)))
+        same = [r for r, o in zip(runs, worlds, strict=True) if o["sensor"] == w["sensor"]]
+        out["class_sensor"].append(world_rte(w, class_choice(w["name"], same)))
         out["label_oracle"].append(world_rte(w, {lab: int(np.nanargmin(v))
                                                  for lab, v in w["label_rte"].items()}))
     return {k: np.asarray(v) for k, v in out.items()}
@@ -105,8 +110,9 @@ def main() -> None:
     print(f"{args.headroom}: {len(worlds)} worlds, {len(candidates)} candidates (SBS = "
           f"candidate {sbs}); the selection replica's label means, geometric mean over worlds "
           "(95 % interval)")
-    for name, ref in (("constant", "sbs"), ("class", "sbs"), ("label_oracle", "sbs"),
-                      ("class", "constant")):
+    for name, ref in (("constant", "sbs"), ("class", "sbs"), ("class_sensor", "sbs"),
+                      ("label_oracle", "sbs"), ("class", "constant"),
+                      ("class_sensor", "class")):
         e = ratio_estimate(rte[name] / rte[ref])
         wins = int((rte[name] < rte[ref]).sum())
         print(f"  {name} / {ref}: {e.value:.3f} ({e.low:.3f}-{e.high:.3f}), "

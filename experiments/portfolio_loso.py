@@ -67,12 +67,15 @@ def loso(E: np.ndarray, y: np.ndarray, seq: np.ndarray, label: np.ndarray,
     choices: the kNN's per k, the SBS's (the lowest mean log1p(y) over the other sequences'
     frames), the constant's and the label's (the member best on the other sequences, or on
     those frames of them with the held-out frame's true environment label, by the class oracle's
-    score: a perfect environment classifier's choice) and the frame oracle's."""
+    score: a perfect environment classifier's choice; ``label_sensor``: of the sequences of the
+    held-out one's sensor only) and the frame oracle's."""
     from scipy.spatial import cKDTree
 
     t = np.log1p(np.maximum(y, 0.0))
     chosen = {k: [] for k in ks}
-    sbs, oracle, by_label, robust = [], [], [], []
+    sbs, oracle, by_label, robust, by_sensor = [], [], [], [], []
+    # the coverage model's train_sensors [hdl32, hdl64]: sequence <world>_<i> has sensor i % 2
+    sensor = np.array([int(s.rsplit("_", 1)[1]) % 2 for s in seq])
     for s in np.unique(seq):
         held, train = seq == s, seq != s
         tree = cKDTree(E[train])
@@ -89,9 +92,13 @@ def loso(E: np.ndarray, y: np.ndarray, seq: np.ndarray, label: np.ndarray,
                 for lab in np.unique(label[held]) if (train & (label == lab)).any()}
         by_label.append(np.array([y[i, best.get(label[i], 0)] for i in np.flatnonzero(held)]))
         robust.append(y[held][:, _robust_best(y, seq, train)])
+        mine = train & (sensor == sensor[held][0])
+        best = {lab: _robust_best(y, seq, mine & (label == lab))
+                for lab in np.unique(label[held]) if (mine & (label == lab)).any()}
+        by_sensor.append(np.array([y[i, best.get(label[i], 0)] for i in np.flatnonzero(held)]))
         oracle.append(y[held].min(axis=1))
     lists = {**{f"k{k}": v for k, v in chosen.items()}, "sbs": sbs, "constant": robust,
-             "label": by_label, "frame_oracle": oracle}
+             "label": by_label, "label_sensor": by_sensor, "frame_oracle": oracle}
     sbs_means = np.array([np.mean(v) for v in sbs])
     return {name: (float(np.mean(np.concatenate(v))),
                    float(np.exp(np.mean(np.log(np.array([np.mean(x) for x in v]) / sbs_means)))))
