@@ -69,8 +69,10 @@ def refuse_non_rotations(R: F64, what: str, lines: list[int] | None = None) -> N
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         where = f"line {lines[k]}" if lines is not None else f"pose {k}"
+        with np.errstate(all="ignore"):  # huge entries: det = inf, no warning
+            det = np.linalg.det(R[k])
         raise InputError(f"{what} {where}: the rotation is not a rotation matrix (R^T R = I and "
-                         f"det R = +1 within 1e-3; det = {np.linalg.det(R[k]):.6g})")
+                         f"det R = +1 within 1e-3; det = {det:.6g})")
 
 
 def poses_from_quaternions(xyz: F64, q_xyzw: F64, what: str,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -188,6 +189,13 @@ def test_ground_truth_far_off_earth_and_huge_rotation_entries(root: Path, tmp_pa
     lines[1] = " ".join(f"{v:.6e}" for v in P.ravel())
     poses.write_text("\n".join(lines) + "\n")
     fails(kitti(root, out), f"{poses} line 2", "not a rotation matrix", out=out)
+    P[1, 1] = P[2, 2] = 1e300  # det 1e900: it overflowed with a warning in the error message
+    lines[1] = " ".join(f"{v:.6e}" for v in P.ravel())
+    poses.write_text("\n".join(lines) + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fails(kitti(root, out), f"{poses} line 2", "not a rotation matrix", "det = inf",
+              out=out)
     tum = tmp_path / "gt.tum"
     tum.write_text("0.0 0 0 0 0 0 0 1\n0.1 0 0 -2e9 0 0 0 1\n0.2 0 0 0 0 0 0 1\n")
     fails(["ingest", "folder", root / "sequences" / "04" / "velodyne", "--poses", tum,
