@@ -10,9 +10,9 @@ alone, each world's RTE under a choice is the label means weighted by the world'
 sub-trajectories per label (switching costs not paid: a proxy of the stitched runs), for:
 
 - **SBS**: the fixed set (a member of the candidate set);
-- **constant**: the one candidate that was best on the *other* worlds (the mean log ratio to
-  each world's median candidate, as the class oracle scores it, over the whole world): a
-  single set chosen on 39 worlds instead of the joint study's 12 training sequences;
+- **constant**: the one candidate that was best on the *other* worlds over the whole world,
+  by the class oracle's score (``least_log_ratio``: the mean log ratio to each world's median
+  candidate): a single set chosen on 39 worlds instead of the joint study's 12 training sequences;
 - **class**: per label, the candidate best on the other worlds with that label (the class
   oracle's choice, ``pipeline.verdict.headroom.class_choice``);
 - **class and sensor**: the same from the other worlds of the world's sensor only;
@@ -75,21 +75,19 @@ def whole_world(world: dict) -> np.ndarray:
 
 def controls(worlds: list[dict], sbs: int) -> dict[str, np.ndarray]:
     """Per world, its RTE under each choice (module docstring): {choice: (W,)}."""
-    from pipeline.verdict.headroom import CandidateRuns, class_choice
+    from pipeline.verdict.headroom import class_choice, least_log_ratio
 
     whole = [whole_world(w) for w in worlds]
-    runs = [CandidateRuns(w["name"], {lab: list(v) for lab, v in w["label_rte"].items()}, {},
-                          None) for w in worlds]  # type: ignore[arg-type]
     out: dict[str, list[float]] = {"sbs": [], "constant": [], "class": [], "class_sensor": [],
                                    "label_oracle": []}
     for i, w in enumerate(worlds):
-        others = [np.log(v / np.median(v)) for j, v in enumerate(whole)
-                  if j != i and np.isfinite(v).all() and (v > 0).all()]
+        constant = least_log_ratio([v for j, v in enumerate(whole) if j != i])
         out["sbs"].append(whole[i][sbs])
-        out["constant"].append(whole[i][int(np.argmin(np.mean(others, axis=0)))])
-        out["class"].append(world_rte(w, class_choice(w["name"], runs)))
-        same = [r for r, o in zip(runs, worlds, strict=True) if o["sensor"] == w["sensor"]]
-        out["class_sensor"].append(world_rte(w, class_choice(w["name"], same)))
+        out["constant"].append(whole[i][constant])
+        out["class"].append(world_rte(w, class_choice(w["name"], {
+            o["name"]: o["label_rte"] for o in worlds})))
+        out["class_sensor"].append(world_rte(w, class_choice(w["name"], {
+            o["name"]: o["label_rte"] for o in worlds if o["sensor"] == w["sensor"]})))
         out["label_oracle"].append(world_rte(w, {lab: int(np.nanargmin(v))
                                                  for lab, v in w["label_rte"].items()}))
     return {k: np.asarray(v) for k, v in out.items()}

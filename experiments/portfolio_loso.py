@@ -106,15 +106,15 @@ def loso(E: np.ndarray, y: np.ndarray, seq: np.ndarray, label: np.ndarray,
 
 
 def _robust_best(y: np.ndarray, seq: np.ndarray, rows: np.ndarray) -> int:
-    """The member with the lowest mean over the sequences of ``rows`` (F,) bool of the log
-    ratio of its mean y there to the sequence's median member: the class oracle's score
-    (``pipeline.verdict.headroom.class_choice``), which no single sequence's failures rule."""
-    scores = []
-    for s in np.unique(seq[rows]):
-        v = y[rows & (seq == s)].mean(axis=0)
-        if (v > 0).all():
-            scores.append(np.log(v / np.median(v)))
-    return int(np.argmin(np.mean(scores, axis=0)))
+    """The member best over the sequences of ``rows`` (F,) bool by the class oracle's score
+    (``pipeline.verdict.headroom.least_log_ratio`` of each sequence's mean y per member), which
+    no single sequence's failures rule."""
+    from pipeline.verdict.headroom import least_log_ratio
+
+    best = least_log_ratio([y[rows & (seq == s)].mean(axis=0) for s in np.unique(seq[rows])])
+    if best is None:
+        raise SystemExit("no sequence where every member has a finite, positive mean RTE")
+    return best
 
 
 def main() -> None:

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import InputError
 from pipeline.odometry.base import Schedule
@@ -108,21 +108,27 @@ def best_per_label(label_rte: Mapping[str, Sequence[float]]) -> dict[str, int]:
             for lab, v in label_rte.items() if np.isfinite(v).any()}
 
 
-def class_choice(name: str, runs: Sequence[CandidateRuns]) -> dict[str, int]:
-    """Per label of world ``name``: the candidate whose mean log ratio to each other world's
-    median candidate (on that label) is lowest over the other worlds with that label."""
-    mine = next(r for r in runs if r.name == name)
+def least_log_ratio(rte_pct: Sequence[ArrayLike]) -> int | None:
+    """The candidate with the lowest mean, over ``rte_pct`` (each (C,): one world's or one
+    sequence's RTE [%] of every candidate), of the log ratio to that vector's median candidate,
+    so that no single hard world or failure rules the choice; a vector with a non-finite or
+    non-positive entry is left out; None when none is left."""
+    scores = [np.log(v / np.median(v)) for v in (np.asarray(r, np.float64) for r in rte_pct)
+              if np.isfinite(v).all() and (v > 0).all()]
+    return int(np.argmin(np.mean(scores, axis=0))) if scores else None
+
+
+def class_choice(name: str,
+                 label_rte: Mapping[str, Mapping[str, Sequence[float]]]) -> dict[str, int]:
+    """Per label of world ``name``: the candidate best on the other worlds with that label
+    (``least_log_ratio``); ``label_rte``: world name -> label -> (C,) RTE [%] of every
+    candidate (``CandidateRuns.label_rte``)."""
     out = {}
-    for lab in mine.label_rte:
-        scores = []
-        for other in runs:
-            if other.name == name or lab not in other.label_rte:
-                continue
-            v = np.asarray(other.label_rte[lab], np.float64)
-            if np.isfinite(v).all() and (v > 0).all():
-                scores.append(np.log(v / np.median(v)))
-        if scores:
-            out[lab] = int(np.argmin(np.mean(scores, axis=0)))
+    for lab in label_rte[name]:
+        best = least_log_ratio([rte[lab] for other, rte in label_rte.items()
+                                if other != name and lab in rte])
+        if best is not None:
+            out[lab] = best
     return out
 
 
@@ -186,8 +192,9 @@ def run_headroom(worlds: Sequence[VerdictWorld], inputs: SuiteInputs,
                                               for w in worlds], workers,
                                  on_done=lambda i, r: _logged("cross-fitted", r.oracle, i,
                                                               len(worlds), t0))
+        label_rte = {r.name: r.label_rte for r in first}
         second = map_in_processes(second_pass, [(w, inputs, candidates,
-                                                 class_choice(w.name, first), period_s, tmp)
+                                                 class_choice(w.name, label_rte), period_s, tmp)
                                                 for w in worlds], workers,
                                   on_done=lambda i, r: _logged("class", r, i, len(worlds), t0))
         shutil.rmtree(tmp / "worlds", ignore_errors=True)

@@ -20,14 +20,13 @@ from pipeline.sim import GENERATOR_VERSION
 from pipeline.sim.dataset import SimulateSection
 from pipeline.sim.effects import SensorEffects
 from pipeline.verdict.headroom import (
-    CandidateRuns,
     best_per_label,
     candidate_set,
     class_choice,
     held_schedule,
     label_means,
 )
-from pipeline.verdict.runs import WorldResult, read_results, write_world
+from pipeline.verdict.runs import read_results, write_world
 from pipeline.verdict.section import VerdictSection
 from pipeline.verdict.statistics import geometric_mean
 from pipeline.verdict.summary import suite_metrics, targets_met
@@ -196,9 +195,7 @@ def test_the_oracles_choose_per_label() -> None:
         "cave": 1, "open": 2}
     # class oracle of world a: the candidate best on the other worlds, relative to each
     # world's median candidate (b's caves are 10x harder, but rank candidate 2 best)
-    empty = WorldResult("x", "id", (), "hdl32", 0, 0, [], {}, {}, {}, 0.0)
-    runs = [CandidateRuns("a", {"cave": [1.0, 2.0, 3.0]}, {}, empty),
-            CandidateRuns("b", {"cave": [30.0, 20.0, 5.0]}, {}, empty),
-            CandidateRuns("c", {"cave": [3.0, 2.5, 2.0], "open": [1.0, 1.0, 1.0]}, {}, empty)]
-    assert class_choice("a", runs) == {"cave": 2}
-    assert class_choice("c", runs) == {"cave": 2}  # "open" only on c: no class choice
+    label_rte = {"a": {"cave": [1.0, 2.0, 3.0]}, "b": {"cave": [30.0, 20.0, 5.0]},
+                 "c": {"cave": [3.0, 2.5, 2.0], "open": [1.0, 1.0, 1.0]}}
+    assert class_choice("a", label_rte) == {"cave": 2}
+    assert class_choice("c", label_rte) == {"cave": 2}  # "open" only on c: no class choice
