@@ -19,7 +19,6 @@ study's best set; sets equal to an earlier one are dropped. Each sequence is one
 
 from __future__ import annotations
 
-import itertools
 import logging
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -28,7 +27,7 @@ from pydantic import Field
 
 from pipeline.config import Section, validate_section
 from pipeline.errors import ConfigError
-from pipeline.odometry.base import ParameterSpace, Params
+from pipeline.odometry.base import ParameterSpace, Params, grid_sets
 from pipeline.tuning.smbo import StudySummary, TrialsSection, run_trials, study_adapter
 
 log = logging.getLogger(__name__)
@@ -59,32 +58,14 @@ def portfolio_members(space: ParameterSpace, section: PortfolioSection,
     if empty:
         raise ConfigError(f"portfolio.grid.{empty[0]} must list at least one value, got []")
     try:
-        members = distinct_sets(space, grid_sets(section.grid))
+        members = space.distinct(grid_sets(section.grid))
     except ConfigError as exc:  # a grid value out of range: name the setting
         raise ConfigError(f"portfolio.grid: {exc}") from None
     if section.fixed:
         if fixed is None:
             raise ConfigError("portfolio.fixed needs the joint study's output (--fixed DIR)")
         members.append(dict(fixed))
-    return distinct_sets(space, [space.defaults(), *members])[1:]
-
-
-def grid_sets(grid: Mapping[str, Sequence[float]]) -> list[Params]:
-    """Every combination of the grid's values, its first parameter varying slowest."""
-    names = list(grid)
-    return [dict(zip(names, values, strict=True))
-            for values in itertools.product(*grid.values())]
-
-
-def distinct_sets(space: ParameterSpace, sets: Sequence[Mapping[str, float]]) -> list[Params]:
-    """``sets`` validated against ``space`` (a missing parameter at its default; ConfigError
-    naming a value out of range), the first of equal ones kept, in order."""
-    out: list[Params] = []
-    for params in sets:
-        checked = {k: float(v) for k, v in space.validate(params).items()}
-        if checked not in out:
-            out.append(checked)
-    return out
+    return space.distinct([space.defaults(), *members])[1:]
 
 
 def run_portfolio(sequence_paths: Sequence[str | Path], out_dir: str | Path,

@@ -16,10 +16,11 @@ bitwise the same with and without it. The optional capabilities (``StreamingAdap
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import numbers
-from collections.abc import Callable, Generator, Iterable, Mapping
+from collections.abc import Callable, Generator, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal, Protocol, runtime_checkable
@@ -98,6 +99,14 @@ def _changed(spec: ParamSpec, new: Mapping[str, object], what: str) -> ParamSpec
     return replace(spec, low=low, high=high, default=default, log=log)
 
 
+def grid_sets(grid: Mapping[str, Sequence[float]]) -> list[Params]:
+    """Every combination of the grid's values (parameter name -> its values), its first
+    parameter varying slowest."""
+    names = list(grid)
+    return [dict(zip(names, values, strict=True))
+            for values in itertools.product(*grid.values())]
+
+
 @dataclass(frozen=True)
 class ParameterSpace:
     """The ordered parameters of an adapter."""
@@ -127,6 +136,16 @@ class ParameterSpace:
             )
         out = {} if partial else self.defaults()
         out.update({k: self[k].check(v) for k, v in params.items()})
+        return out
+
+    def distinct(self, sets: Iterable[Mapping[str, float]]) -> list[Params]:
+        """``sets`` validated (``validate``: a missing parameter at its default; ConfigError
+        naming a value out of range), the first of equal ones kept, in order."""
+        out: list[Params] = []
+        for params in sets:
+            checked = {k: float(v) for k, v in self.validate(params).items()}
+            if checked not in out:
+                out.append(checked)
         return out
 
     @property

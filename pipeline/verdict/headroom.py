@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import InputError
-from pipeline.odometry.base import Schedule
+from pipeline.odometry.base import Schedule, grid_sets
 from pipeline.verdict.runs import SuiteInputs, WorldResult
 from pipeline.verdict.statistics import closed_gap
 from pipeline.verdict.worlds import VerdictWorld
@@ -53,13 +53,11 @@ def candidate_set(grid: Mapping[str, Sequence[float]], baseline: Params, fixed: 
                   space: Any) -> list[Params]:
     """The frozen grid's product, the baseline and the fixed set (validated against the
     studies' space; duplicates once, in that order)."""
-    from pipeline.portfolio import distinct_sets, grid_sets
-
     names = list(space.names)
     if set(grid) != set(names):
         raise InputError(f"verdict.oracle: the grid's parameters {sorted(grid)} are not the "
                          f"studies' {sorted(names)}")
-    return distinct_sets(space, [*grid_sets({n: grid[n] for n in names}), baseline, fixed])
+    return space.distinct([*grid_sets({n: grid[n] for n in names}), baseline, fixed])
 
 
 def held_schedule(labels: Sequence[str], stamps_ns: NDArray[np.int64],
