@@ -131,9 +131,9 @@ def predicted_cpu(study: dict[str, object], costs: dict[str, dict[str, float]]) 
 def report(run: Path, costs: dict[str, dict[str, float]] | None) -> None:
     from pipeline.sequence_index import read_index
 
-    index = next(read_index(p) for p in (run / "data/kitti_sim", run / "data/kitti",
-                                          run / "data/sequences")
-                 if (p / "index.json").is_file() and read_index(p).splits.get("train"))
+    folders = (run / "data/kitti_sim", run / "data/kitti", run / "data/sequences")
+    indexes = (read_index(p) for p in folders if (p / "index.json").is_file())
+    index = next(i for i in indexes if i.splits.get("train"))  # each index read once
     train = {Path(p).stem: Path(p) for p in index.paths("train")}
     trials = frames_run(run / "results/trials", train)
     joint = frames_run(run / "results/fixed", train)
