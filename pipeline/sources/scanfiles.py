@@ -185,11 +185,26 @@ def _pcd_ascii(path: Path, body: bytes, header: PcdHeader) -> NDArray:
                          f"header says {header.points} points x {n_values} values")
     rec = np.zeros(header.points, dtype=header.dtype)
     col = 0
-    for name in header.dtype.names or ():
+    for field, name in zip(header.names, header.dtype.names or (), strict=True):
         width = int(np.prod(header.dtype[name].shape or (1,)))
-        rec[name] = table[:, col : col + width].reshape(rec[name].shape)
+        values = table[:, col : col + width]
+        _check_fits(path, field, values, header.dtype[name].base)
+        rec[name] = values.reshape(rec[name].shape)
         col += width
     return rec
+
+
+def _check_fits(path: Path, name: str, values: NDArray, kind: np.dtype) -> None:
+    """InputError naming the field when a value of the ascii body does not fit its declared
+    type: beyond a float type's range (it would become inf), or beyond an integer type's range
+    or not finite (it would wrap or be undefined)."""
+    info = np.finfo(kind) if kind.kind == "f" else np.iinfo(kind)
+    finite = np.isfinite(values)
+    bad = ~finite if kind.kind != "f" else np.zeros_like(finite)
+    bad |= finite & ((values > info.max) | (values < info.min))
+    if bad.any():
+        raise InputError(f"{path}: PCD field {name} holds {float(values[bad][0]):g}, which does "
+                         f"not fit its type {kind} (range {info.min:g} to {info.max:g})")
 
 
 def _scan_of_record(rec: NDArray, names: list[str], path: Path) -> ScanFile:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +31,22 @@ def test_pcd_binary_and_ascii(tmp_path: Path, cloud: np.ndarray) -> None:
     write_pcd(tmp_path / "a.pcd", cloud, ascii_data=True)
     np.testing.assert_array_equal(read_scan(tmp_path / "b.pcd").points, cloud)
     np.testing.assert_array_equal(read_scan(tmp_path / "a.pcd").points, cloud)
+
+
+def test_pcd_ascii_value_beyond_its_type(tmp_path: Path) -> None:
+    """A value an ascii body's declared type cannot hold is refused, naming the field, without
+    numpy's cast warning (1e300 in a float32 field became inf, 300 in a uint8 field wrapped)."""
+    head = ("VERSION .7\nFIELDS x y z i\nSIZE 4 4 4 {size}\nTYPE F F F {type}\nCOUNT 1 1 1 1\n"
+            "WIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n")
+    for size, kind, row, rule in [("4", "F", "1 2 3 1e300", "field i holds 1e+300"),
+                                  ("1", "U", "1 2 3 300", "field i holds 300"),
+                                  ("1", "U", "1 2 3 nan", "field i holds nan")]:
+        path = tmp_path / "v.pcd"
+        path.write_text(head.format(size=size, type=kind) + "1 2 3 1\n" + row + "\n")
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(InputError, match=rf"v.pcd: PCD {re.escape(rule)}.*does not fit"):
+                read_scan(path)
 
 
 def test_pcd_truncated(tmp_path: Path, cloud: np.ndarray) -> None:
