@@ -144,6 +144,13 @@ def _number(value: Any, what: str, low: float | None = None, strict: bool = Fals
     return float(value)
 
 
+def _object(value: Any, what: str) -> Mapping[str, Any]:
+    """``value`` when it is a JSON object; ValueError naming ``what`` otherwise."""
+    if not isinstance(value, dict):
+        raise ValueError(f"{what} must be an object, got {value!r}")
+    return value
+
+
 def validate_values(manifest: Mapping[str, Any]) -> None:
     """The manifest's numbers and names make sense (its checksum only says they were not
     altered): the parameter space, the scalings, the selection settings, the fallback.
@@ -169,14 +176,13 @@ def validate_values(manifest: Mapping[str, Any]) -> None:
             raise ValueError(f"parameter_space {name}: kind must be float|int and log a bool")
         if s["log"] and low <= 0:
             raise ValueError(f"parameter_space {name}: a log scale needs low > 0, got {low:g}")
-    scaling = manifest.get("scaling") or {}
-    _number((scaling.get("environment") or {}).get("e_scale"),
-            "scaling.environment.e_scale", 0.0, strict=True)
-    _number((scaling.get("environment") or {}).get("w_e"),
-            "scaling.environment.w_e", 0.0, strict=True)
-    _number((scaling.get("parameters") or {}).get("x_scale"),
+    scaling = _object(manifest.get("scaling"), "scaling")
+    environment = _object(scaling.get("environment"), "scaling.environment")
+    _number(environment.get("e_scale"), "scaling.environment.e_scale", 0.0, strict=True)
+    _number(environment.get("w_e"), "scaling.environment.w_e", 0.0, strict=True)
+    _number(_object(scaling.get("parameters"), "scaling.parameters").get("x_scale"),
             "scaling.parameters.x_scale", 0.0, strict=True)
-    model = manifest.get("model") or {}
+    model = _object(manifest.get("model"), "model")
     if model.get("target") not in ("log", "linear"):
         raise ValueError(f"model.target must be 'log' or 'linear', got {model.get('target')!r}")
     _validate_novelty(manifest.get("novelty"), space)

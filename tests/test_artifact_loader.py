@@ -155,6 +155,10 @@ def set_path(manifest: dict[str, Any], dotted: str, value: Any) -> None:
     ("novelty.fallback", {"mode": "per_scan", "chosen": "per_scan"},
      ("per_scan", "fallback_params")),
     ("novelty.distance", "far", ("novelty.distance", "finite number")),
+    # blocks that are not objects (the fuzz suite's scaling = 1: an AttributeError before)
+    ("scaling", 1, ("scaling must be an object", "got 1")),
+    ("scaling.environment", [0.5], ("scaling.environment must be an object",)),
+    ("scaling.parameters", "x", ("scaling.parameters must be an object",)),
 ])
 def test_bad_manifest_values_are_refused(good: Path, tmp_path: Path, field: str, value: Any,
                                          words: tuple[str, ...]) -> None:
