@@ -23,7 +23,7 @@ import numbers
 from collections.abc import Callable, Generator, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, Protocol, runtime_checkable
+from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -318,9 +318,28 @@ class Schedule:
             if table.column(name).null_count:
                 raise InputError(f"{path}: schedule column {name} has missing values")
         names = [c for c in table.column_names if c not in ("frame", "stamp_ns")]
-        return cls(table.column("frame").to_numpy().astype(np.int32),
+        return cls(_integers(table.column("frame").to_numpy(), np.int32, "frame", path),
                    {n: table.column(n).to_numpy().astype(np.float64) for n in names},
-                   table.column("stamp_ns").to_numpy().astype(np.int64), str(path))
+                   _integers(table.column("stamp_ns").to_numpy(), np.int64, "stamp_ns", path),
+                   str(path))
+
+
+def _integers(values: NDArray[Any], dtype: type[np.signedinteger[Any]], name: str,
+              path: Path) -> NDArray[Any]:
+    """``values`` as ``dtype``; InputError naming the column and the first value that is not a
+    whole number in its range (a float column of 1.5 or 2**31 is not cast to a wrong frame)."""
+    if values.dtype.kind in "iu":
+        info = np.iinfo(dtype)
+        bad = (values < info.min) | (values > info.max)
+    else:
+        # float: whole and exactly representable; 2**63 is not an int64, beyond float's grain
+        bad = ~np.isfinite(values) | (values != np.round(values)) | \
+            (values < np.iinfo(dtype).min) | (values >= -float(np.iinfo(dtype).min))
+    if bad.any():
+        info = np.iinfo(dtype)
+        raise InputError(f"{path}: schedule column {name} must hold whole numbers in "
+                         f"[{info.min}, {info.max}], got {values[bad][0].item()!r}")
+    return values.astype(dtype)
 
 
 @runtime_checkable

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 from click.testing import CliRunner
 from helpers.odometry_data import Seq
 
+from pipeline.errors import InputError
 from pipeline.odometry import get_adapter
 from pipeline.odometry.base import Schedule
 from pipeline.trajectory import read_trajectory
@@ -117,6 +119,35 @@ def test_a_schedule_without_frame_or_stamp_fails_with_one_line(
     assert res.output.strip() == (f"adaptune: error: {path}: a schedule needs the columns frame "
                                   f"and stamp_ns, {dropped} missing")
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("column", "values", "shown"), [
+    ("frame", [0.0, 1.5], "1.5"),                   # a fraction of a frame
+    ("frame", [0.0, 2.0**31], "2147483648.0"),      # beyond int32: it wrapped to -2**31
+    ("frame", [0.0, float("nan")], "nan"),
+    ("stamp_ns", [0.0, 1e30], "1e+30"),             # beyond int64
+])
+def test_a_schedule_column_of_non_whole_numbers_fails_with_one_line(
+        column: str, values: list[float], shown: str, tmp_path: Path) -> None:
+    """The fuzz suite's frame of 2**31 in a float column: cast with a numpy warning to a wrong
+    frame before; now refused naming the column, its range and the value."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    path = tmp_path / "s.parquet"
+    Schedule.constant(get_adapter("ndt").space.defaults(), 2).write(path)
+    table = pq.read_table(path)
+    table = table.set_column(table.column_names.index(column), column,
+                             pa.array(values, pa.float64()))
+    pq.write_table(table, path)
+    kind = "int32" if column == "frame" else "int64"
+    info = np.iinfo(kind)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(InputError) as err:
+            Schedule.read(path)
+    assert str(err.value) == (f"{path}: schedule column {column} must hold whole numbers in "
+                              f"[{info.min}, {info.max}], got {shown}")
 
 
 def test_a_command_writing_a_non_utf8_trajectory_fails_with_one_line(
