@@ -14,6 +14,7 @@ ground truth's own error; the simulated ones are given both against the exact gr
 from __future__ import annotations
 
 import zlib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,6 +33,8 @@ SLICES = (("01", 0, 9), ("04", 0, 9), ("06", 0, 9), ("10", 0, 9))
 ALGORITHMS = ("gicp", "kiss_icp")
 TARGET_RATIO = 1.5
 """Calibration target: simulated / real within [1 / TARGET_RATIO, TARGET_RATIO]."""
+MEDIAN_CONFIDENCE = 0.95
+"""The least coverage of a real median's interval (``median_interval``)."""
 
 
 @dataclass
@@ -108,6 +111,45 @@ class RealismResult:
     def within_target(self, side: str = "sim_gt") -> dict[str, bool]:
         return {k: 1.0 / TARGET_RATIO <= v <= TARGET_RATIO
                 for k, v in self.ratios(side).items()}
+
+    def ratio_ranges(self, side: str = "sim_gt") -> dict[str, tuple[float, float]]:
+        """Per slice, the ratio of every median (``ratios``' keys ``<algo> <slice> median t``
+        and ``r``) against the ends of the real median's interval (``median_interval``): the
+        simulated median over the real interval's high end, then over its low end. Nine steps
+        give the real median a wide interval; the simulated one pools every replica's steps."""
+        out: dict[str, tuple[float, float]] = {}
+        for a in self.algorithms:
+            for s in self.slices:
+                sim, real = getattr(s, side)[a], s.real[a]
+                for key, median, steps in (("t", sim.median_t_cm, real.t_cm),
+                                           ("r", sim.median_r_deg, real.r_deg)):
+                    low, high, _ = median_interval(steps)
+                    out[f"{a} {s.sequence} median {key}"] = (median / high, median / low)
+        return out
+
+    def beyond_real_noise(self, side: str = "sim_gt") -> dict[str, bool]:
+        """Per slice median: True when its whole ``ratio_ranges`` lies outside the target's
+        [1 / 1.5, 1.5], so the miss is not the real slice's few steps."""
+        return {k: high < 1.0 / TARGET_RATIO or low > TARGET_RATIO
+                for k, (low, high) in self.ratio_ranges(side).items()}
+
+
+def median_interval(values: Sequence[float], confidence: float = MEDIAN_CONFIDENCE
+                    ) -> tuple[float, float, float]:
+    """(low, high, coverage): the distribution-free interval of the median of ``values`` from
+    their order statistics, [x(j), x(n + 1 - j)] with the largest j whose coverage
+    P(j <= B <= n - j), B ~ Binomial(n, 1/2), is at least ``confidence`` (j = 1 when even the
+    extremes fall short: then the coverage says so). n = 9: x(2) .. x(8), 96.1 %."""
+    from scipy.stats import binom
+
+    x = np.sort(np.asarray(values, dtype=np.float64))
+    n = len(x)
+    if n == 0:
+        raise ValueError("median_interval needs at least one value")
+    j = 1
+    while j + 1 <= n - j and 1.0 - 2.0 * binom.cdf(j, n, 0.5) >= confidence:
+        j += 1
+    return float(x[j - 1]), float(x[n - j]), float(1.0 - 2.0 * binom.cdf(j - 1, n, 0.5))
 
 
 def parse_slice(text: str) -> tuple[str, int, int]:

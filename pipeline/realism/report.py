@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.io_utils import atomic_write_text, output_folder
-from pipeline.realism.compare import TARGET_RATIO, RealismResult
+from pipeline.realism.compare import TARGET_RATIO, RealismResult, median_interval
 from pipeline.realism.statistics import RANGE_EDGES_M, ScanStatistics
 
 
@@ -41,7 +41,9 @@ def summary(result: RealismResult) -> dict[str, Any]:
             "target_ratio": TARGET_RATIO,
             "slices": [asdict(s) for s in result.slices], "pooled_p90": pooled,
             "ratios": result.ratios(), "ratios_exact_gt": result.ratios("sim"),
-            "within_target": result.within_target()}
+            "within_target": result.within_target(),
+            "ratio_ranges": result.ratio_ranges(),
+            "beyond_real_noise": result.beyond_real_noise()}
 
 
 def _ratio(sim: float, real: float) -> str:
@@ -83,10 +85,40 @@ def markdown(result: RealismResult) -> str:
             f"| {p90['sim_gt', 'r_deg']:.3f} "
             f"| {_ratio(p90['sim_gt', 'r_deg'], p90['real', 'r_deg'])} |")
     within, exact = result.within_target(), result.within_target("sim")
-    return "\n".join([*lines, "", *_ground_truth_table(result), "", *_scan_table(result), "",
+    return "\n".join([*lines, "", *_real_noise_table(result), "", *_ground_truth_table(result),
+                      "", *_scan_table(result), "",
                       f"Within x{TARGET_RATIO:g}: {sum(within.values())} of {len(within)} "
                       f"figures with the ground-truth error added ({sum(exact.values())} "
                       "against the exact ground truth)."]) + "\n"
+
+
+def _real_noise_table(result: RealismResult) -> list[str]:
+    """Per slice and algorithm: the real median's interval (order statistics of its steps) and
+    the ratio's range against it; ``!!`` where the whole range is outside x1.5."""
+    ranges, beyond = result.ratio_ranges(), result.beyond_real_noise()
+    coverage = {median_interval(s.real[a].t_cm)[2] for s in result.slices
+                for a in result.algorithms}
+    lines = ["The real side's own noise: a slice's real median comes from its few steps; its "
+             "distribution-free interval (order statistics, coverage "
+             f"{', '.join(f'{c:.1%}' for c in sorted(coverage))}) and the ratio sim+gt / real "
+             "against the interval's ends. `!!`: the whole range is outside "
+             f"x{TARGET_RATIO:g}, a miss the real side's noise does not explain.", "",
+             "| slice | algorithm | real t interval [cm] | ratio range t "
+             "| real r interval [deg] | ratio range r |", "|---|---|---|---|---|---|"]
+    for s in result.slices:
+        for a in result.algorithms:
+            cells = []
+            for key, steps, digits in (("t", s.real[a].t_cm, 2), ("r", s.real[a].r_deg, 3)):
+                low, high, _ = median_interval(steps)
+                name = f"{a} {s.sequence} median {key}"
+                r_low, r_high = ranges[name]
+                mark = " !!" if beyond[name] else ""
+                cells.append(f"{low:.{digits}f}-{high:.{digits}f} "
+                             f"| {r_low:.2f}-{r_high:.2f}{mark}")
+            lines.append(f"| {s.sequence} {s.first}-{s.last} | {a} | {cells[0]} | {cells[1]} |")
+    lines += ["", f"Beyond the real side's noise: {sum(beyond.values())} of {len(beyond)} "
+              "per-slice medians."]
+    return lines
 
 
 def _ground_truth_table(result: RealismResult) -> list[str]:

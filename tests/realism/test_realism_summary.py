@@ -122,3 +122,37 @@ def test_the_target_compares_the_side_with_the_ground_truths_error() -> None:
     assert result.ratios("sim")["gicp A median t"] == pytest.approx(0.5)
     assert all(result.within_target().values())
     assert not any(result.within_target("sim").values())
+
+
+@pytest.mark.parametrize(("n", "low", "high", "coverage"), [
+    # [x(j), x(n + 1 - j)] covers the median with P(j <= B <= n - j), B ~ Binomial(n, 1/2):
+    (9, 2.0, 8.0, 1 - 2 * 10 / 512),     # j = 2: 1 - 2 P(B <= 1); j = 3 gives 1 - 2 * 46 / 512
+    (5, 1.0, 5.0, 1 - 2 / 32),           # even the extremes cover 93.75 % only
+    (20, 6.0, 15.0, 1 - 2 * 21700 / 2**20),  # P(B <= 5) = (1 + 20 + 190 + 1140 + 4845
+                                             # + 15504) / 2**20
+    (1, 1.0, 1.0, 0.0),
+])
+def test_the_real_medians_interval_is_of_order_statistics(n: int, low: float, high: float,
+                                                          coverage: float) -> None:
+    from pipeline.realism.compare import median_interval
+
+    values = [float(v) for v in np.random.default_rng(n).permutation(np.arange(1, n + 1))]
+    got = median_interval(values)
+    assert got[:2] == (low, high)
+    assert got[2] == pytest.approx(coverage)
+
+
+def test_a_miss_is_beyond_the_real_sides_noise_only_outside_x1_5_at_both_ends() -> None:
+    """Real steps 1..9 cm (median 5, interval 2-8). Simulated median 10 (2x): the range
+    10/8 .. 10/2 = 1.25-5 reaches inside x1.5, so the miss may be the real side's few steps;
+    simulated median 13: 1.625-6.5, all of it outside, beyond the noise."""
+    real = [float(v) for v in range(1, 10)]
+    for sim_median, beyond in ((10.0, False), (13.0, True)):
+        sim = {"gicp": side([sim_median] * 3, [sim_median] * 3)}
+        result = RealismResult([SliceResult("A", 0, 9, "rural", STATS, STATS,
+                                            {"gicp": side(real, real)}, sim, sim, None,
+                                            (0.0, 0.0))], ("gicp",), 1, "hdl64", 64, {})
+        assert not result.within_target()["gicp A median t"]
+        low, high = result.ratio_ranges()["gicp A median t"]
+        assert (low, high) == pytest.approx((sim_median / 8.0, sim_median / 2.0))
+        assert result.beyond_real_noise()["gicp A median t"] is beyond
