@@ -19,11 +19,14 @@ In a copy P of the coverage model's project (its params.yaml, results/fixed):
         --descriptors data/descriptors.parquet --environment data/environment.parquet \
         --db results/$s.duckdb
     python experiments/tuning_suite.py --project P --worlds 12 --k 1000,3000
+    python experiments/tuning_suite.py --project P --family ood --worlds 12 --k 1000
 
-The last step fits per sensor and k the portfolio surrogate into P/dev/models/k<k>/<sensor>/,
-runs the ID dev suite's worlds (baseline, fixed and every k on every replica;
-``pipeline.verdict.runs.run_suite``, each world with its sensor's model), writes P/dev/tune/ and
-P/dev/tune.json and prints one row per k.
+The last steps fit per sensor and k the portfolio surrogate into P/dev/models/k<k>/<sensor>/
+and run the family's dev suite (baseline, fixed and every adaptive setting on every replica;
+``pipeline.verdict.runs.run_suite``): ``id``, each world with its sensor's model of every k;
+``ood``, whose sensor has no model (so the suite's own rule runs the fixed set, the fixed
+column), with each trained sensor's model borrowed (``--lenders``). They write
+P/dev/tune_<family>/ and P/dev/tune_<family>.json and print one row per setting.
 """
 
 from __future__ import annotations
@@ -61,8 +64,22 @@ def sensor_model(project: Path, sensor: str, k: int) -> Path:
     return out
 
 
-def dev(project: Path, n_worlds: int | None, ks: list[int]) -> None:
-    """The ID dev suite, each world with its sensor's model of every k; print and write."""
+def borrowed(project: Path, k: int, sensor: str, lender: str) -> Path:
+    """A model folder whose ``sensor`` model is ``lender``'s (k ``k``): what a sensor kept out
+    of training would run if it borrowed a trained sensor's model (a link, nothing refitted)."""
+    out = project / "dev" / "models" / f"k{k}_{sensor}_as_{lender}"
+    out.mkdir(parents=True, exist_ok=True)
+    link = out / sensor
+    if not link.is_symlink():
+        link.symlink_to(Path("..") / f"k{k}" / lender)
+    return out
+
+
+def dev(project: Path, family: str, n_worlds: int | None, ks: list[int],
+        lenders: list[str]) -> None:
+    """The family's dev suite, each world with its sensor's model of every k (``id``), or with
+    each lender's model (``ood``: the sensor has none; the fixed set is the fixed column);
+    print and write."""
     from pipeline.report.outputs import write_json
     from pipeline.verdict.report import load_settings, suite_inputs
     from pipeline.verdict.runs import AdaptiveSetting, run_suite
@@ -70,35 +87,41 @@ def dev(project: Path, n_worlds: int | None, ks: list[int]) -> None:
     from pipeline.verdict.worlds import suite_worlds
 
     section, settings = load_settings(project / "params.yaml")
-    draw = section.suites.id
+    draw = section.suites.draw(family)
     if n_worlds is not None:
         draw = draw.model_copy(update={"worlds": n_worlds})
     section = section.model_copy(update={"suite": "dev", "suites": section.suites.model_copy(
-        update={"id": draw})})
+        update={family: draw})})
     inputs, study = suite_inputs(None, project / "results" / "fixed", section, settings)
-    worlds = suite_worlds(section, "id", settings.template)
+    worlds = suite_worlds(section, family, settings.template)
     selection = settings.selection.replace(refine_iters=0)
+    trained = ["hdl32", "hdl64"]
     for k in ks:
-        for sensor in sorted({w.spec.sensor for w in worlds}):
+        for sensor in trained:
             sensor_model(project, sensor, k)
-    adaptive = {f"adaptive:k{k}": AdaptiveSetting(project / "dev" / "models" / f"k{k}",
-                                                  selection) for k in ks}
+    if family == "id":
+        folders = {f"k{k}": project / "dev" / "models" / f"k{k}" for k in ks}
+    else:
+        folders = {f"k{k}_as_{lender}": borrowed(project, k, sensor, lender) for k in ks
+                   for lender in lenders for sensor in sorted({w.spec.sensor for w in worlds})}
+    adaptive = {f"adaptive:{name}": AdaptiveSetting(folder, selection)
+                for name, folder in folders.items()}
     results = run_suite(worlds, dataclasses.replace(inputs, adaptive=adaptive),
-                        project / "dev" / "tune", section.workers)
-    header = {"family": "id", "suite": "dev", "seed_root": section.root("id"),
+                        project / "dev" / f"tune_{family}", section.workers)
+    header = {"family": family, "suite": "dev", "seed_root": section.root(family),
               "tuning_root": section.tuning.seed_root, "replicas": section.replicas,
               "fixed_study": study}
-    summaries = {f"k{k}": suite_metrics(results, header, section.failure_pct, section.confidence,
-                                        section.resamples, section.root("id"), f"adaptive:k{k}")
-                 for k in ks}
-    write_json(project / "dev" / "tune.json", summaries)
-    print(f"id dev suite, {len(results)} worlds, {section.replicas + 1} runs a setting, "
+    summaries = {name: suite_metrics(results, header, section.failure_pct, section.confidence,
+                                     section.resamples, section.root(family), f"adaptive:{name}")
+                 for name in folders}
+    write_json(project / "dev" / f"tune_{family}.json", summaries)
+    print(f"{family} dev suite, {len(results)} worlds, {section.replicas + 1} runs a setting, "
           "per-sensor portfolio tuned on the tuning suite; geometric means (95 % interval)")
     for name, m in summaries.items():
         r = m["ratios"]
         cells = [f"{key.removeprefix('adaptive_vs_')} {_g(r[key])}"
                  for key in ("adaptive_vs_fixed", "adaptive_vs_baseline", "adaptive_vs_best")]
-        print(f"{name:6s} " + "; ".join(cells) + f"; wins vs fixed "
+        print(f"{name:14s} " + "; ".join(cells) + f"; wins vs fixed "
               f"{r['adaptive_vs_fixed']['wins']}/{len(results)}; worst "
               f"{r['adaptive_vs_fixed']['worst']:.2f}; changes {m['selector']['changes']:.1f}")
     print(json.dumps({k: {n: round(w["ratios"]["adaptive_vs_fixed"], 3)
@@ -112,10 +135,14 @@ def _g(s: dict[str, Any]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--project", type=Path, required=True)
+    parser.add_argument("--family", choices=["id", "ood"], default="id")
     parser.add_argument("--worlds", type=int, default=None)
     parser.add_argument("--k", default="1000,3000")
+    parser.add_argument("--lenders", default="hdl32,hdl64",
+                        help="ood: the trained sensors whose models the unseen sensor borrows")
     args = parser.parse_args()
-    dev(args.project, args.worlds, [int(k) for k in args.k.split(",")])
+    dev(args.project, args.family, args.worlds, [int(k) for k in args.k.split(",")],
+        args.lenders.split(","))
 
 
 if __name__ == "__main__":
