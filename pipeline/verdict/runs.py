@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.artifact import MANIFEST_NAME
 from pipeline.errors import InputError
 from pipeline.selection import SelectionSettings
 from pipeline.verdict.statistics import median_over_runs
@@ -43,8 +44,6 @@ PROGRESS = logging.getLogger("pipeline.progress")  # shown at any CLI verbosity 
 
 F64 = NDArray[np.float64]
 FIXED_SETTINGS = ("baseline", "fixed")
-MANIFEST = "manifest.json"
-"""The file that makes a folder an artifact (``pipeline.surrogates.writer``)."""
 SCRATCH = "worlds"
 """The folder of the worlds' MCAPs while they are decoded (removed at the end)."""
 
@@ -62,17 +61,18 @@ class AdaptiveSetting:
         """The artifact a world of ``sensor`` runs: ``model_dir`` when it is one artifact, else
         its subfolder ``sensor``; None when there is none (a sensor kept out of training: the
         world runs the fixed set)."""
-        if (self.model_dir / MANIFEST).is_file():
+        if (self.model_dir / MANIFEST_NAME).is_file():
             return self.model_dir
         own = self.model_dir / sensor
-        return own if (own / MANIFEST).is_file() else None
+        return own if (own / MANIFEST_NAME).is_file() else None
 
     def check(self) -> None:
         """InputError unless ``model_dir`` is an artifact or holds one for some sensor."""
-        if (self.model_dir / MANIFEST).is_file() or any(self.model_dir.glob(f"*/{MANIFEST}")):
+        folder = self.model_dir
+        if (folder / MANIFEST_NAME).is_file() or any(folder.glob(f"*/{MANIFEST_NAME}")):
             return
-        raise InputError(f"{self.model_dir}: neither an artifact ({MANIFEST}) nor a folder of "
-                         "one artifact per sensor (<sensor>/manifest.json)")
+        raise InputError(f"{folder}: neither an artifact ({MANIFEST_NAME}) nor a folder of one "
+                         f"artifact per sensor (<sensor>/{MANIFEST_NAME})")
 
 
 @dataclass(frozen=True)
