@@ -87,7 +87,7 @@ class TuningDraw(Section):
     segments and frames) from ``seed_root``, a root of its own (frozen with the others)."""
 
     seed_root: int = 45453
-    worlds: int = Field(24, ge=1)
+    worlds: int = Field(default=24, ge=1)
 
 
 class VerdictSection(Section):
