@@ -45,6 +45,8 @@ ARTIFACT_SCHEMA_VERSION = "2.0"
 """The artifact's own format version (the other formats follow ``schemas.SCHEMA_VERSION``);
 readers refuse another major version. 2.0: the selector's runtime settings left the manifest
 (params ``select``) and the novelty guard has its own block."""
+MANIFEST_NAME = "manifest.json"
+"""The file that makes a folder an artifact."""
 MANIFEST_HASH_KEY = "manifest_sha256"
 
 
@@ -73,7 +75,7 @@ MAX_MANIFEST_BYTES = 64 << 20
 def read_manifest(path: Path) -> dict[str, Any]:
     """``path``/manifest.json: a regular file, valid JSON, an adaptune manifest whose own
     checksum matches, of a schema version this code reads. ArtifactError otherwise."""
-    mpath = path / "manifest.json"
+    mpath = path / MANIFEST_NAME
     if not mpath.exists() and not mpath.is_symlink():
         raise ArtifactError(f"{path}: not a model artifact (no manifest.json)")
     data = read_regular_file(mpath, MAX_MANIFEST_BYTES)

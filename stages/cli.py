@@ -74,6 +74,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "Oracles against SBS and the closed gap of the in-distribution suite (verdict/dvc.yaml "
         "stage).",
     ),
+    "tuning-suite": (
+        "stages.verdict:tuning_suite",
+        "Simulate the coverage model's tuning suite, indexed per sensor (verdict/dvc.yaml "
+        "stage).",
+    ),
     "ingest-set": (
         "stages.ingest:ingest_set",
         "Ingest the recordings of params.yaml's data section (dvc stage).",

@@ -17,8 +17,11 @@ from stages.common import dir_option, params_option, sequences_option
 @dir_option("--fixed", "fixed_dir", required=False,
             help="The joint study's output, whose best set joins the portfolio "
                  "(portfolio.fixed).")
+@click.option("--split", default=None,
+              help="The index split to run on [default: trials.split], e.g. one sensor's "
+                   "worlds of the tuning suite (adaptune tuning-suite).")
 def portfolio(params_path: Path | None, sequence_dir: Path, out_dir: Path,
-              fixed_dir: Path | None) -> None:
+              fixed_dir: Path | None, split: str | None) -> None:
     """Run the portfolio's parameter sets on every training sequence into OUT."""
     from pipeline.config import BaseSection, load_section
     from pipeline.evaluate.runs import best_fixed_params
@@ -31,7 +34,7 @@ def portfolio(params_path: Path | None, sequence_dir: Path, out_dir: Path,
     seed = load_section(params_path, "base", BaseSection).seed
     fixed = (best_fixed_params(fixed_dir, settings.algorithm)[1]
              if fixed_dir is not None and section.fixed else None)
-    paths = read_index(sequence_dir).paths(settings.split)
+    paths = read_index(sequence_dir).paths(split or settings.split)
     for s in run_portfolio(paths, out_dir, settings, section, seed, fixed):
         click.echo(f"{s.algorithm} {s.sequence}: {s.trials} sets ({s.ran} run now), "
                    f"{s.failed} failed, best {s.best_objective:.4g} % (set {s.best_trial})",

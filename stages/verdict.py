@@ -1,12 +1,13 @@
-"""``adaptune verdict``, ``oracles`` and ``headroom``: the coverage model's suites
-(verdict/dvc.yaml).
+"""``adaptune verdict``, ``oracles``, ``headroom`` and ``tuning-suite``: the coverage model's
+suites (verdict/dvc.yaml).
 
 ``verdict --family id|ood`` simulates the worlds of the family's suite (``verdict.suite``:
 ``test`` by default, ``dev`` where choices are made), runs baseline, fixed and adaptive on each
 with their replicas and writes the metrics, the plot data and the figure; ``oracles`` runs the
 oracle's candidate set and the oracles on the in-distribution suite (they do not depend on the
 selector); ``headroom`` scores them and the suite's adaptive against SBS and writes the closed
-gap (``pipeline.verdict`` documents them).
+gap; ``tuning-suite`` simulates the worlds the coverage model's portfolio is tuned on
+(``pipeline.verdict`` documents them).
 """
 
 from __future__ import annotations
@@ -83,3 +84,19 @@ def headroom(params_path: Path, fixed_dir: Path, suite_dir: Path, runs_dir: Path
                f"cross-fitted oracle / SBS {_num(o['geomean'])} ({_num(o['low'])}-"
                f"{_num(o['high'])}), closed gap {_num(gap['value'])} ({_num(gap['low'])}-"
                f"{_num(gap['high'])}) -> {metrics_path}", err=True)
+
+
+@click.command("tuning-suite")
+@params_option
+@dir_option("--out", help="Folder for <name>.mcap and index.json (data/tune).")
+def tuning_suite(params_path: Path, out: Path) -> None:
+    """Simulate the coverage model's tuning suite (verdict.tuning), indexed per sensor."""
+    from pipeline.verdict.report import load_settings
+    from pipeline.verdict.tuning import simulate_tuning_suite, tuning_worlds
+
+    section, settings = load_settings(params_path)
+    worlds = simulate_tuning_suite(tuning_worlds(section, settings.template), out,
+                                   section.workers)
+    for w in worlds:
+        click.echo(f"{out / w.name}.mcap: {w.description}", err=True)
+    click.echo(f"{out / 'index.json'}: {len(worlds)} worlds", err=True)

@@ -19,6 +19,7 @@ from pipeline.artifact import (
     ARTIFACT_SCHEMA,
     ARTIFACT_SCHEMA_VERSION,
     MANIFEST_HASH_KEY,
+    MANIFEST_NAME,
     canonical_manifest_hash,
 )
 from pipeline.errors import ArtifactError
@@ -69,7 +70,7 @@ def write_artifact(
         manifest = manifest_of(fitted, pca, info, files, shapes, repo)
         validate_manifest(manifest)
         manifest[MANIFEST_HASH_KEY] = canonical_manifest_hash(manifest)
-        (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2), encoding="utf-8")
+        (tmp / MANIFEST_NAME).write_text(json.dumps(manifest, indent=2), encoding="utf-8")
     return manifest
 
 

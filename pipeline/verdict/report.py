@@ -217,6 +217,8 @@ def suite_inputs(model: Path | None, fixed_dir: Path, section: VerdictSection,
         raise InputError(f"{fixed_dir}: the joint study ran {study['trials']} trials, the "
                          f"frozen budget is {section.fixed_trials} (run the fixed stage)")
     adaptive = {} if model is None else {"adaptive": AdaptiveSetting(model, settings.selection)}
+    for setting in adaptive.values():
+        setting.check()
     inputs = SuiteInputs(algorithm, space, baseline, fixed, settings.adapter_options,
                          section.length_m, section.replicas, section.replica_scale,
                          settings.penalty_pct, adaptive)

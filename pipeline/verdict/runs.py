@@ -5,6 +5,8 @@ For every world (``pipeline.verdict.worlds``), ``score_world``
 1. simulates it into a scratch MCAP and decodes it once (``LoadedWorld``), then deletes the MCAP;
 2. computes the schedule of every adaptive setting (the model's selector with that setting's
    ``select`` settings: ``adaptive`` in the stage, more in a dev study of selector variants);
+   with one model per sensor, the world's sensor's; a sensor without one (kept out of
+   training) runs the fixed set, and its runs are fixed's;
 3. runs baseline (the frozen defaults), fixed (the joint study's best) and every adaptive
    schedule on the nominal parameters and on replicas 1..R;
 4. writes ``<out>/<world>/``: ``rte.parquet`` (frame, label, one column ``<setting>/<r>`` per
@@ -31,6 +33,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.artifact import MANIFEST_NAME
+from pipeline.errors import InputError
 from pipeline.selection import SelectionSettings
 from pipeline.verdict.statistics import median_over_runs
 from pipeline.verdict.worlds import VerdictWorld
@@ -46,10 +50,29 @@ SCRATCH = "worlds"
 
 @dataclass(frozen=True)
 class AdaptiveSetting:
-    """An adaptive setting: the artifact and the selector's runtime settings it runs with."""
+    """An adaptive setting: the artifact, or a folder of one artifact per sensor (named for
+    it: the coverage model's portfolio, ``pipeline.verdict.tuning``), and the selector's
+    runtime settings it runs with."""
 
     model_dir: Path
     selection: SelectionSettings = field(default_factory=SelectionSettings)
+
+    def model_for(self, sensor: str) -> Path | None:
+        """The artifact a world of ``sensor`` runs: ``model_dir`` when it is one artifact, else
+        its subfolder ``sensor``; None when there is none (a sensor kept out of training: the
+        world runs the fixed set)."""
+        if (self.model_dir / MANIFEST_NAME).is_file():
+            return self.model_dir
+        own = self.model_dir / sensor
+        return own if (own / MANIFEST_NAME).is_file() else None
+
+    def check(self) -> None:
+        """InputError unless ``model_dir`` is an artifact or holds one for some sensor."""
+        folder = self.model_dir
+        if (folder / MANIFEST_NAME).is_file() or any(folder.glob(f"*/{MANIFEST_NAME}")):
+            return
+        raise InputError(f"{folder}: neither an artifact ({MANIFEST_NAME}) nor a folder of one "
+                         f"artifact per sensor (<sensor>/{MANIFEST_NAME})")
 
 
 @dataclass(frozen=True)
@@ -151,9 +174,15 @@ def score_world(world: VerdictWorld, inputs: SuiteInputs, out_dir: Path) -> Worl
     from pipeline.adaptive import loaded_model
 
     nominal: dict[str, Any] = {"baseline": inputs.baseline, "fixed": inputs.fixed}
-    selection = {}
+    selection, as_fixed = {}, []
     for name, adaptive in inputs.adaptive.items():
-        chosen = loaded.select(loaded_model(adaptive.model_dir), adaptive.selection)
+        model_dir = adaptive.model_for(world.spec.sensor)
+        if model_dir is None:  # no model for this sensor: the fixed set, its runs
+            as_fixed.append(name)
+            selection[name] = {"changes": 0, "novel_share": 1.0,
+                               "edge_share": _edge_share(inputs.fixed, inputs.space)}
+            continue
+        chosen = loaded.select(loaded_model(model_dir), adaptive.selection)
         nominal[name] = chosen.schedule
         selection[name] = {"changes": chosen.changes, "novel_share": chosen.novel_share,
                            "edge_share": chosen.edge_share}
@@ -163,11 +192,22 @@ def score_world(world: VerdictWorld, inputs: SuiteInputs, out_dir: Path) -> Worl
         runs = [loaded.run(setting, r, inputs.replica_scale) for r in range(inputs.replicas + 1)]
         t_err[name] = np.stack([t for t, _ in runs])
         failed[name] = [f for _, f in runs]
+    for name in as_fixed:
+        t_err[name], failed[name] = t_err["fixed"], failed["fixed"]
     result = WorldResult(world.name, world.family, world.spec.segments, world.spec.sensor,
                          world.spec.frames, world.spec.seed, loaded.labels, t_err, failed,
                          selection, time.perf_counter() - t0)
     write_world(out_dir / world.name, result)
     return result
+
+
+def _edge_share(params: Mapping[str, float], space: Any) -> float:
+    """``edge_share`` of a constant setting: 1.0 when a parameter is within 1 % of its range's
+    width from a bound, else 0.0."""
+    from pipeline.verdict.world import edge_share
+
+    bounds = [{"low": space[n].low, "high": space[n].high} for n in space.names]
+    return edge_share(np.array([[params[n] for n in space.names]]), bounds)
 
 
 def load_world(world: VerdictWorld, inputs: SuiteInputs, scratch: Path) -> Any:

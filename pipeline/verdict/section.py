@@ -81,6 +81,15 @@ class Suites(Section):
         return getattr(self, family)  # type: ignore[no-any-return]
 
 
+class TuningDraw(Section):
+    """The coverage model's tuning suite (``pipeline.verdict.tuning``): ``worlds`` worlds drawn
+    exactly as the in-distribution suites draw theirs (``suites.id``: its sensors, labels,
+    segments and frames) from ``seed_root``, a root of its own (frozen with the others)."""
+
+    seed_root: int = 45453
+    worlds: int = Field(default=24, ge=1)
+
+
 class VerdictSection(Section):
     """params.yaml ``verdict`` (module docstring).
 
@@ -91,6 +100,7 @@ class VerdictSection(Section):
     budget (``fixed.iterations`` / ``fixed.warm_start`` below them are refused); failure_pct:
     a sub-trajectory with a larger RTE [%] fails; oracle: the candidate grid of the headroom
     study (parameter -> values, their product; the baseline and the fixed set are added);
+    tuning: the tuning suite the coverage model's portfolio runs on (``TuningDraw``);
     replicas: extra runs of every setting on every world with the parameters moved by at most
     ``replica_scale`` (``pipeline.evaluate.replicas``); confidence / resamples: the bootstrap's
     level and resamples; workers: worlds run at a time (processes); length_m: L (from base).
@@ -99,6 +109,7 @@ class VerdictSection(Section):
     suite: Literal["dev", "test"] = "test"
     world_generator: int = Field(2, ge=1)
     suites: Suites = Suites()
+    tuning: TuningDraw = TuningDraw()
     baseline: dict[str, float] = Field(
         default_factory=lambda: {"resolution": 4.0, "keyframe_interval": 4.0})
     fixed_trials: int = Field(64, ge=1)
@@ -121,6 +132,14 @@ class VerdictSection(Section):
         if not v or empty:
             raise ValueError(f"must give every parameter at least one value, got {v}")
         return v
+
+    @model_validator(mode="after")
+    def _tuning_root(self) -> VerdictSection:
+        roots = {r for f in FAMILIES for r in self.suites.draw(f).seed_roots.values()}
+        if self.tuning.seed_root in roots:
+            raise ValueError(f"tuning.seed_root must differ from every suite's root, got "
+                             f"{self.tuning.seed_root}, which a suite uses")
+        return self
 
     def root(self, family: str) -> int:
         """The seed root of ``family``'s chosen suite."""

@@ -86,3 +86,26 @@ def test_the_cli_turns_a_bad_portfolio_into_one_line(tmp_path: Path, portfolio: 
     cli_fails(["portfolio", "--params", str(params), "--sequences", str(tmp_path / "seqs"),
                "--out", str(out)], message)
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("split", "message"), [
+    ("hdl64", "no sequences in split 'hdl64' (splits: hdl32, train, validation)"),
+    ("hdl32", "split 'hdl32' lists b.mcap"),
+])
+def test_split_picks_the_index_split_the_portfolio_runs_on(tmp_path: Path, split: str,
+                                                           message: str) -> None:
+    """``--split`` (the tuning suite's per-sensor splits) replaces trials.split: the split's
+    sequences are the ones read, one line and exit code 1 when it is missing or names a file
+    that is not there."""
+    from helpers.evaluation_data import cli_fails
+
+    from pipeline.sequence_index import write_index
+
+    params = tmp_path / "params.yaml"
+    params.write_text("portfolio: {grid: {resolution: [2.0]}, fixed: false}\n")
+    write_index(tmp_path / "seqs", {"train": ["a"], "validation": [], "hdl32": ["b"]})
+    (tmp_path / "seqs" / "a.mcap").write_bytes(b"")
+    out = tmp_path / "portfolio"
+    cli_fails(["portfolio", "--params", str(params), "--sequences", str(tmp_path / "seqs"),
+               "--out", str(out), "--split", split], message)
+    assert not out.exists()

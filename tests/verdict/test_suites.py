@@ -199,3 +199,104 @@ def test_the_oracles_choose_per_label() -> None:
                  "c": {"cave": [3.0, 2.5, 2.0], "open": [1.0, 1.0, 1.0]}}
     assert class_choice("a", label_rte) == {"cave": 2}
     assert class_choice("c", label_rte) == {"cave": 2}  # "open" only on c: no class choice
+
+
+def test_the_tuning_suite_is_drawn_as_the_id_suites_from_its_own_root() -> None:
+    """verdict.tuning: worlds id_tune_<i> of the id draw (sensors alternate, 900-1200 frames,
+    2-4 segments) from the frozen root 45453, none of them a dev or test world; the index lists
+    every world under train and each sensor's under its name; a root a suite uses is refused."""
+    from pipeline.verdict.tuning import tuning_index, tuning_worlds
+
+    section = VerdictSection()
+    assert (section.tuning.seed_root, section.tuning.worlds) == (45453, 24)
+    worlds = tuning_worlds(section, TEMPLATE)
+    assert [w.name for w in worlds[:2]] == ["id_tune_00", "id_tune_01"] and len(worlds) == 24
+    assert [w.spec.sensor for w in worlds[:4]] == ["hdl32", "hdl64", "hdl32", "hdl64"]
+    assert all(900 <= w.spec.frames <= 1200 and 2 <= len(w.spec.segments) <= 4 for w in worlds)
+    assert worlds[0].description == "cave-street-open-street, hdl32, 1169 frames"
+    suites = [suite_worlds(section.model_copy(update={"suite": s}), f, TEMPLATE)
+              for s in ("dev", "test") for f in ("id", "ood")]
+    assert {w.spec.seed for w in worlds}.isdisjoint({w.spec.seed for ws in suites for w in ws})
+    index = tuning_index(worlds)
+    assert index["train"] == [w.name for w in worlds] and index["validation"] == []
+    assert index["hdl32"] == [f"id_tune_{i:02d}" for i in range(0, 24, 2)]
+    assert index["hdl64"] == [f"id_tune_{i:02d}" for i in range(1, 24, 2)]
+    with pytest.raises(ConfigError, match=r"tuning\.seed_root must differ from every suite's "
+                                          r"root, got 87976"):
+        validate_section(VerdictSection, "verdict", {"tuning": {"seed_root": 87976}})
+
+
+def test_a_model_folder_per_sensor_gives_each_world_its_sensors_artifact(tmp_path: Path) -> None:
+    """--model is one artifact (every world runs it) or a folder of one per sensor; a sensor
+    without one (the VLP-16, kept out of training) gets None: its worlds run the fixed set. A
+    folder holding neither is refused before any world runs."""
+    from pipeline.verdict.runs import AdaptiveSetting
+
+    one = tmp_path / "model"
+    one.mkdir()
+    (one / "manifest.json").write_text("{}")
+    assert AdaptiveSetting(one).model_for("vlp16") == one
+    per_sensor = tmp_path / "models"
+    for sensor in ("hdl32", "hdl64"):
+        (per_sensor / sensor).mkdir(parents=True)
+        (per_sensor / sensor / "manifest.json").write_text("{}")
+    setting = AdaptiveSetting(per_sensor)
+    setting.check()
+    assert setting.model_for("hdl64") == per_sensor / "hdl64"
+    assert setting.model_for("vlp16") is None
+    (tmp_path / "empty" / "hdl32").mkdir(parents=True)
+    with pytest.raises(InputError, match="neither an artifact"):
+        AdaptiveSetting(tmp_path / "empty").check()
+
+
+def test_a_world_whose_sensor_has_no_model_runs_the_fixed_set(tmp_path: Path) -> None:
+    """A per-sensor model folder without the VLP-16's: the VLP-16 world's adaptive is the
+    fixed set, its runs fixed's (not run again), no schedule written, every scan unfamiliar."""
+    from pipeline.verdict.runs import AdaptiveSetting, SuiteInputs, score_world
+    from pipeline.verdict.section import SuiteDraw
+    from pipeline.verdict.worlds import world_of
+
+    models = tmp_path / "models" / "hdl32"
+    models.mkdir(parents=True)
+    (models / "manifest.json").write_text("{}")  # never loaded: no world here is an HDL-32E
+    draw = SuiteDraw(seed_roots={"dev": 1, "test": 2}, worlds=1, sensors=("vlp16",),
+                     segments=(2, 2), frames=(60, 60))
+    w = world_of(draw, "ood", "dev", 0, TEMPLATE)
+    fixed = {"resolution": 2.0, "keyframe_interval": 1.0}
+    inputs = SuiteInputs("ndt", SPACE, SPACE.defaults(), fixed, {}, 4.0, 1, 0.005, 100.0,
+                         {"adaptive": AdaptiveSetting(models.parent)})
+    result = score_world(w, inputs, tmp_path / "runs")
+    assert np.array_equal(result.t_err_pct["adaptive"], result.t_err_pct["fixed"],
+                          equal_nan=True)
+    assert not np.array_equal(result.t_err_pct["baseline"], result.t_err_pct["fixed"],
+                              equal_nan=True)
+    assert result.selection["adaptive"] == {"changes": 0, "novel_share": 1.0, "edge_share": 0.0}
+    assert not list((tmp_path / "runs").rglob("*.schedule.parquet"))
+
+
+def test_the_tuning_suite_stage_writes_the_worlds_and_their_index(tmp_path: Path) -> None:
+    """``adaptune tuning-suite``: every tuning world an MCAP, the index last, with its sensor
+    split (two tiny VLP-16 worlds here)."""
+    import json
+
+    from click.testing import CliRunner
+
+    from pipeline.sequence import SequenceReader
+    from stages.cli import main
+
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump({"verdict": {
+        "tuning": {"seed_root": 5, "worlds": 2}, "workers": 1,
+        "suites": {"id": {"seed_roots": {"dev": 1, "test": 2}, "worlds": 1,
+                          "sensors": ["vlp16"], "segments": [2, 2], "frames": [60, 60]}}}}))
+    out = tmp_path / "tune"
+    res = CliRunner().invoke(main, ["tuning-suite", "--params", str(params), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    index = json.loads((out / "index.json").read_text())
+    assert index == {"train": ["id_tune_00", "id_tune_01"], "validation": [],
+                     "vlp16": ["id_tune_00", "id_tune_01"]}
+    for name in index["train"]:
+        with SequenceReader(out / f"{name}.mcap") as reader:
+            assert len(reader.stamps_ns) == 60 and len(reader.info.labels) == 2
+    assert sorted(p.name for p in out.iterdir()) == ["id_tune_00.mcap", "id_tune_01.mcap",
+                                                    "index.json"]

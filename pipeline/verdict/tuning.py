@@ -1,0 +1,59 @@
+"""The coverage model's tuning suite (docs/results/verdict-protocol.md, "The tuning suite").
+
+The portfolio (``pipeline.portfolio``) learns which member suits which scan from worlds of the
+kind the suites hold: long worlds of 2 to 4 environment segments, drawn exactly as the
+in-distribution suites draw theirs (``verdict.suites.id``) from a seed root of their own
+(``verdict.tuning``), so no suite world is ever trained on. World i is ``id_tune_<i>``; it
+depends on (the tuning root, i) alone, so more worlds only append.
+
+``simulate_tuning_suite`` writes them as a sequences folder: ``<name>.mcap`` per world and an
+index whose ``train`` split lists every world and whose split per sensor (``hdl32``, ``hdl64``)
+lists that sensor's: the portfolio and its surrogate run once per sensor (``adaptune portfolio
+--split SENSOR``), since a deployment knows its sensor.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pipeline.sim.simulate import SimSpec
+from pipeline.verdict.section import VerdictSection
+from pipeline.verdict.worlds import VerdictWorld, check_generator, world_of
+
+TUNING = "tune"
+"""The suite name of the tuning worlds (``id_tune_<i>``)."""
+
+
+def tuning_worlds(section: VerdictSection, template: SimSpec) -> list[VerdictWorld]:
+    """The tuning suite's worlds, in order; ConfigError when the world generator is not the one
+    the suites were frozen with."""
+    check_generator(section)
+    draw = section.suites.id.model_copy(update={
+        "seed_roots": {TUNING: section.tuning.seed_root}, "worlds": section.tuning.worlds})
+    return [world_of(draw, "id", TUNING, i, template) for i in range(draw.worlds)]
+
+
+def tuning_index(worlds: list[VerdictWorld]) -> dict[str, list[str]]:
+    """The sequences index of the tuning folder: ``train`` every world, then one split per
+    sensor (in the order the sensors first appear) with its worlds."""
+    index: dict[str, list[str]] = {"train": [w.name for w in worlds], "validation": []}
+    for w in worlds:
+        index.setdefault(w.spec.sensor, []).append(w.name)
+    return index
+
+
+def simulate_tuning_suite(worlds: list[VerdictWorld], out_dir: str | Path,
+                          workers: int) -> list[VerdictWorld]:
+    """Write ``out_dir``/<name>.mcap for every world (``workers`` at a time, the longest first;
+    each world depends on its own spec alone) and the index (``tuning_index``) last."""
+    from pipeline.io_utils import output_folder
+    from pipeline.sequence_index import write_index
+    from pipeline.sim.dataset import simulate_all
+    from pipeline.sim.simulate import simulate_sequence
+
+    out = output_folder(out_dir)
+    jobs = [(w.spec, out / f"{w.name}.mcap", w.name, False) for w in worlds]
+    longest_first = sorted(range(len(jobs)), key=lambda i: -worlds[i].spec.frames)
+    simulate_all(simulate_sequence, jobs, [job[1] for job in jobs], workers, True, longest_first)
+    write_index(out, tuning_index(worlds))
+    return worlds
