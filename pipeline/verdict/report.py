@@ -216,7 +216,8 @@ def suite_inputs(model: Path | None, fixed_dir: Path, section: VerdictSection,
     if study["trials"] < section.fixed_trials:
         raise InputError(f"{fixed_dir}: the joint study ran {study['trials']} trials, the "
                          f"frozen budget is {section.fixed_trials} (run the fixed stage)")
-    adaptive = {} if model is None else {"adaptive": AdaptiveSetting(model, settings.selection)}
+    adaptive = {} if model is None else {
+        "adaptive": AdaptiveSetting(model, settings.selection, section.borrow_model)}
     for setting in adaptive.values():
         setting.check()
     inputs = SuiteInputs(algorithm, space, baseline, fixed, settings.adapter_options,

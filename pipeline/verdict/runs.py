@@ -6,7 +6,8 @@ For every world (``pipeline.verdict.worlds``), ``score_world``
 2. computes the schedule of every adaptive setting (the model's selector with that setting's
    ``select`` settings: ``adaptive`` in the stage, more in a dev study of selector variants);
    with one model per sensor, the world's sensor's; a sensor without one (kept out of
-   training) runs the fixed set, and its runs are fixed's;
+   training) borrows the model of ``verdict.borrow_model``, or runs the fixed set (its runs
+   are then fixed's);
 3. runs baseline (the frozen defaults), fixed (the joint study's best) and every adaptive
    schedule on the nominal parameters and on replicas 1..R;
 4. writes ``<out>/<world>/``: ``rte.parquet`` (frame, label, one column ``<setting>/<r>`` per
@@ -51,20 +52,24 @@ SCRATCH = "worlds"
 @dataclass(frozen=True)
 class AdaptiveSetting:
     """An adaptive setting: the artifact, or a folder of one artifact per sensor (named for
-    it: the coverage model's portfolio, ``pipeline.verdict.tuning``), and the selector's
-    runtime settings it runs with."""
+    it: the coverage model's portfolio, ``pipeline.verdict.tuning``), the selector's runtime
+    settings it runs with, and the sensor whose model a sensor without one borrows."""
 
     model_dir: Path
     selection: SelectionSettings = field(default_factory=SelectionSettings)
+    borrow: str | None = None
 
     def model_for(self, sensor: str) -> Path | None:
         """The artifact a world of ``sensor`` runs: ``model_dir`` when it is one artifact, else
-        its subfolder ``sensor``; None when there is none (a sensor kept out of training: the
-        world runs the fixed set)."""
+        its subfolder ``sensor``, else (a sensor kept out of training) the subfolder of the
+        sensor it borrows from (``borrow``); None when there is none: the world runs the fixed
+        set."""
         if (self.model_dir / MANIFEST_NAME).is_file():
             return self.model_dir
-        own = self.model_dir / sensor
-        return own if (own / MANIFEST_NAME).is_file() else None
+        for name in (sensor, self.borrow):
+            if name is not None and (self.model_dir / name / MANIFEST_NAME).is_file():
+                return self.model_dir / name
+        return None
 
     def check(self) -> None:
         """InputError unless ``model_dir`` is an artifact or holds one for some sensor."""

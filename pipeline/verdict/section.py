@@ -101,6 +101,9 @@ class VerdictSection(Section):
     a sub-trajectory with a larger RTE [%] fails; oracle: the candidate grid of the headroom
     study (parameter -> values, their product; the baseline and the fixed set are added);
     tuning: the tuning suite the coverage model's portfolio runs on (``TuningDraw``);
+    borrow_model: with one model per sensor, the sensor whose model a sensor without one runs
+    (None: such a world runs the fixed set; hdl64 chosen on the out-of-distribution dev suite,
+    docs/results/selector-dev.md);
     replicas: extra runs of every setting on every world with the parameters moved by at most
     ``replica_scale`` (``pipeline.evaluate.replicas``); confidence / resamples: the bootstrap's
     level and resamples; workers: worlds run at a time (processes); length_m: L (from base).
@@ -110,6 +113,7 @@ class VerdictSection(Section):
     world_generator: int = Field(2, ge=1)
     suites: Suites = Suites()
     tuning: TuningDraw = TuningDraw()
+    borrow_model: SensorName | None = "hdl64"
     baseline: dict[str, float] = Field(
         default_factory=lambda: {"resolution": 4.0, "keyframe_interval": 4.0})
     fixed_trials: int = Field(64, ge=1)
@@ -132,6 +136,14 @@ class VerdictSection(Section):
         if not v or empty:
             raise ValueError(f"must give every parameter at least one value, got {v}")
         return v
+
+    @model_validator(mode="after")
+    def _borrowed(self) -> VerdictSection:
+        trained = self.suites.id.sensors
+        if self.borrow_model is not None and self.borrow_model not in trained:
+            raise ValueError(f"borrow_model must be a trained sensor ({', '.join(trained)}) or "
+                             f"null, got {self.borrow_model!r}")
+        return self
 
     @model_validator(mode="after")
     def _tuning_root(self) -> VerdictSection:

@@ -57,6 +57,8 @@ def test_the_frozen_values_are_the_codes_defaults_and_the_verdict_params() -> No
                         "sensors": ["hdl32"], "frames": [60, 60], "segments": [2, 4]}}},
      ">= 30 frames a segment"),
     ({"oracle": {"resolution": []}}, "at least one value"),
+    ({"borrow_model": "vlp16"}, "borrow_model must be a trained sensor \\(hdl32, hdl64\\) or "
+                                "null, got 'vlp16'"),
 ])
 def test_bad_verdict_sections_name_the_rule(change: dict[str, object], rule: str) -> None:
     with pytest.raises(ConfigError, match=rule):
@@ -228,8 +230,9 @@ def test_the_tuning_suite_is_drawn_as_the_id_suites_from_its_own_root() -> None:
 
 def test_a_model_folder_per_sensor_gives_each_world_its_sensors_artifact(tmp_path: Path) -> None:
     """--model is one artifact (every world runs it) or a folder of one per sensor; a sensor
-    without one (the VLP-16, kept out of training) gets None: its worlds run the fixed set. A
-    folder holding neither is refused before any world runs."""
+    without one (the VLP-16, kept out of training) borrows another's (verdict.borrow_model), or
+    gets None: its worlds run the fixed set. A folder holding neither is refused before any
+    world runs."""
     from pipeline.verdict.runs import AdaptiveSetting
 
     one = tmp_path / "model"
@@ -244,6 +247,10 @@ def test_a_model_folder_per_sensor_gives_each_world_its_sensors_artifact(tmp_pat
     setting.check()
     assert setting.model_for("hdl64") == per_sensor / "hdl64"
     assert setting.model_for("vlp16") is None
+    borrowing = AdaptiveSetting(per_sensor, borrow="hdl64")
+    assert borrowing.model_for("vlp16") == per_sensor / "hdl64"
+    assert borrowing.model_for("hdl32") == per_sensor / "hdl32"  # its own first
+    assert AdaptiveSetting(per_sensor, borrow="ouster").model_for("vlp16") is None
     (tmp_path / "empty" / "hdl32").mkdir(parents=True)
     with pytest.raises(InputError, match="neither an artifact"):
         AdaptiveSetting(tmp_path / "empty").check()
@@ -286,7 +293,7 @@ def test_the_tuning_suite_stage_writes_the_worlds_and_their_index(tmp_path: Path
 
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump({"verdict": {
-        "tuning": {"seed_root": 5, "worlds": 2}, "workers": 1,
+        "tuning": {"seed_root": 5, "worlds": 2}, "workers": 1, "borrow_model": None,
         "suites": {"id": {"seed_roots": {"dev": 1, "test": 2}, "worlds": 1,
                           "sensors": ["vlp16"], "segments": [2, 2], "frames": [60, 60]}}}}))
     out = tmp_path / "tune"

@@ -37,6 +37,7 @@ def tiny_params() -> dict[str, Any]:
     v["suites"]["id"].update(worlds=2, segments=[2, 2], frames=[60, 60], sensors=["vlp16"])
     v["suites"]["ood"].update(worlds=1, segments=[2, 2], frames=[60, 60])
     v.update(fixed_trials=2, fixed_warm_start=1, replicas=1, resamples=200, workers=2,
+             borrow_model=None,  # the only trained sensor here is the VLP-16
              oracle={"resolution": [2.0, 6.0], "keyframe_interval": [4.0]})
     return p
 
