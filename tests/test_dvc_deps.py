@@ -9,7 +9,14 @@ from pathlib import Path
 
 import pytest
 import yaml
-from helpers.dvc_deps import DVC_FILES, REPO, files_of_command, generated, stage_commands
+from helpers.dvc_deps import (
+    DVC_FILES,
+    REPO,
+    files_of_command,
+    generated,
+    stage_commands,
+    stage_spec,
+)
 
 TEXTS = {name: (REPO / name).read_text(encoding="utf-8") for name in DVC_FILES}
 
@@ -25,7 +32,7 @@ def test_dvc_yaml_deps_are_the_generated_ones(name: str) -> None:
                                              for stage in stage_commands(TEXTS[name])])
 def test_every_module_a_stage_runs_is_a_dependency(name: str, stage: str) -> None:
     module = stage_commands(TEXTS[name])[stage]
-    deps = yaml.safe_load(TEXTS[name])["stages"][stage].get("deps", [])
+    deps = stage_spec(yaml.safe_load(TEXTS[name])["stages"][stage]).get("deps", [])
     stage_dir = (REPO / name).parent
     covered = [(stage_dir / d).resolve() for d in deps if "${" not in d]
     missing = sorted(
@@ -46,3 +53,22 @@ def test_the_import_graph_sees_lazy_imports() -> None:
             "schemas/artifact.schema.json", "pipeline/__init__.py"} <= surrogate
     adaptive = rel(files_of_command("stages.adaptive"))
     assert "pipeline/artifact.py" in adaptive and "pipeline/surrogates/fit.py" not in adaptive
+
+
+def test_a_foreach_stage_gets_the_deps_of_its_command() -> None:
+    """A ``foreach`` stage (one stage per item: the coverage model's per-sensor stages) has its
+    command and deps in ``do:``; they are generated there, indented, its data deps kept."""
+    text = ("stages:\n"
+            "  portfolio:\n"
+            "    foreach: [hdl32, hdl64]\n"
+            "    do:\n"
+            "      cmd: adaptune portfolio --sequences data/tune --split ${item} --out x/${item}\n"
+            "      deps: [data/tune, ../pipeline/stale.py]\n"
+            "      outs: [\"x/${item}\"]\n")
+    assert stage_commands(text) == {"portfolio": "stages.portfolio"}
+    out = generated(text, "../")
+    deps = yaml.safe_load(out)["stages"]["portfolio"]["do"]["deps"]
+    assert deps[0] == "data/tune" and "../pipeline/stale.py" not in deps
+    assert {"../stages/portfolio.py", "../pipeline/portfolio.py"} <= set(deps)
+    assert "\n      deps: [data/tune, ../stages/__init__.py," in out  # under do:, wrapped at 100
+    assert generated(out, "../") == out

@@ -7,6 +7,7 @@ blocks left out; a package's ``__init__.py`` counts for each module imported fro
 schema file a module names (``"tables.sql"``, or a folder of them: ``f"ros2/{name}.msg"``)
 counts too. A folder whose every file is needed is listed as the folder.
 
+A ``foreach`` stage has its command and deps in its ``do:`` block (``stage_spec``).
 ``python tests/helpers/dvc_deps.py`` rewrites the ``deps:`` of every stage in dvc.yaml and
 verdict/dvc.yaml (``DVC_FILES``; its data dependencies first, as written, then the code);
 ``--check`` exits 1 when one differs
@@ -142,6 +143,12 @@ def cover(files: set[Path]) -> list[str]:
     return sorted(out, key=lambda s: (s.split("/")[0] != "stages", s))
 
 
+def stage_spec(spec: dict) -> dict:
+    """The stage's own fields: its ``do:`` block for a ``foreach`` stage (one stage per item,
+    the same command and deps with ``${item}`` in them), else the stage."""
+    return spec["do"] if "foreach" in spec else spec
+
+
 def stage_commands(dvc_yaml: str) -> dict[str, str]:
     """stage -> the module of its ``adaptune`` sub-command."""
     import yaml
@@ -151,7 +158,7 @@ def stage_commands(dvc_yaml: str) -> dict[str, str]:
 
     out = {}
     for stage, spec in yaml.safe_load(dvc_yaml)["stages"].items():
-        words = " ".join(spec["cmd"].split()).split()
+        words = " ".join(stage_spec(spec)["cmd"].split()).split()
         assert words[0] == "adaptune", f"{stage}: the command must be an adaptune sub-command"
         out[stage] = COMMANDS[words[1]][0].split(":")[0]
     return out
@@ -184,13 +191,15 @@ def generated(dvc_yaml: str, prefix: str = "") -> str:
     commands = stage_commands(dvc_yaml)
     roots = tuple(prefix + root for root in CODE_ROOTS)
     for stage, module in commands.items():
-        data = [str(d) for d in specs[stage].get("deps", []) if not str(d).startswith(roots)]
+        data = [str(d) for d in stage_spec(specs[stage]).get("deps", [])
+                if not str(d).startswith(roots)]
         deps = data + [prefix + path for path in cover(files_of_command(module))]
-        block = re.compile(rf"(\n  {re.escape(stage)}:[^\n]*\n(?:    [^\n]*\n)*?    deps: )"
+        indent = "      " if "foreach" in specs[stage] else "    "  # a do: block is indented
+        block = re.compile(rf"(\n  {re.escape(stage)}:[^\n]*\n(?:    [^\n]*\n)*?{indent}deps: )"
                            r"\[[^\]]*\]")
         if not block.search(dvc_yaml):
             raise SystemExit(f"dvc.yaml: stage {stage!r} has no one-list deps: [...] to rewrite")
-        listed = _flow(deps, 11)
+        listed = _flow(deps, len(indent) + 7)
         dvc_yaml = block.sub(lambda m, listed=listed: m.group(1) + listed, dvc_yaml, count=1)
     return dvc_yaml
 
