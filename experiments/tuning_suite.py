@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # verdict_dev's summary row
 
 PORTFOLIO: dict[str, Any] = {"rows": "portfolio", "n_sobol": 0, "w_x": 1000.0}
 """As experiments/verdict_dev.py: the members as the only candidates, kept apart."""
@@ -80,6 +81,8 @@ def dev(project: Path, family: str, n_worlds: int | None, ks: list[int],
     """The family's dev suite, each world with its sensor's model of every k (``id``), or with
     each lender's model (``ood``: the sensor has none; the fixed set is the fixed column);
     print and write."""
+    from verdict_dev import summary_row
+
     from pipeline.report.outputs import write_json
     from pipeline.verdict.report import load_settings, suite_inputs
     from pipeline.verdict.runs import AdaptiveSetting, run_suite
@@ -118,18 +121,9 @@ def dev(project: Path, family: str, n_worlds: int | None, ks: list[int],
     print(f"{family} dev suite, {len(results)} worlds, {section.replicas + 1} runs a setting, "
           "per-sensor portfolio tuned on the tuning suite; geometric means (95 % interval)")
     for name, m in summaries.items():
-        r = m["ratios"]
-        cells = [f"{key.removeprefix('adaptive_vs_')} {_g(r[key])}"
-                 for key in ("adaptive_vs_fixed", "adaptive_vs_baseline", "adaptive_vs_best")]
-        print(f"{name:14s} " + "; ".join(cells) + f"; wins vs fixed "
-              f"{r['adaptive_vs_fixed']['wins']}/{len(results)}; worst "
-              f"{r['adaptive_vs_fixed']['worst']:.2f}; changes {m['selector']['changes']:.1f}")
+        print(summary_row(name, m))
     print(json.dumps({k: {n: round(w["ratios"]["adaptive_vs_fixed"], 3)
                           for n, w in m["per_world"].items()} for k, m in summaries.items()}))
-
-
-def _g(s: dict[str, Any]) -> str:
-    return f"{s['geomean']:.2f} ({s['low']:.2f}-{s['high']:.2f})"
 
 
 def main() -> None:

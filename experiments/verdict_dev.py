@@ -108,19 +108,25 @@ def main() -> None:
     print(f"{args.family} dev suite, {len(results)} worlds, {section.replicas + 1} runs a "
           "setting; geometric means (95 % interval), win rate, pooled failure rate")
     for n, m in summaries.items():
-        r = m["ratios"]
-        cells = [f"{k.removeprefix('adaptive_vs_')} {_g(r[k])}"
-                 for k in ("adaptive_vs_fixed", "adaptive_vs_baseline", "adaptive_vs_best")]
-        sel = m["selector"]
-        print(f"{n:28s} " + "; ".join(cells)
-              + f"; wins vs fixed {r['adaptive_vs_fixed']['wins']}/{len(results)}"
-              + f"; failures {m['pooled'][f'adaptive:{n}']['failure_rate']:.3f}"
-              + f" (fixed {m['pooled']['fixed']['failure_rate']:.3f}, baseline "
-              + f"{m['pooled']['baseline']['failure_rate']:.3f})"
-              + f"; changes {sel['changes']:.1f}, unfamiliar {sel['novel_share']:.2f}, "
-              + f"edge {sel['edge_share']:.2f}")
+        print(summary_row(n, m))
     print(json.dumps({"log_spread_adaptive_vs_fixed": {
         n: m["ratios"]["adaptive_vs_fixed"]["log_spread"] for n, m in summaries.items()}}))
+
+
+def summary_row(name: str, m: dict[str, Any]) -> str:
+    """One variant's line: its ratios with intervals, wins and worst against fixed, pooled
+    failure rates and what its selector did (``m``: ``suite_metrics`` of the variant)."""
+    r, sel, pooled = m["ratios"], m["selector"], m["pooled"]
+    cells = [f"{k.removeprefix('adaptive_vs_')} {_g(r[k])}"
+             for k in ("adaptive_vs_fixed", "adaptive_vs_baseline", "adaptive_vs_best")]
+    f = r["adaptive_vs_fixed"]
+    return (f"{name:28s} " + "; ".join(cells)
+            + f"; wins vs fixed {f['wins']}/{f['worlds']}, worst {f['worst']:.2f}"
+            + f"; failures {pooled[f'adaptive:{name}']['failure_rate']:.3f}"
+            + f" (fixed {pooled['fixed']['failure_rate']:.3f}, baseline "
+            + f"{pooled['baseline']['failure_rate']:.3f})"
+            + f"; changes {sel['changes']:.1f}, unfamiliar {sel['novel_share']:.2f}, "
+            + f"edge {sel['edge_share']:.2f}")
 
 
 def _g(s: dict[str, Any]) -> str:
