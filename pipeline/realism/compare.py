@@ -112,19 +112,27 @@ class RealismResult:
         return {k: 1.0 / TARGET_RATIO <= v <= TARGET_RATIO
                 for k, v in self.ratios(side).items()}
 
+    def real_intervals(self) -> dict[str, tuple[float, float, float]]:
+        """Per slice median (``ratios``' keys ``<algo> <slice> median t`` and ``r``): the real
+        median's interval (low, high, coverage) from its steps (``median_interval``)."""
+        return {f"{a} {s.sequence} median {key}": median_interval(steps)
+                for a in self.algorithms for s in self.slices
+                for key, steps in (("t", s.real[a].t_cm), ("r", s.real[a].r_deg))}
+
     def ratio_ranges(self, side: str = "sim_gt") -> dict[str, tuple[float, float]]:
-        """Per slice, the ratio of every median (``ratios``' keys ``<algo> <slice> median t``
-        and ``r``) against the ends of the real median's interval (``median_interval``): the
-        simulated median over the real interval's high end, then over its low end. Nine steps
-        give the real median a wide interval; the simulated one pools every replica's steps."""
+        """Per slice, the ratio of every median against the ends of the real median's interval
+        (``real_intervals``): the simulated median over the real interval's high end, then over
+        its low end. Nine steps give the real median a wide interval; the simulated one pools
+        every replica's steps."""
+        intervals = self.real_intervals()
         out: dict[str, tuple[float, float]] = {}
         for a in self.algorithms:
             for s in self.slices:
-                sim, real = getattr(s, side)[a], s.real[a]
-                for key, median, steps in (("t", sim.median_t_cm, real.t_cm),
-                                           ("r", sim.median_r_deg, real.r_deg)):
-                    low, high, _ = median_interval(steps)
-                    out[f"{a} {s.sequence} median {key}"] = (median / high, median / low)
+                sim = getattr(s, side)[a]
+                for key, median in (("t", sim.median_t_cm), ("r", sim.median_r_deg)):
+                    name = f"{a} {s.sequence} median {key}"
+                    low, high, _ = intervals[name]
+                    out[name] = (median / high, median / low)
         return out
 
     def beyond_real_noise(self, side: str = "sim_gt") -> dict[str, bool]:

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.io_utils import atomic_write_text, output_folder
-from pipeline.realism.compare import TARGET_RATIO, RealismResult, median_interval
+from pipeline.realism.compare import TARGET_RATIO, RealismResult
 from pipeline.realism.statistics import RANGE_EDGES_M, ScanStatistics
 
 
@@ -95,9 +95,9 @@ def markdown(result: RealismResult) -> str:
 def _real_noise_table(result: RealismResult) -> list[str]:
     """Per slice and algorithm: the real median's interval (order statistics of its steps) and
     the ratio's range against it; ``!!`` where the whole range is outside x1.5."""
-    ranges, beyond = result.ratio_ranges(), result.beyond_real_noise()
-    coverage = {median_interval(s.real[a].t_cm)[2] for s in result.slices
-                for a in result.algorithms}
+    intervals, ranges = result.real_intervals(), result.ratio_ranges()
+    beyond = result.beyond_real_noise()
+    coverage = {c for _, _, c in intervals.values()}
     lines = ["The real side's own noise: a slice's real median comes from its few steps; its "
              "distribution-free interval (order statistics, coverage "
              f"{', '.join(f'{c:.1%}' for c in sorted(coverage))}) and the ratio sim+gt / real "
@@ -108,9 +108,9 @@ def _real_noise_table(result: RealismResult) -> list[str]:
     for s in result.slices:
         for a in result.algorithms:
             cells = []
-            for key, steps, digits in (("t", s.real[a].t_cm, 2), ("r", s.real[a].r_deg, 3)):
-                low, high, _ = median_interval(steps)
+            for key, digits in (("t", 2), ("r", 3)):
                 name = f"{a} {s.sequence} median {key}"
+                low, high, _ = intervals[name]
                 r_low, r_high = ranges[name]
                 mark = " !!" if beyond[name] else ""
                 cells.append(f"{low:.{digits}f}-{high:.{digits}f} "
