@@ -328,15 +328,14 @@ def _integers(values: NDArray[Any], dtype: type[np.signedinteger[Any]], name: st
               path: Path) -> NDArray[Any]:
     """``values`` as ``dtype``; InputError naming the column and the first value that is not a
     whole number in its range (a float column of 1.5 or 2**31 is not cast to a wrong frame)."""
+    info = np.iinfo(dtype)
     if values.dtype.kind in "iu":
-        info = np.iinfo(dtype)
         bad = (values < info.min) | (values > info.max)
     else:
         # float: whole and exactly representable; 2**63 is not an int64, beyond float's grain
         bad = ~np.isfinite(values) | (values != np.round(values)) | \
-            (values < np.iinfo(dtype).min) | (values >= -float(np.iinfo(dtype).min))
+            (values < info.min) | (values >= -float(info.min))
     if bad.any():
-        info = np.iinfo(dtype)
         raise InputError(f"{path}: schedule column {name} must hold whole numbers in "
                          f"[{info.min}, {info.max}], got {values[bad][0].item()!r}")
     return values.astype(dtype)
