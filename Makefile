@@ -49,8 +49,9 @@ repro: setup
 	PATH="$(abspath $(BIN)):$$PATH" $(BIN)/dvc repro
 
 # The coverage model's verdict (issue 29; docs/results/verdict-protocol.md): the second pipeline,
-# verdict/dvc.yaml with verdict/params.yaml. `make verdict` trains the coverage model (every
-# environment class, HDL-32E and HDL-64E) and scores both test suites (in distribution, out of
+# verdict/dvc.yaml with verdict/params.yaml. `make verdict` trains the coverage model (the fixed
+# set on every environment class with the HDL-32E and the HDL-64E, one portfolio model per
+# sensor on the tuning suite) and scores both test suites (in distribution, out of
 # distribution: the VLP-16); `make verdict-headroom` adds the oracles and the closed gap on the
 # in-distribution suite. A dev suite: `dvc exp run verdict/dvc.yaml:verdict_id -S
 # verdict/params.yaml:verdict.suite=dev`.

@@ -96,16 +96,17 @@ def verdict_docs(repo: Path) -> str:
     """docs/results/verdict.md from the coverage pipeline's metrics (``verdict_page``), once a
     run of it is recorded in docs/results/runs.yaml (``verdict``; its metrics named from the
     repository root, e.g. verdict/metrics/id.json)."""
-    from pipeline.report.verdict_page import HEADROOM, METRICS, SURROGATE, verdict_page
+    from pipeline.report.verdict_page import HEADROOM, METRICS, surrogate_sensor, verdict_page
 
     run = read_run(repo, "verdict")
     lock = _load_yaml(repo / VERDICT_LOCK)
     folder = VERDICT_LOCK.parent.as_posix()
     names = [n for n in METRICS if n in run.outputs or n != HEADROOM]
-    metrics = {n: read_metrics(repo, n, run, lock, folder) for n in names}
-    record = record_beside(Path(SURROGATE)).as_posix()  # the surrogate stage's text and counts
-    metrics[SURROGATE] = merge_leaves(metrics[SURROGATE],
-                                      read_metrics(repo, record, run, lock, folder))
+    models = [n for n in run.outputs if surrogate_sensor(n)]
+    metrics = {n: read_metrics(repo, n, run, lock, folder) for n in names + models}
+    for name in models:
+        record = record_beside(Path(name)).as_posix()  # the surrogate stage's text and counts
+        metrics[name] = merge_leaves(metrics[name], read_metrics(repo, record, run, lock, folder))
     params = stage_params(lock, {n.removeprefix(folder + "/"): m for n, m in metrics.items()})
     return verdict_page(metrics, _provenance(run, list(metrics)), params)
 

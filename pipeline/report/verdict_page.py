@@ -1,5 +1,6 @@
 """docs/results/verdict.md, rendered from the coverage pipeline's committed metrics
-(verdict/metrics/{id,ood,headroom,surrogate}.json; ``make docs``, ``pipeline.report.pages``).
+(verdict/metrics/{id,ood,headroom}.json and surrogate_<sensor>.json, one per trained sensor's
+model; ``make docs``, ``pipeline.report.pages``).
 
 The page gives every target of issue 29 with its figure and interval, then per suite the ratios
 (geometric mean, interval, win rate and its Wilson interval, worst world), the pooled RTE and
@@ -22,11 +23,20 @@ from pipeline.report.markdown import values as _values
 from pipeline.verdict.statistics import worlds_needed
 from pipeline.verdict.summary import CLOSED_GAP_TARGET, TARGETS
 
-ID, OOD, HEADROOM, SURROGATE = ("verdict/metrics/id.json", "verdict/metrics/ood.json",
-                                "verdict/metrics/headroom.json",
-                                "verdict/metrics/surrogate.json")
-METRICS = (ID, OOD, HEADROOM, SURROGATE)
-"""The metrics the page quotes (the headroom's only when its stage has run)."""
+ID, OOD, HEADROOM = ("verdict/metrics/id.json", "verdict/metrics/ood.json",
+                      "verdict/metrics/headroom.json")
+METRICS = (ID, OOD, HEADROOM)
+"""The suites' metrics the page quotes (the headroom's only when its stage has run)."""
+SURROGATE_PREFIX = "verdict/metrics/surrogate_"
+"""Each trained sensor's model: ``verdict/metrics/surrogate_<sensor>.json`` (verdict/dvc.yaml's
+``surrogate`` stages), with its record beside it."""
+
+
+def surrogate_sensor(name: str) -> str | None:
+    """The sensor of a model's metrics file ``name`` (None for any other file)."""
+    if name.startswith(SURROGATE_PREFIX) and name.endswith(".json"):
+        return name.removeprefix(SURROGATE_PREFIX).removesuffix(".json")
+    return None
 TITLES = {"adaptive_vs_fixed": "adaptive / fixed", "adaptive_vs_baseline": "adaptive / baseline",
           "adaptive_vs_best": "adaptive / min(baseline, fixed)",
           "fixed_vs_baseline": "fixed / baseline", "adaptive_vs_sbs": "adaptive / SBS",
@@ -50,12 +60,9 @@ def verdict_page(metrics: Mapping[str, Mapping[str, Any]], provenance: Sequence[
         lines += [*_suite(m), ""]
     if head is not None:
         lines += [*_headroom(head), ""]
-    if SURROGATE in metrics:
-        cv = metrics[SURROGATE]
-        lines += ["## The coverage model", "",
-                  f"{cv['algorithm']}, leave-one-sequence-out over {cv['folds']} training "
-                  f"sequences: MAE {_f(cv['mae'], 2)}, RMSE {_f(cv['rmse'], 2)} (% RTE); mean "
-                  f"regret {_f(cv['regret_mean'], 2)}.", ""]
+    models = {surrogate_sensor(n): m for n, m in metrics.items() if surrogate_sensor(n)}
+    if models:
+        lines += [*_models(models), ""]
     for m in suites:
         lines += [*_worlds(m), ""]
     lines += ["## Params", "", "<details><summary>verdict/params.yaml values of every stage behind "
@@ -169,6 +176,16 @@ def _headroom(h: Mapping[str, Any]) -> list[str]:
             *_table(["ratio", "geometric mean (95 % interval)", "win rate", "worst world"], rows),
             "", "Closed gap, log(SBS / adaptive) / log(SBS / oracle):", "",
             *_table(["oracle", "closed gap", "95 % interval"], gaps)]
+
+
+def _models(models: Mapping[str | None, Mapping[str, Any]]) -> list[str]:
+    """Each trained sensor's model: its leave-one-world-out figures on its tuning worlds."""
+    rows = [[sensor, cv["algorithm"], cv["folds"], _f(cv["mae"], 2), _f(cv["rmse"], 2),
+             _f(cv["regret_mean"], 2)] for sensor, cv in models.items()]
+    return ["## The models, one per trained sensor", "",
+            "Each is fitted on its sensor's worlds of the tuning suite; a sensor without a model "
+            "borrows `verdict.borrow_model`'s. Leave one tuning world out (RTE [%]):", "",
+            *_table(["sensor", "algorithm", "worlds", "MAE", "RMSE", "mean regret"], rows)]
 
 
 def _worlds(m: Mapping[str, Any]) -> list[str]:

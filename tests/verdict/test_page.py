@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from helpers.verdict_data import world
 
-from pipeline.report.verdict_page import HEADROOM, ID, OOD, SURROGATE, verdict_page
+from pipeline.report.verdict_page import HEADROOM, ID, OOD, SURROGATE_PREFIX, verdict_page
 from pipeline.verdict.headroom import headroom_metrics
 from pipeline.verdict.runs import WorldResult
 from pipeline.verdict.summary import suite_metrics
@@ -37,8 +37,10 @@ def test_the_page_gives_every_target_its_figure_and_verdict() -> None:
                for w in worlds]
     head = headroom_metrics(worlds, oracles, [HEADER["baseline"]], {**HEADER, "family": "id"},
                             0.95, 999, 0)
-    cv = {"algorithm": "ndt", "folds": 12, "mae": 1.0, "rmse": 2.0, "regret_mean": 0.5}
-    page = verdict_page({ID: ids, OOD: ood, HEADROOM: head, SURROGATE: cv},
+    models = {f"{SURROGATE_PREFIX}{sensor}.json": {"algorithm": "ndt", "folds": folds,
+                                                     "mae": 1.0, "rmse": 2.0, "regret_mean": r}
+              for sensor, folds, r in (("hdl32", 12, 0.5), ("hdl64", 11, 0.75))}
+    page = verdict_page({ID: ids, OOD: ood, HEADROOM: head, **models},
                         ["> provenance"], {"verdict": {"suite": "test"}})
     targets = page.split("## The targets (issue 29)")[1].split("\n## ")[0]
     rows = [line for line in targets.splitlines() if line.startswith("| id") or
@@ -54,3 +56,6 @@ def test_the_page_gives_every_target_its_figure_and_verdict() -> None:
     assert "| id test: headroom" in targets and "| headroom |" in targets
     assert "Power: with the spread of its per-world log ratios, this suite of 12 worlds" in page
     assert "verdict: {suite: test}" in page or "suite: test" in page
+    models_table = page.split("## The models, one per trained sensor")[1].split("\n## ")[0]
+    assert "| hdl32 | ndt | 12 | 1.00 | 2.00 | 0.50 |" in models_table
+    assert "| hdl64 | ndt | 11 | 1.00 | 2.00 | 0.75 |" in models_table

@@ -23,8 +23,9 @@ pytestmark = pytest.mark.slow
 
 def tiny_params() -> dict[str, Any]:
     """verdict/params.yaml with three short training sequences, a few trials, two tiny
-    in-distribution worlds, one out-of-distribution world and a 2 x 1 oracle grid; the VLP-16
-    everywhere (the fastest sensor to simulate: the suites' sensors are params like the rest)."""
+    tuning worlds, two tiny in-distribution worlds, one out-of-distribution world and a 2 x 1
+    oracle and portfolio grid; the VLP-16 everywhere (the fastest sensor to simulate: the
+    suites' sensors are params like the rest)."""
     p = yaml.safe_load((REPO / "verdict" / "params.yaml").read_text())
     p["base"]["length_m"] = 4.0
     p["simulate"].update(train={"cave": 1, "open": 1, "street": 1}, train_frames=40,
@@ -32,12 +33,14 @@ def tiny_params() -> dict[str, Any]:
     p["descriptors"].update(workers=1, pca_dim=4, range_bins=3)
     p["trials"].update(iterations=3, workers=1, startup_trials=2)
     p["fixed"].update(iterations=2, warm_start=1)
-    p["surrogate"].update(n_sobol=16, cv_max_frames=10)
+    p["surrogate"].update(k=20, cv_max_frames=10)  # k below the tiny tables' rows
+    p["portfolio"]["grid"] = {"resolution": [2.0, 6.0], "keyframe_interval": [4.0]}
     v = p["verdict"]
     v["suites"]["id"].update(worlds=2, segments=[2, 2], frames=[60, 60], sensors=["vlp16"])
     v["suites"]["ood"].update(worlds=1, segments=[2, 2], frames=[60, 60])
     v.update(fixed_trials=2, fixed_warm_start=1, replicas=1, resamples=200, workers=2,
              borrow_model=None,  # the only trained sensor here is the VLP-16
+             tuning={"seed_root": v["tuning"]["seed_root"], "worlds": 2},
              oracle={"resolution": [2.0, 6.0], "keyframe_interval": [4.0]})
     return p
 
@@ -77,8 +80,10 @@ def project(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
 def test_every_stage_ran_and_wrote_its_metrics(project: tuple[Path, str]) -> None:
     root, log = project
     stages = yaml.safe_load((root / "verdict" / "dvc.yaml").read_text())["stages"]
-    for name in stages:
-        assert f"Running stage 'verdict/dvc.yaml:{name}'" in log
+    for name, spec in stages.items():  # a foreach stage runs once per trained sensor
+        for stage in [f"{name}@vlp16"] if "foreach" in spec else [name]:
+            assert f"Running stage 'verdict/dvc.yaml:{stage}'" in log
+    assert (root / "verdict" / "models" / "vlp16" / "manifest.json").is_file()
     assert "Running stage 'evaluate'" not in log  # the toy pipeline is another one
     metrics = root / "verdict" / "metrics"
     for family, worlds in (("id", 2), ("ood", 1)):
@@ -92,7 +97,7 @@ def test_every_stage_ran_and_wrote_its_metrics(project: tuple[Path, str]) -> Non
         assert m["pooled"]["fixed"]["sub_trajectories"] > 0
         assert (root / "verdict" / "report" / f"{family}.png").stat().st_size > 0
     # the oracles' runs do not depend on the selector: a new one re-scores the headroom alone
-    assert not {"model", "results/suites/id"} & set(stages["oracles"]["deps"])
+    assert not {"models", "results/suites/id"} & set(stages["oracles"]["deps"])
     assert not [p for p in stages["oracles"]["params"] if p.startswith("select.")
                 and p != "select.period_s"]
     h = json.loads((metrics / "headroom.json").read_text())
