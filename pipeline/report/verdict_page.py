@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
 import yaml
 
 from pipeline.report.markdown import fill as _fill
@@ -140,7 +141,28 @@ def _suite(m: Mapping[str, Any]) -> list[str]:
             f"{_pct(sel['edge_share'])} of the frames ran with a parameter at the edge of its "
             f"range. Failed runs: "
             + ", ".join(f"{s} {n}" for s, n in m["failed_runs"].items()) + ".", "",
-            *_power(m)]
+            *_per_sensor(m), *_power(m)]
+
+
+def _per_sensor(m: Mapping[str, Any]) -> list[str]:
+    """The suite's worlds split by sensor (a suite of more than one): geometric means of the
+    per-world ratios, wins and the worst world, without intervals (the split is not sized)."""
+    by_sensor: dict[str, list[Mapping[str, float]]] = {}
+    for w in m["per_world"].values():
+        by_sensor.setdefault(w["sensor"], []).append(w["ratios"])
+    if len(by_sensor) < 2:
+        return []
+    rows = []
+    for sensor, ratios in by_sensor.items():
+        af = np.array([r["adaptive_vs_fixed"] for r in ratios])
+        ab = np.array([r["adaptive_vs_baseline"] for r in ratios])
+        rows.append([sensor, len(ratios), _f(float(np.exp(np.log(af).mean())), 2),
+                     f"{int((af < 1).sum())} / {len(af)}", _f(float(af.max()), 2),
+                     _f(float(np.exp(np.log(ab).mean())), 2)])
+    return ["Per sensor (geometric means of the per-world ratios; no intervals: the suite is "
+            "sized as a whole, not per sensor):", "",
+            *_table(["sensor", "worlds", "adaptive / fixed", "wins", "worst world",
+                     "adaptive / baseline"], rows), ""]
 
 
 def _power(m: Mapping[str, Any]) -> list[str]:

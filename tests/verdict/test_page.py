@@ -3,6 +3,8 @@ every target with its figure, interval and verdict; the power from the suite's o
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from helpers.verdict_data import world
 
@@ -59,3 +61,20 @@ def test_the_page_gives_every_target_its_figure_and_verdict() -> None:
     models_table = page.split("## The models, one per trained sensor")[1].split("\n## ")[0]
     assert "| hdl32 | ndt | 12 | 1.00 | 2.00 | 0.50 |" in models_table
     assert "| hdl64 | ndt | 11 | 1.00 | 2.00 | 0.75 |" in models_table
+
+
+def test_a_suite_of_two_sensors_is_also_given_per_sensor() -> None:
+    """The HDL-32E's worlds at 0.5 x fixed, the HDL-64E's even with it: each half's own
+    geometric mean, wins and worst world, next to the suite's."""
+    worlds = [dataclasses.replace(world(f"id_test_{i:02d}",
+                                        {"baseline": [[2.0, 2.0]], "fixed": [[1.0, 1.0]],
+                                         "adaptive": [[r, r]]}, ["cave", "street"]),
+                                  sensor=sensor)
+              for i, (sensor, r) in enumerate([("hdl32", 0.5), ("hdl64", 1.0)] * 3)]
+    m = suite_metrics(worlds, {**HEADER, "family": "id"}, 10.0, 0.95, 999, 0)
+    page = verdict_page({ID: m}, ["> provenance"], {})
+    rows = [line for line in page.splitlines() if line.startswith("| hdl")]
+    assert rows == ["| hdl32 | 3 | 0.50 | 3 / 3 | 0.50 | 0.25 |",
+                    "| hdl64 | 3 | 1.00 | 0 / 3 | 1.00 | 0.50 |"]
+    one_sensor = verdict_page({ID: suite("id", 0.6, 4)[0]}, ["> provenance"], {})
+    assert "Per sensor" not in one_sensor
