@@ -2,8 +2,10 @@
 
 Not a `make bench` module (tens of minutes): ``python experiments/verdict_dev.py --project verdict
 [--family id] [--worlds N] [--variants default,paper,...]``, after the coverage model's training
-stages ran in ``--project`` (``dvc repro verdict/dvc.yaml:surrogate``). Every choice of the
-selector is made here, on the **dev** suites, never on the test suites.
+stages ran in ``--project`` (``dvc repro verdict/dvc.yaml:surrogate`` at 1ea832c or before:
+since 962a54d the verdict pipeline builds one portfolio model per sensor, models/<sensor>, whose
+variants experiments/tuning_suite.py studies). Every choice of the selector is made here, on
+the **dev** suites, never on the test suites.
 
 It reads the project's params.yaml (its ``verdict`` section with ``suite`` set to ``dev``), its
 model/, results/fixed, results/adaptune.duckdb and data/pca; fits the surrogate variants a
