@@ -38,6 +38,8 @@ def surrogate_sensor(name: str) -> str | None:
     if name.startswith(SURROGATE_PREFIX) and name.endswith(".json"):
         return name.removeprefix(SURROGATE_PREFIX).removesuffix(".json")
     return None
+
+
 TITLES = {"adaptive_vs_fixed": "adaptive / fixed", "adaptive_vs_baseline": "adaptive / baseline",
           "adaptive_vs_best": "adaptive / min(baseline, fixed)",
           "fixed_vs_baseline": "fixed / baseline", "adaptive_vs_sbs": "adaptive / SBS",
@@ -61,7 +63,7 @@ def verdict_page(metrics: Mapping[str, Mapping[str, Any]], provenance: Sequence[
         lines += [*_suite(m), ""]
     if head is not None:
         lines += [*_headroom(head), ""]
-    models = {surrogate_sensor(n): m for n, m in metrics.items() if surrogate_sensor(n)}
+    models = {sensor: m for n, m in metrics.items() if (sensor := surrogate_sensor(n))}
     if models:
         lines += [*_models(models), ""]
     for m in suites:
@@ -200,7 +202,7 @@ def _headroom(h: Mapping[str, Any]) -> list[str]:
             *_table(["oracle", "closed gap", "95 % interval"], gaps)]
 
 
-def _models(models: Mapping[str | None, Mapping[str, Any]]) -> list[str]:
+def _models(models: Mapping[str, Mapping[str, Any]]) -> list[str]:
     """Each trained sensor's model: its leave-one-world-out figures on its tuning worlds."""
     rows = [[sensor, cv["algorithm"], cv["folds"], _f(cv["mae"], 2), _f(cv["rmse"], 2),
              _f(cv["regret_mean"], 2)] for sensor, cv in models.items()]
