@@ -21,7 +21,7 @@ from pipeline.report.markdown import number as _f
 from pipeline.report.markdown import percent as _pct
 from pipeline.report.markdown import table as _table
 from pipeline.report.markdown import values as _values
-from pipeline.verdict.statistics import worlds_needed
+from pipeline.verdict.statistics import geometric_mean, worlds_needed
 from pipeline.verdict.summary import CLOSED_GAP_TARGET, TARGETS
 
 ID, OOD, HEADROOM = ("verdict/metrics/id.json", "verdict/metrics/ood.json",
@@ -157,10 +157,10 @@ def _per_sensor(m: Mapping[str, Any]) -> list[str]:
     rows = []
     for sensor, ratios in by_sensor.items():
         af = np.array([r["adaptive_vs_fixed"] for r in ratios])
-        ab = np.array([r["adaptive_vs_baseline"] for r in ratios])
-        rows.append([sensor, len(ratios), _f(float(np.exp(np.log(af).mean())), 2),
+        ab = [r["adaptive_vs_baseline"] for r in ratios]
+        rows.append([sensor, len(ratios), _f(geometric_mean(af), 2),
                      f"{int((af < 1).sum())} / {len(af)}", _f(float(af.max()), 2),
-                     _f(float(np.exp(np.log(ab).mean())), 2)])
+                     _f(geometric_mean(ab), 2)])
     return ["Per sensor (geometric means of the per-world ratios; no intervals: the suite is "
             "sized as a whole, not per sensor):", "",
             *_table(["sensor", "worlds", "adaptive / fixed", "wins", "worst world",
