@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -99,24 +99,33 @@ def simulate_set(
     section: SimulateSection, base_seed: int, out_dir: str | Path, progress: bool = False
 ) -> list[SimSummary]:
     """Write ``out_dir``/<name>.mcap for every sequence and ``out_dir``/index.json
-    ({"train": [...], "validation": [...]}); returns what was written, in index order.
-
-    ``section.workers`` sequences at a time in spawned processes, the longest first; each
-    sequence depends only on its own spec, so the files are the same whatever ``workers``.
-    ``progress``: a bar per sequence (one worker only); a log line per finished sequence
-    otherwise."""
-    out_dir = Path(out_dir)
-    output_folder(out_dir)
+    ({"train": [...], "validation": [...]}); returns what was written, in index order
+    (``simulate_folder``, ``section.workers`` at a time)."""
     specs = dataset_specs(section, base_seed)
-    bars = progress and section.workers == 1
-    jobs = [(spec, out_dir / f"{name}.mcap", name, bars) for name, (_, spec) in specs.items()]
-    longest_first = sorted(range(len(jobs)), key=lambda i: -jobs[i][0].frames)
-    summaries = simulate_all(simulate_sequence, jobs, [job[1] for job in jobs], section.workers,
-                             not bars, longest_first)
     index: dict[str, list[str]] = {"train": [], "validation": []}
     for name, (split, _) in specs.items():
         index[split].append(name)
-    write_index(out_dir, index)
+    return simulate_folder({name: spec for name, (_, spec) in specs.items()}, index, out_dir,
+                           section.workers, progress)
+
+
+def simulate_folder(specs: Mapping[str, SimSpec], index: Mapping[str, list[str]],
+                    out_dir: str | Path, workers: int, progress: bool = False
+                    ) -> list[SimSummary]:
+    """A sequences folder: ``out_dir``/<name>.mcap for every spec, then ``index`` (split ->
+    names) as its index.json, written last; returns what was written, in ``specs``' order.
+
+    ``workers`` sequences at a time in spawned processes, the longest first; each sequence
+    depends only on its own spec, so the files are the same whatever ``workers``.
+    ``progress``: a bar per sequence (one worker only); a log line per finished sequence
+    otherwise."""
+    out = output_folder(Path(out_dir))
+    bars = progress and workers == 1
+    jobs = [(spec, out / f"{name}.mcap", name, bars) for name, spec in specs.items()]
+    longest_first = sorted(range(len(jobs)), key=lambda i: -jobs[i][0].frames)
+    summaries = simulate_all(simulate_sequence, jobs, [job[1] for job in jobs], workers,
+                             not bars, longest_first)
+    write_index(out, dict(index))
     return summaries
 
 

@@ -211,8 +211,7 @@ def _edge_share(params: Mapping[str, float], space: Any) -> float:
     width from a bound, else 0.0."""
     from pipeline.verdict.world import edge_share
 
-    bounds = [{"low": space[n].low, "high": space[n].high} for n in space.names]
-    return edge_share(np.array([[params[n] for n in space.names]]), bounds)
+    return edge_share(np.array([[params[n] for n in space.names]]), space.to_json())
 
 
 def load_world(world: VerdictWorld, inputs: SuiteInputs, scratch: Path) -> Any:

@@ -46,14 +46,7 @@ def simulate_tuning_suite(worlds: list[VerdictWorld], out_dir: str | Path,
                           workers: int) -> list[VerdictWorld]:
     """Write ``out_dir``/<name>.mcap for every world (``workers`` at a time, the longest first;
     each world depends on its own spec alone) and the index (``tuning_index``) last."""
-    from pipeline.io_utils import output_folder
-    from pipeline.sequence_index import write_index
-    from pipeline.sim.dataset import simulate_all
-    from pipeline.sim.simulate import simulate_sequence
+    from pipeline.sim.dataset import simulate_folder
 
-    out = output_folder(out_dir)
-    jobs = [(w.spec, out / f"{w.name}.mcap", w.name, False) for w in worlds]
-    longest_first = sorted(range(len(jobs)), key=lambda i: -worlds[i].spec.frames)
-    simulate_all(simulate_sequence, jobs, [job[1] for job in jobs], workers, True, longest_first)
-    write_index(out, tuning_index(worlds))
+    simulate_folder({w.name: w.spec for w in worlds}, tuning_index(worlds), out_dir, workers)
     return worlds
