@@ -12,16 +12,18 @@ as a started sequence has no such segment, except at the rungs, where the mean i
 sequences that have one (a short sequence of a joint study does not blank a rung). Its *curve*
 is its values at every checkpoint it reached.
 
-Rungs (successive halving): checkpoint r lets every sequence run to the fraction
-eta^(r - rungs + 1) of its frames (r = 0 .. rungs - 2; the last rung is the whole sequence), all
-sequences side by side, so that a joint trial is compared on every sequence from its first
-rung on. Before a trial starts, the tuner sets a threshold at every rung from the trials it
-has told the search (the finished trials 0..t-lag that reached the rung, ok or stopped, as
-deterministic as the proposals): with V their values at the rung, the trial goes on when its
-own value is among the best 1 / eta of V and itself (Optuna's rule: the (|V| + 1) // eta-th
-smallest, at least the smallest), else it stops there. The search is told a stopped trial's
-failure (the penalty, ``told_loss``): TPE's good set holds whole trials only, and the RTE of a
-prefix is never ranked against a whole sequence's.
+Rungs (successive halving): checkpoint r lets every sequence run to the fraction eta^(r+1-rungs)
+of its frames (r = 0 .. rungs - 2; the last rung is the whole sequence), all sequences side by
+side, so that a joint trial is compared on every sequence from its first rung on; with
+``halving.unit: sequence`` checkpoint r runs whole sequences instead, a subset spread over the
+study's holding that fraction of its frames (``sequence_rungs``: a joint trial is ranked on
+whole-sequence RTEs, as at the end). Before a trial starts, the tuner sets a threshold at every
+rung from the trials it has told the search (the finished trials 0..t-lag that reached the rung,
+ok or stopped, as deterministic as the proposals): with V their values at the rung, the trial
+goes on when its own value is among the best 1 / eta of V and itself (Optuna's rule: the
+(|V|+1)//eta-th smallest, at least the smallest), else it stops there. The search is told a
+stopped trial's failure (the penalty, ``told_loss``): TPE's good set holds whole trials only,
+and the RTE of a prefix is never ranked against a whole sequence's.
 
 Percentile: ``checkpoints - 1`` evenly spaced frames of each sequence, the sequences one after
 another (a joint study also checks at the end of every sequence but the last); the threshold
@@ -64,16 +66,25 @@ class PruningSection(Section):
     min_trials: int = Field(5, ge=1)
 
 
+RungUnit = Literal["prefix", "sequence"]
+"""What a rung of successive halving runs: a ``prefix`` of every sequence, or whole
+``sequence``s, a subset spread over the study's (``sequence_rungs``)."""
+
+
 class HalvingSection(Section):
     """params.yaml ``trials.halving``: the rungs of ``fidelity: halving``.
 
     eta: about one in eta of a rung's trials runs on to the next (Optuna's
-    ``reduction_factor``); rungs: how many fidelities, the last the whole sequence: the first
-    runs eta^-(rungs - 1) of every sequence's frames (3 and 3: 1/9, 1/3, all).
+    ``reduction_factor``); rungs: how many fidelities, the last the whole study: the first
+    runs eta^-(rungs - 1) of the frames (3 and 3: 1/9, 1/3, all); unit: ``prefix`` (that
+    fraction of every sequence) or ``sequence`` (whole sequences holding at least that
+    fraction of the frames, spread over the study's: a joint study; a study of one sequence
+    then runs whole).
     """
 
     eta: int = Field(3, ge=2, le=100)
     rungs: int = Field(3, ge=2, le=10)
+    unit: RungUnit = "prefix"
 
     def fractions(self) -> list[float]:
         """The fraction of the frames every rung but the last runs, ascending."""
@@ -173,14 +184,60 @@ def checkpoints(frame_counts: Sequence[int], settings: PruningSection) -> list[C
 
 def rungs(frame_counts: Sequence[int], settings: HalvingSection) -> list[Checkpoint]:
     """The rungs but the last (the whole sequences) over sequences of ``frame_counts`` frames:
-    every sequence to ceil(fraction * count) - 1, side by side; a rung that would run no
-    sequence further than the one before is left out."""
+    every sequence to ceil(fraction * count) - 1, side by side (``unit: sequence``:
+    ``sequence_rungs``); a rung that would run no sequence further than the one before is left
+    out."""
+    if settings.unit == "sequence":
+        return sequence_rungs(frame_counts, settings.fractions())
     out: list[Checkpoint] = []
     for fraction in settings.fractions():
         frames = tuple(min(max(0, math.ceil(n * fraction) - 1), n - 1) for n in frame_counts)
         if frames == tuple(n - 1 for n in frame_counts) or (out and frames == out[-1].frames):
             continue
         out.append(Checkpoint(frames))
+    return out
+
+
+def spread_order(n: int) -> list[int]:
+    """0..n-1 in van der Corput order (the base-2 radical inverse of 0, 1, 2, ... scaled to n,
+    repeats skipped): each prefix of the order is spread over the range, 8 -> 0 4 2 6 1 5 3 7,
+    so a study whose index groups its sequences by environment meets every group early."""
+    out: list[int] = []
+    j = 0
+    while len(out) < n:
+        v, f, i = 0.0, 0.5, j
+        while i:
+            v += f * (i & 1)
+            i >>= 1
+            f /= 2
+        index = int(v * n)
+        if index not in out:
+            out.append(index)
+        j += 1
+    return out
+
+
+def sequence_rungs(frame_counts: Sequence[int], fractions: Sequence[float]) -> list[Checkpoint]:
+    """Rungs of whole sequences (``HalvingSection.unit: sequence``): rung r runs the first m_r
+    sequences of ``spread_order`` to their ends, m_r the fewest holding ``fractions[r]`` of all
+    frames (at least one); a rung with every sequence, or no more than the rung before, is
+    left out. A rung's value is then the mean whole-sequence RTE of its sequences: it ranks
+    parameters as the whole study does, where a prefix ranks them on a sequence's start."""
+    order = spread_order(len(frame_counts))
+    total = sum(frame_counts)
+    out: list[Checkpoint] = []
+    taken = 0
+    for fraction in fractions:
+        m, held = 0, 0
+        while m < len(order) and (m == 0 or held < fraction * total):
+            held += frame_counts[order[m]]
+            m += 1
+        if m >= len(order) or m <= taken:
+            continue
+        taken = m
+        chosen = set(order[:m])
+        out.append(Checkpoint(tuple(n - 1 if s in chosen else -1
+                                    for s, n in enumerate(frame_counts))))
     return out
 
 

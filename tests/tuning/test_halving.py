@@ -24,6 +24,9 @@ from pipeline.tuning.pruning import (
     StoppingRule,
     rung_thresholds,
     rungs,
+    running_rte,
+    sequence_rungs,
+    spread_order,
     value_at,
 )
 from pipeline.tuning.smbo import make_job, make_studies, run_trials, study_adapter
@@ -129,6 +132,50 @@ def test_a_joint_trial_runs_every_sequence_from_the_first_rung(
         ran = [len(read_trajectory(trajectory_path(tmp_path, "drift", q.stem, i)))
                for q in sequences]
         assert ran == ([30, 30] if st == "ok" else [ran[0], ran[0]]) and ran[0] in (8, 15, 30)
+
+
+def test_sequence_rungs_run_whole_sequences_spread_over_the_study() -> None:
+    """``halving.unit: sequence``: rung r runs the first sequences of the van der Corput order
+    that hold its fraction of the frames, whole; nested rungs, none with every sequence."""
+    assert spread_order(8) == [0, 4, 2, 6, 1, 5, 3, 7]
+    assert spread_order(6) == [0, 3, 1, 4, 2, 5]
+    assert sorted(spread_order(13)) == list(range(13))
+    h = HalvingSection(eta=3, rungs=3, unit="sequence")
+    end, no = 299, -1
+    assert rungs([300] * 8, h) == [  # 1/9 of 2400 frames: one sequence; 1/3: three
+        Checkpoint((end, no, no, no, no, no, no, no)),
+        Checkpoint((end, no, end, no, end, no, no, no))]
+    # KITTI's training sequences: 00 alone holds 1/9 of 14,136 frames, 00 and 03 a third
+    assert rungs([4541, 1101, 4661, 801, 271, 2761], h) == [
+        Checkpoint((4540, no, no, no, no, no)), Checkpoint((4540, no, no, 800, no, no))]
+    assert rungs([300], h) == []  # one sequence: the study runs whole
+    assert sequence_rungs([10, 10], [0.5, 0.5]) == [Checkpoint((9, -1))]  # no repeated rung
+    with pytest.raises(ValueError, match="unit"):
+        HalvingSection.model_validate({"unit": "window"})
+
+
+def test_a_joint_trial_stopped_at_a_sequence_rung_ran_its_sequences_whole(
+        sequences: list[Path], pool: Executor, tmp_path: Path) -> None:
+    """eta 2 over two sequences of 30 frames: the one rung is seq_a whole; a trial stopped
+    there has seq_a's whole trajectory and none of seq_b, and its value is seq_a's RTE."""
+    s = settings(iterations=12, fidelity="halving",
+                 halving={"eta": 2, "rungs": 3, "unit": "sequence"})
+    (joint,) = run_trials(sequences, tmp_path, s, seed=5, joint=True, progress=False,
+                          executor=pool)
+    t = table(tmp_path, "__joint__")
+    assert joint.pruned == t["status"].count("pruned") > 0
+    with SequenceReader(sequences[0]) as reader:
+        gt_a = reader.ground_truth()
+    for i, st in enumerate(t["status"]):
+        a, b = (trajectory_path(tmp_path, "drift", q.stem, i) for q in sequences)
+        est_a = read_trajectory(a).T_world_lidar
+        assert len(est_a) == 30
+        if st == "ok":
+            assert len(read_trajectory(b)) == 30
+        else:
+            assert not b.exists() and "pruned at seq_a frame 29" in t["error"][i]
+            # its value there: seq_a's whole RTE
+            assert t["objective"][i] == pytest.approx(running_rte(gt_a, est_a, 29, 5.0))
 
 
 def test_a_trial_streams_from_the_file_as_from_the_cache(
