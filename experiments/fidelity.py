@@ -5,7 +5,8 @@ results/adaptune.duckdb, metrics/surrogate.json, data/kitti_sim or another seque
 optionally timing.log: ``TIME <stage> wall W user U sys S`` lines) and prints, per run:
 
 - frames: the fraction of the frames of every study its trials ran (a stopped trial: its
-  trajectory; a failed one: none written, counted whole);
+  trajectories, none for a sequence it did not start; a failed one: none written, counted
+  whole);
 - the best RTE found per training sequence (the best ok trial's objective) and its median;
 - the surrogate's leave-one-sequence-out MAE and regret (metrics/surrogate.json);
 - coverage of the parameter space per frame: the distinct trials with a row at each frame
@@ -50,11 +51,12 @@ def frames_run(out: Path, sequences: dict[str, Path]) -> dict[str, dict[str, obj
         names = list(sequences) if study == JOINT_SEQUENCE else [study]
         ran_env: dict[str, int] = {}
         ran = total = 0
-        for trial in t["trial"]:
+        for trial, status in zip(t["trial"], t["status"], strict=True):
             for name in names:
                 labels = info[name]
                 path = trajectory_path(out, algorithm, name, trial)
-                n = len(read_trajectory(path)) if path.is_file() else len(labels)
+                unrun = 0 if status == "pruned" else len(labels)  # a rung of whole sequences
+                n = len(read_trajectory(path)) if path.is_file() else unrun
                 for env in labels[:n]:
                     ran_env[env] = ran_env.get(env, 0) + 1
                 ran += n
