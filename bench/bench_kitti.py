@@ -271,36 +271,29 @@ def frame_costs(drive: Drive, costs: dict[str, Cost], sampled: bool) -> np.ndarr
     return np.array([per[env] for env in drive.environments])
 
 
-def rung_spans(drive: Drive, settings: object) -> list[tuple[int, int, bool]]:
-    """(first frame, end frame, checked at its end) of every rung of ``drive``, the last one
-    the rest of the sequence (never checked)."""
+def study_cost(drives: list[Drive], costs: list[np.ndarray], rates: list[float],
+               halving: object) -> tuple[float, float]:
+    """(CPU seconds of one trial on average, of one whole trial) of a study over ``drives``
+    under successive halving with promotion ``rates``: its rungs as the study makes them
+    (``pipeline.tuning.pruning.rungs``: prefixes side by side, or whole sequences), each rung
+    paying the frames it runs beyond the one before, at the share of trials that reach it.
+    A rung is checked (and ``rates[r]`` applied) where a segment of L has ended on one of the
+    sequences it ran."""
     from pipeline.tuning.pruning import rungs
 
-    n = drive.frames
-    out, start = [], 0
-    for point in rungs([n], settings.halving):  # type: ignore[attr-defined]
-        end = point.frames[0] + 1
-        out.append((start, end, bool(drive.distance_m[end - 1] > LENGTH_M)))
-        start = end
-    out.append((start, n, False))
-    return out
-
-
-def study_cost(drives: list[Drive], costs: list[np.ndarray], rates: list[float],
-               settings: object, joint: bool) -> tuple[float, float]:
-    """(CPU seconds of one trial on average, of one whole trial) of a study over ``drives``
-    under successive halving with promotion ``rates``; rungs side by side (joint)."""
-    spans = [rung_spans(d, settings) for d in drives]
-    whole = float(sum(c.sum() for c in costs))
-    mean = 0.0
-    share = 1.0
-    for r in range(len(spans[0])):
-        mean += share * sum(float(c[s[r][0]:s[r][1]].sum()) for c, s in zip(costs, spans,
-                                                                            strict=True))
-        checked = any(s[r][2] for s in spans) if joint else spans[0][r][2]
+    points = [p.frames for p in rungs([d.frames for d in drives], halving)]  # type: ignore[arg-type]
+    ends = tuple(d.frames - 1 for d in drives)
+    done = [-1] * len(drives)
+    mean, share = 0.0, 1.0
+    for r, frames in enumerate([*points, ends]):
+        mean += share * sum(float(c[p + 1:f + 1].sum())
+                            for c, p, f in zip(costs, done, frames, strict=True) if f > p)
+        done = [max(p, f) for p, f in zip(done, frames, strict=True)]
+        checked = r < len(points) and any(
+            f >= 0 and d.distance_m[f] > LENGTH_M for d, f in zip(drives, frames, strict=True))
         if checked and r < len(rates):
             share *= rates[r]
-    return mean, whole
+    return mean, float(sum(c.sum() for c in costs))
 
 
 def makespan(jobs: list[float], workers: int) -> float:
@@ -320,20 +313,22 @@ class Protocol:
 
 
 def protocol_cost(drives: dict[str, Drive], costs: dict[str, Cost], promotion: Promotion,
-                  halving: bool, joint_iterations: int) -> Protocol:
-    """The model of the module docstring for one adapter's ``costs``."""
-    settings = halving_settings(LENGTH_M)
+                  halving: bool, joint_iterations: int, joint_unit: str = "prefix") -> Protocol:
+    """The model of the module docstring for one adapter's ``costs``; ``joint_unit``: the joint
+    study's rungs (``halving.unit``)."""
+    per_sequence = halving_settings(LENGTH_M).halving  # type: ignore[attr-defined]
+    joint_rungs = per_sequence.model_copy(update={"unit": joint_unit})
     sampled = {s: frame_costs(drives[s], costs, True) for s in drives}
     default = {s: frame_costs(drives[s], costs, False) for s in drives}
     core = wall = 0.0
     for s in TRAIN:
-        mean, whole = study_cost([drives[s]], [sampled[s]], promotion.rates, settings, False)
+        mean, whole = study_cost([drives[s]], [sampled[s]], promotion.rates, per_sequence)
         trial = mean if halving else whole
         core += ITERATIONS * trial
         wall += (ITERATIONS * trial / WORKERS + whole if halving
                  else math.ceil(ITERATIONS / WORKERS) * whole)
     mean, whole = study_cost([drives[s] for s in TRAIN], [sampled[s] for s in TRAIN],
-                             promotion.rates, settings, True)
+                             promotion.rates, joint_rungs)
     trial = mean if halving else whole
     core += joint_iterations * trial
     wall += (joint_iterations * trial / WORKERS + whole if halving
