@@ -149,9 +149,9 @@ def report(run: Path, costs: dict[str, dict[str, float]] | None) -> None:
     fractions = [float(s["fraction"]) for s in trials.values()]
     print(f"  per-sequence studies: frames run {100 * np.mean(fractions):.1f} % (mean), "
           f"joint {100 * float(next(iter(joint.values()))['fraction']):.1f} %")
-    cv = json.loads((run / "metrics/surrogate.json").read_text()).get("cv", {})
-    print(f"  surrogate LOSO: MAE {cv.get('mae')}, RMSE {cv.get('rmse')}, regret "
-          f"{cv.get('regret')}")
+    cv = json.loads((run / "metrics/surrogate.json").read_text())
+    print(f"  surrogate LOSO: MAE {cv.get('mae'):.4g}, RMSE {cv.get('rmse'):.4g}, regret "
+          f"{cv.get('regret_mean'):.4g}")
     for seq, c in coverage(run / "results/adaptune.duckdb").items():
         print(f"  coverage {seq}: {c['frames']} frames, {c['groups']} trial sets; distinct "
               f"trials a frame, first third {c['early_trials']:.1f}, last third "
