@@ -54,9 +54,13 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from common import Row, data_root, size
+
+if TYPE_CHECKING:
+    from pipeline.tuning.pruning import HalvingSection, RungUnit
 
 ADAPTERS = ("gicp", "kiss_icp", "ndt")
 ENVIRONMENT_SEQUENCE = {"urban": "07", "residential": "00", "rural": "04", "highway": "01"}
@@ -272,7 +276,7 @@ def frame_costs(drive: Drive, costs: dict[str, Cost], sampled: bool) -> np.ndarr
 
 
 def study_cost(drives: list[Drive], costs: list[np.ndarray], rates: list[float],
-               halving: object) -> tuple[float, float]:
+               halving: HalvingSection) -> tuple[float, float]:
     """(CPU seconds of one trial on average, of one whole trial) of a study over ``drives``
     under successive halving with promotion ``rates``: its rungs as the study makes them
     (``pipeline.tuning.pruning.rungs``: prefixes side by side, or whole sequences), each rung
@@ -281,7 +285,7 @@ def study_cost(drives: list[Drive], costs: list[np.ndarray], rates: list[float],
     sequences it ran."""
     from pipeline.tuning.pruning import rungs
 
-    points = [p.frames for p in rungs([d.frames for d in drives], halving)]  # type: ignore[arg-type]
+    points = [p.frames for p in rungs([d.frames for d in drives], halving)]
     ends = tuple(d.frames - 1 for d in drives)
     done = [-1] * len(drives)
     mean, share = 0.0, 1.0
@@ -313,7 +317,8 @@ class Protocol:
 
 
 def protocol_cost(drives: dict[str, Drive], costs: dict[str, Cost], promotion: Promotion,
-                  halving: bool, joint_iterations: int, joint_unit: str = "prefix") -> Protocol:
+                  halving: bool, joint_iterations: int, joint_unit: RungUnit = "prefix"
+                  ) -> Protocol:
     """The model of the module docstring for one adapter's ``costs``; ``joint_unit``: the joint
     study's rungs (``halving.unit``)."""
     per_sequence = halving_settings(LENGTH_M).halving  # type: ignore[attr-defined]

@@ -150,8 +150,8 @@ def report(run: Path, costs: dict[str, dict[str, float]] | None) -> None:
     print(f"  per-sequence studies: frames run {100 * np.mean(fractions):.1f} % (mean), "
           f"joint {100 * float(next(iter(joint.values()))['fraction']):.1f} %")
     cv = json.loads((run / "metrics/surrogate.json").read_text())
-    print(f"  surrogate LOSO: MAE {cv.get('mae'):.4g}, RMSE {cv.get('rmse'):.4g}, regret "
-          f"{cv.get('regret_mean'):.4g}")
+    print(f"  surrogate LOSO: MAE {cv['mae']:.4g}, RMSE {cv['rmse']:.4g}, regret "
+          f"{cv['regret_mean']:.4g}")
     for seq, c in coverage(run / "results/adaptune.duckdb").items():
         print(f"  coverage {seq}: {c['frames']} frames, {c['groups']} trial sets; distinct "
               f"trials a frame, first third {c['early_trials']:.1f}, last third "

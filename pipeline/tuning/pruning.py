@@ -202,7 +202,7 @@ def spread_order(n: int) -> list[int]:
     """0..n-1 in van der Corput order (the base-2 radical inverse of 0, 1, 2, ... scaled to n,
     repeats skipped): each prefix of the order is spread over the range, 8 -> 0 4 2 6 1 5 3 7,
     so a study whose index groups its sequences by environment meets every group early."""
-    out: list[int] = []
+    out: dict[int, None] = {}  # insertion-ordered, each index once
     j = 0
     while len(out) < n:
         v, f, i = 0.0, 0.5, j
@@ -210,11 +210,9 @@ def spread_order(n: int) -> list[int]:
             v += f * (i & 1)
             i >>= 1
             f /= 2
-        index = int(v * n)
-        if index not in out:
-            out.append(index)
+        out.setdefault(int(v * n))
         j += 1
-    return out
+    return list(out)
 
 
 def sequence_rungs(frame_counts: Sequence[int], fractions: Sequence[float]) -> list[Checkpoint]:

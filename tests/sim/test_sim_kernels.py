@@ -14,6 +14,7 @@ from pipeline.sim.mt19937 import fill, seeded
 from pipeline.sim.rays_kernel import turn_rays
 from pipeline.sim.relief_kernel import row_sums
 from pipeline.sim.returns_kernel import GROUND, draw_uniforms, shape_returns
+from pipeline.sim.returns_kernel import _normal as _polar_normal
 
 
 @numba.njit
@@ -44,6 +45,27 @@ def _numba_draws(seed: int, t: np.ndarray, mat: np.ndarray, cover: float,
     return out
 
 
+# The transforms as the kernel applies them, compiled as it is: numpy's own log and sqrt may
+# differ from numba's in the last bit on a CPU where numpy dispatches them to AVX-512 code
+# (docs/results/seed-spread.md, "Another machine").
+@numba.njit
+def _exponential(u: np.ndarray, scale: float) -> np.ndarray:
+    """shape_returns' blade depth, -ln(1 - u) * scale, of every u."""
+    out = np.empty(len(u))
+    for i in range(len(u)):
+        out[i] = -math.log(1.0 - u[i]) * scale
+    return out
+
+
+@numba.njit
+def _normals(r2: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The kernel's own polar-method normal of every pair (r2, x)."""
+    out = np.empty(len(r2))
+    for i in range(len(r2)):
+        out[i] = _polar_normal(r2[i], x[i])
+    return out
+
+
 @pytest.mark.parametrize("seed", [0, 1, 12345, 2**31 - 1])
 def test_stream_is_numbas_np_random(seed: int) -> None:
     mt, buf, pos = seeded(seed)
@@ -67,28 +89,9 @@ def test_drawn_uniforms_give_numbas_numbers() -> None:
     ground = ok & (mat == GROUND)
     assert np.array_equal(_exponential(u[ground, 0], 1.0), want[ground, 0])
     assert np.array_equal(u[ground, 1], want[ground, 1])
-    assert np.array_equal(_normal(u[ok, 2], u[ok, 3]), want[ok, 2])
+    assert np.array_equal(_normals(u[ok, 2], u[ok, 3]), want[ok, 2])
     assert np.array_equal(u[ok, 4], want[ok, 3])
-    assert np.array_equal(_normal(u[ok, 5], u[ok, 6]), want[ok, 4])
-
-
-# The transforms as the kernel applies them, compiled as it is: numpy's own log and sqrt may
-# differ from numba's in the last bit on a CPU where numpy dispatches them to AVX-512 code
-# (docs/results/seed-spread.md, "Another machine").
-@numba.njit
-def _exponential(u: np.ndarray, scale: float) -> np.ndarray:
-    out = np.empty(len(u))
-    for i in range(len(u)):
-        out[i] = -math.log(1.0 - u[i]) * scale
-    return out
-
-
-@numba.njit
-def _normal(r2: np.ndarray, x: np.ndarray) -> np.ndarray:
-    out = np.empty(len(r2))
-    for i in range(len(r2)):
-        out[i] = math.sqrt(-2.0 * math.log(r2[i]) / r2[i]) * x[i]
-    return out
+    assert np.array_equal(_normals(u[ok, 5], u[ok, 6]), want[ok, 4])
 
 
 def test_returns_do_not_depend_on_the_split() -> None:
