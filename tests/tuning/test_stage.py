@@ -84,6 +84,18 @@ def test_bad_input_exits_1_without_output(
     assert not out.exists()
 
 
+def test_an_unknown_rung_unit_is_one_line(sequences: list[Path], tmp_path: Path) -> None:
+    """``trials.halving.unit`` names what it accepts; nothing is written."""
+    out = tmp_path / "out"
+    params = params_file(tmp_path, fidelity="halving", halving={"unit": "window"})
+    res = CliRunner().invoke(main, ["trials", str(sequences[0]), "--out", str(out),
+                                    "--params", str(params)])
+    assert res.exit_code == 1 and res.output.splitlines() == [
+        "adaptune: error: trials.halving.unit: Input should be 'prefix' or 'sequence', got "
+        "'window'"], res.output
+    assert not out.exists()
+
+
 def test_missing_split_is_one_line(sequences: list[Path], tmp_path: Path) -> None:
     folder = tmp_path / "seqs"
     folder.mkdir()
