@@ -35,13 +35,48 @@ def process_threads() -> int:
     return int(value)
 
 
-def _start_worker(parent_pid: int, threads: int) -> None:
+MEMORY_ENV = "ADAPTUNE_WORKER_MEMORY"
+"""The environment variable that gives one worker process the bytes of memory it may use
+(``worker_memory_bytes``): set in every worker of ``open_executor`` to its share of the machine's,
+and inherited by the processes it starts (trial servers)."""
+
+
+def machine_memory_bytes() -> int | None:
+    """Physical memory of this machine [bytes], None where it cannot be read."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def worker_memory_bytes() -> int | None:
+    """Bytes of memory this process may use: ``ADAPTUNE_WORKER_MEMORY`` where set (a worker of
+    ``open_executor``: the machine's memory divided among the workers, which all run at once),
+    else the machine's; None where neither can be read."""
+    value = os.environ.get(MEMORY_ENV, "")
+    if not value:
+        return machine_memory_bytes()
+    if not value.isdigit() or int(value) < 1:
+        raise ConfigError(f"{MEMORY_ENV} must be an integer >= 1 (bytes), got {value!r}")
+    return int(value)
+
+
+def _memory_share(workers: int) -> str:
+    """``MEMORY_ENV``'s value for one of ``workers`` processes started here: this process's
+    memory divided among them ("" where it is unknown: each reads the machine's)."""
+    memory = worker_memory_bytes()
+    return str(max(1, memory // workers)) if memory else ""
+
+
+def _start_worker(parent_pid: int, threads: int, memory: str = "") -> None:
     """Initializer of a pool worker: ends with its parent, leaves Ctrl-C to it
     (``pipeline.lifetime.become_pool_worker``) and uses ``threads`` threads of its own."""
     from pipeline.lifetime import become_pool_worker
 
     become_pool_worker(parent_pid)
     os.environ[THREADS_ENV] = str(threads)
+    if memory:
+        os.environ[MEMORY_ENV] = memory
 
 
 @contextlib.contextmanager
@@ -49,8 +84,10 @@ def open_executor(workers: int, dask: str | None = None) -> Iterator[Executor]:
     """A concurrent.futures Executor with ``workers`` processes, shut down on exit.
 
     ``dask=None``: ProcessPoolExecutor (spawn context; its workers end with this process and
-    share this process's threads: ``process_threads() // workers`` each, at least 1).
-    ``"local"``: a Dask LocalCluster (``workers`` processes, one thread each). An address: a
+    share this process's threads: ``process_threads() // workers`` each, at least 1, and its
+    memory: ``worker_memory_bytes() // workers`` each, which sizes their scan caches).
+    ``"local"``: a Dask LocalCluster (``workers`` processes, one thread each, the memory shared
+    the same way). An address: a
     client of that scheduler, whose workers may be started the plain way (``dask worker
     tcp://...``): trial servers are started with subprocess, which daemonic processes may do.
     """
@@ -58,7 +95,8 @@ def open_executor(workers: int, dask: str | None = None) -> Iterator[Executor]:
         pool = ProcessPoolExecutor(max_workers=workers,
                                    mp_context=multiprocessing.get_context("spawn"),
                                    initializer=_start_worker,
-                                   initargs=(os.getpid(), max(1, process_threads() // workers)))
+                                   initargs=(os.getpid(), max(1, process_threads() // workers),
+                                             _memory_share(workers)))
         try:
             yield pool
         except BaseException:  # Ctrl-C, SIGTERM, an error: do not wait for running trials
@@ -79,8 +117,9 @@ def _dask_client(workers: int, address: str) -> Iterator[Any]:
     from distributed import Client, LocalCluster
 
     if address == "local":
+        share = _memory_share(workers)
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+                               dashboard_address=None, env={MEMORY_ENV: share} if share else {})
         client = Client(cluster)
         try:
             yield client

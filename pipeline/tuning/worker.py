@@ -3,7 +3,7 @@
 A worker (a process-pool process, a Dask worker, or a trial server) runs many trials of the
 same study. It keeps:
 - the scan cache: the study's sequences decoded once (only these; skipped when they exceed
-  ``SCAN_CACHE_LIMIT_BYTES``), so reading the MCAPs is paid once, not once per trial; and
+  ``scan_cache_limit_bytes()``), so reading the MCAPs is paid once, not once per trial; and
   their ground truth, read once;
 - the warmed adapter: one adapter instance per (adapter, options, sequences) on which the
   optional ``warm(scans)`` ran (``ndt`` keeps its downsampled source clouds there);
@@ -25,7 +25,6 @@ import contextlib
 import json
 import logging
 import math
-import os
 import threading
 import time
 from typing import Any
@@ -44,17 +43,24 @@ from pipeline.tuning.job import (
 log = logging.getLogger(__name__)
 
 
-def _scan_cache_limit_bytes() -> int:
-    """A quarter of the machine's memory, at most 8 GiB (1 GiB where it cannot be read)."""
-    try:
-        physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):
+SCAN_CACHE_MAX_BYTES = 8 << 30
+"""The most decoded sequences one worker keeps, whatever its memory."""
+
+
+def scan_cache_limit_bytes(share_bytes: int | None = None,
+                           machine_bytes: int | None = None) -> int:
+    """Decoded sequences [bytes] a worker keeps at most (the MCAP chunks' uncompressed size): a
+    quarter of the machine's memory, half of the worker's share of it (so that the caches of
+    all the workers together hold half the machine at most), at most ``SCAN_CACHE_MAX_BYTES``;
+    1 GiB where the memory is unknown. Defaults: ``pipeline.executor.worker_memory_bytes`` (a
+    pool worker's share; the machine's in any other process) and ``machine_memory_bytes``."""
+    from pipeline.executor import machine_memory_bytes, worker_memory_bytes
+
+    share = worker_memory_bytes() if share_bytes is None else share_bytes
+    machine = machine_memory_bytes() if machine_bytes is None else machine_bytes
+    if not share or not machine:
         return 1 << 30
-    return int(min(physical // 4, 8 << 30))
-
-
-SCAN_CACHE_LIMIT_BYTES = _scan_cache_limit_bytes()
-"""Decoded sequences a worker keeps in memory at most (the MCAP chunks' uncompressed size)."""
+    return int(min(machine // 4, share // 2, SCAN_CACHE_MAX_BYTES))
 
 
 def study_key(job: TrialJob) -> tuple[Any, ...]:
@@ -72,8 +78,9 @@ class WorkerState:
     has a server of its own.
     """
 
-    def __init__(self, scan_cache_limit_bytes: int = SCAN_CACHE_LIMIT_BYTES) -> None:
-        self.scan_cache_limit_bytes = scan_cache_limit_bytes
+    def __init__(self, cache_limit_bytes: int | None = None) -> None:
+        self.scan_cache_limit_bytes = (scan_cache_limit_bytes() if cache_limit_bytes is None
+                                       else cache_limit_bytes)
         self.scans: dict[str, list[Any]] = {}
         self.truths: dict[str, Any] = {}  # ground truth by path, read once
         self.adapter: tuple[tuple[Any, ...], Adapter] | None = None
