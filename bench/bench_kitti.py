@@ -5,14 +5,17 @@ Two measurements, one model.
 
 1. Per-frame cost of every in-process adapter on simulated KITTI (``pipeline.sim.kitti_dataset``,
    HDL-64E, ~125k points a scan): the first FRAMES frames of one sequence per environment (07
-   urban, 00 residential, 04 rural, 01 highway), each run through ``run_sequence`` as a trial
-   runs it (MCAP decoding included: full KITTI sequences exceed a trial worker's scan cache),
-   once with the defaults and with SAMPLES parameter sets drawn uniformly from the adapter's
-   space. The figure is CPU time per frame (the process and its decoding thread).
+   urban, 00 residential, 04 rural, 01 highway), each run through ``run_sequence`` as the
+   evaluate stage and an uncached trial run it (MCAP decoding included), once with the
+   defaults and with SAMPLES parameter sets drawn uniformly from the adapter's space; the
+   sampled sets again over scans decoded once and an adapter warmed on them, as a trial runs
+   when its study fits its worker's scan cache (``pipeline.tuning.worker``); and decoding
+   alone. The figure is CPU time per frame (the process and its decoding thread).
 2. Promotion at the rungs of successive halving (``trials.fidelity: halving`` with the params'
    ``trials.halving``): one real study of the paper's budget, 256 proposals of NDT, with the told
    lag of 16 workers (``told_lag(16)`` = 31: the first 31 trials run whole, and every threshold
-   lags 31 trials), run one trial at a time (the study is the same for any executor) on the
+   lags 31 trials; the same study with one worker, a lag of 1, is printed beside it: fewer
+   workers stop more), run one trial at a time (the study is the same for any executor) on the
    first HALVING_FRAMES frames of sequence 00, L scaled so that the window is as many L long as
    sequence 00 is 100 m. Measured: the fraction of frames its trials ran, and p_r, the fraction
    of the trials checked at rung r that went on. NDT's p_r stand for every adapter (the rule
@@ -22,6 +25,10 @@ The model counts the odometry of the protocol: n_s frames of sequence s (from
 ``kitti_trajectories``: 23,201 frames, 14,136 in 00-05), each frame at the CPU cost of its
 environment (the simulated-KITTI schedules); c = sampled parameters (a trial, the fixed and the
 adaptive runs), d = the defaults (the baseline). C_s(a, b) = the cost of frames a..b-1 of s.
+A study whose sequences fit one worker's scan cache (``scan_cache_limit_bytes`` of the
+worker's share of the memory: MEMORY_BYTES shared by the N workers, 2 GiB each; of the full
+protocol 03 and 04, ~1.5 and ~0.5 GB decoded) runs its trials at the cached cost instead, and
+every worker that runs one of them decodes the sequences once.
 
     whole:    core-s = I * sum_s C_s(0, n_s) + J * sum_s C_s(0, n_s) + E
     halving:  core-s = I * sum_s sum_r R_s,r C_s(k_s,r-1, k_s,r) + J * sum_r R_r sum_s C_s(...) + E
@@ -54,7 +61,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from common import Row, data_root, size
@@ -69,18 +76,26 @@ TEST = ("06", "07", "08", "09", "10")
 ITERATIONS = 256
 PRESET_JOINT = 64
 WORKERS = 16
+MEMORY_BYTES = 64 << 30
+"""The workstation the full protocol is modelled on: WORKERS cores, 64 GiB."""
 LENGTH_M = 100.0
 HALVING_SEQUENCE = "00"
 
 
 @dataclass
 class Cost:
-    """Seconds per frame of one adapter in one environment: CPU and wall, defaults and sampled."""
+    """Seconds per frame of one adapter in one environment: CPU and wall, defaults and sampled
+    read from the MCAP (``run_sequence``); ``cpu_cached``: sampled over scans decoded once and
+    an adapter warmed on them (a trial whose study fits its worker's scan cache; NaN: as
+    ``cpu_sampled``); ``cpu_decode``: decoding a frame; ``bytes_per_frame``: a decoded frame."""
 
     cpu_default: float
     wall_default: float
     cpu_sampled: float
     failed: int
+    cpu_cached: float = math.nan
+    cpu_decode: float = 0.0
+    bytes_per_frame: float = 0.0
 
 
 @dataclass
@@ -116,8 +131,13 @@ def run() -> list[Row]:
     rows: list[Row] = []
     with tempfile.TemporaryDirectory() as tmp:
         paths, points = simulate(trajectories, frames, Path(tmp))
-        promotion = halving_promotion(trajectories, halving_frames, drives, Path(tmp))
-        rows.append(promotion_row(promotion, halving_frames))
+        studies = {n: Path(tmp) / f"halving-{n}" for n in (WORKERS, 1)}
+        for folder in studies.values():
+            folder.mkdir()
+        promotion = halving_promotion(trajectories, halving_frames, drives, studies[WORKERS])
+        serial = halving_promotion(trajectories, halving_frames, drives, studies[1], workers=1)
+        rows.append(promotion_row(promotion, halving_frames, WORKERS))
+        rows.append(promotion_row(serial, halving_frames, 1))
         for name in ADAPTERS:
             by_path = {path: adapter_cost(name, path, samples) for path in set(paths.values())}
             costs = {env: by_path[path] for env, path in paths.items()}
@@ -164,32 +184,50 @@ def simulate(trajectories: Path, frames: int, tmp: Path) -> tuple[dict[str, Path
 
 
 def adapter_cost(name: str, path: Path, samples: int) -> Cost:
-    """Per-frame cost of adapter ``name`` over the sequence ``path`` (module docstring)."""
+    """Per-frame cost of adapter ``name`` over the sequence ``path`` (module docstring): read
+    from the MCAP as the evaluate stage and an uncached trial run it, and over decoded scans
+    as a trial of a study that fits its worker's scan cache runs it
+    (``pipeline.tuning.worker``: the scans decoded once, the adapter warmed on them)."""
     from pipeline.errors import AdaptuneError
-    from pipeline.odometry import get_adapter, run_sequence
+    from pipeline.odometry import get_adapter, run_scans, run_sequence
     from pipeline.sequence import SequenceReader
+    from pipeline.tuning.worker import decoded_bytes
 
     adapter = get_adapter(name)
+    cpu = time.process_time()
     with SequenceReader(path) as reader:
-        n = len(reader)
+        scans, stamps_ns = list(reader), np.asarray(reader.stamps_ns)
+    n = len(scans)
+    decode = (time.process_time() - cpu) / n
+    warmed = get_adapter(name)
+    warm = getattr(warmed, "warm", None)
+    if warm is not None:
+        warm(scans)
 
     def timed(params: dict[str, float]) -> tuple[float, float]:
         cpu, wall = time.process_time(), time.perf_counter()
         run_sequence(adapter, path, params)
         return (time.process_time() - cpu) / n, (time.perf_counter() - wall) / n
 
+    def timed_cached(params: dict[str, float]) -> float:
+        cpu = time.process_time()
+        run_scans(warmed, scans, stamps_ns, params, str(path))
+        return (time.process_time() - cpu) / n
+
     timed(adapter.space.defaults())  # warm-up: JIT caches, imports, page cache
     cpu_default, wall_default = timed(adapter.space.defaults())
     rng = np.random.default_rng(0)
-    sampled, failed = [], 0
+    sampled, cached, failed = [], [], 0
     for _ in range(samples):
         params = adapter.space.from_unit(rng.random(len(adapter.space.names)))
         try:
             sampled.append(timed(params)[0])
+            cached.append(timed_cached(params))
         except AdaptuneError:  # a diverging trial: scored with the penalty, its time not counted
             failed += 1
-    return Cost(cpu_default, wall_default, float(np.mean(sampled)) if sampled else math.nan,
-                failed)
+    mean = (lambda xs: float(np.mean(xs)) if xs else math.nan)  # noqa: E731
+    return Cost(cpu_default, wall_default, mean(sampled), failed, mean(cached), decode,
+                decoded_bytes(str(path)) / n)
 
 
 def cost_rows(name: str, costs: dict[str, Cost], points: dict[str, int],
@@ -201,25 +239,31 @@ def cost_rows(name: str, costs: dict[str, Cost], points: dict[str, int],
         rows.append(Row(f"{name} per frame, sim. HDL-64E {env} ({seq}, {points[env] // 1000}k "
                         "pts), defaults, CPU", 1000 * c.cpu_default, "ms",
                         f"wall {1000 * c.wall_default:.0f} ms; {samples} sampled parameter "
-                        f"sets: CPU {1000 * c.cpu_sampled:.0f} ms{failed}"))
+                        f"sets: CPU {1000 * c.cpu_sampled:.0f} ms, over cached scans "
+                        f"{1000 * c.cpu_cached:.0f} ms; decoding {1000 * c.cpu_decode:.1f} ms"
+                        f"{failed}"))
     return rows
 
 
 # -- the halving study -------------------------------------------------------------------
 
-def halving_settings(length_m: float) -> object:
-    """The measured study's TrialsSection: NDT, the paper's budget, the told lag of WORKERS
-    workers, the params' halving, no time limit (in the process)."""
+def halving_settings(length_m: float, halving: HalvingSection | None = None,
+                     workers: int = WORKERS) -> object:
+    """The measured study's TrialsSection: NDT, the paper's budget, the told lag of ``workers``
+    workers, the params' halving (or ``halving``), no time limit (in the process)."""
     from pipeline.tuning.smbo import TrialsSection
 
     trials = int(os.environ.get("ADAPTUNE_BENCH_HALVING_TRIALS", size(str(ITERATIONS), "4")))
-    return TrialsSection(algorithm="ndt", iterations=trials, workers=WORKERS,
-                         time_limit_s=None, length_m=length_m, fidelity="halving")
+    rungs = {} if halving is None else {"halving": halving}
+    return TrialsSection(algorithm="ndt", iterations=trials, workers=workers,
+                         time_limit_s=None, length_m=length_m, fidelity="halving", **rungs)
 
 
 def halving_promotion(trajectories: Path, frames: int, drives: dict[str, Drive],
-                      tmp: Path) -> Promotion:
-    """Run the halving study (module docstring, 2.) and read what it promoted."""
+                      tmp: Path, halving: HalvingSection | None = None,
+                      workers: int = WORKERS) -> Promotion:
+    """Run the halving study (module docstring, 2.) and read what it promoted; ``halving``:
+    other rungs than the params', ``workers``: another told lag."""
     from concurrent.futures import ThreadPoolExecutor
 
     from pipeline.tuning.smbo import run_trials
@@ -227,7 +271,7 @@ def halving_promotion(trajectories: Path, frames: int, drives: dict[str, Drive],
     path = simulate_window(trajectories, HALVING_SEQUENCE, frames, tmp / "halving.mcap")
     drive = drives[HALVING_SEQUENCE]
     length_m = LENGTH_M * float(drive.distance_m[frames - 1]) / float(drive.distance_m[-1])
-    settings = halving_settings(length_m)
+    settings = halving_settings(length_m, halving, workers)
     cpu = time.process_time()
     with ThreadPoolExecutor(1) as one:  # one trial at a time: the same study as 16 workers'
         run_trials([path], tmp / "trials", settings, seed=0,  # type: ignore[arg-type]
@@ -259,30 +303,50 @@ def promotion_of(out: Path, sequence: str, frames: int, settings: object) -> Pro
     return Promotion(rates, sum(ran) / (frames * len(ran)), len(ran), 0.0)
 
 
-def promotion_row(p: Promotion, frames: int) -> Row:
+def promotion_row(p: Promotion, frames: int, workers: int) -> Row:
+    from pipeline.tuning.smbo import told_lag
+
     rates = ", ".join(f"rung {r}: {100 * x:.0f} %" for r, x in enumerate(p.rates))
+    used = "the model's" if workers == WORKERS else "not the model's"
     return Row(f"successive halving, measured: NDT study of {p.trials} proposals on "
-               f"{HALVING_SEQUENCE}'s first {frames} frames (told lag of {WORKERS} workers), "
-               "fraction of frames run", 100 * p.fraction, "%",
-               f"trials going on after {rates}; the study took {p.cpu_s / 60:.1f} CPU-min")
+               f"{HALVING_SEQUENCE}'s first {frames} frames (told lag {told_lag(workers)}: "
+               f"{workers} workers), fraction of frames run", 100 * p.fraction, "%",
+               f"trials going on after {rates} ({used}); the study took "
+               f"{p.cpu_s / 60:.1f} CPU-min")
 
 
 # -- the protocol model ------------------------------------------------------------------
 
-def frame_costs(drive: Drive, costs: dict[str, Cost], sampled: bool) -> np.ndarray:
-    """CPU seconds of every frame of ``drive`` (its environment's cost)."""
-    per = {env: (c.cpu_sampled if sampled else c.cpu_default) for env, c in costs.items()}
+CostKind = Literal["default", "sampled", "cached", "decode"]
+
+
+def frame_costs(drive: Drive, costs: dict[str, Cost], kind: CostKind) -> np.ndarray:
+    """CPU seconds of every frame of ``drive`` (its environment's cost): with the defaults,
+    a sampled set, a sampled set over cached scans, or decoding the frame (``Cost``)."""
+    def one(c: Cost) -> float:
+        if kind == "cached" and not math.isnan(c.cpu_cached):
+            return c.cpu_cached
+        if kind == "decode":
+            return c.cpu_decode
+        return c.cpu_default if kind == "default" else c.cpu_sampled
+
+    per = {env: one(c) for env, c in costs.items()}
     return np.array([per[env] for env in drive.environments])
 
 
+def decoded_size(drive: Drive, costs: dict[str, Cost]) -> float:
+    """Bytes of ``drive``'s scans decoded (its environments' bytes per frame)."""
+    return float(sum(costs[env].bytes_per_frame for env in drive.environments))
+
+
 def study_cost(drives: list[Drive], costs: list[np.ndarray], rates: list[float],
-               halving: HalvingSection) -> tuple[float, float]:
+               halving: HalvingSection, length_m: float = LENGTH_M) -> tuple[float, float]:
     """(CPU seconds of one trial on average, of one whole trial) of a study over ``drives``
     under successive halving with promotion ``rates``: its rungs as the study makes them
     (``pipeline.tuning.pruning.rungs``: prefixes side by side, or whole sequences), each rung
     paying the frames it runs beyond the one before, at the share of trials that reach it.
-    A rung is checked (and ``rates[r]`` applied) where a segment of L has ended on one of the
-    sequences it ran."""
+    A rung is checked (and ``rates[r]`` applied) where a segment of ``length_m`` has ended on
+    one of the sequences it ran."""
     from pipeline.tuning.pruning import rungs
 
     points = [p.frames for p in rungs([d.frames for d in drives], halving)]
@@ -294,7 +358,7 @@ def study_cost(drives: list[Drive], costs: list[np.ndarray], rates: list[float],
                             for c, p, f in zip(costs, done, frames, strict=True) if f > p)
         done = [max(p, f) for p, f in zip(done, frames, strict=True)]
         checked = r < len(points) and any(
-            f >= 0 and d.distance_m[f] > LENGTH_M for d, f in zip(drives, frames, strict=True))
+            f >= 0 and d.distance_m[f] > length_m for d, f in zip(drives, frames, strict=True))
         if checked and r < len(rates):
             share *= rates[r]
     return mean, float(sum(c.sum() for c in costs))
@@ -308,49 +372,92 @@ def makespan(jobs: list[float], workers: int) -> float:
     return max(load)
 
 
+@dataclass(frozen=True)
+class Plan:
+    """What a run of the protocol runs: the training sequences (every sequence of the drives is
+    evaluated), the SMBO budgets, L [m], the rungs of the per-sequence and of the joint studies
+    (None: the params' ``trials.halving``, the joint study's with ``joint_unit``), the workers
+    and the memory they share [bytes]. The defaults are the paper's protocol on WORKERS workers
+    of a MEMORY_BYTES workstation."""
+
+    train: tuple[str, ...] = TRAIN
+    iterations: int = ITERATIONS
+    joint_iterations: int = ITERATIONS
+    length_m: float = LENGTH_M
+    halving: HalvingSection | None = None
+    joint_halving: HalvingSection | None = None
+    joint_unit: RungUnit = "prefix"
+    workers: int = WORKERS
+    memory_bytes: int = MEMORY_BYTES
+
+    def cache_bytes(self) -> int:
+        """The scan cache of one worker (``pipeline.tuning.worker.scan_cache_limit_bytes`` of
+        its share of the memory)."""
+        from pipeline.tuning.worker import scan_cache_limit_bytes
+
+        return scan_cache_limit_bytes(self.memory_bytes // self.workers, self.memory_bytes)
+
+    def rungs(self) -> tuple[HalvingSection, HalvingSection]:
+        """(the per-sequence studies' rungs, the joint study's)."""
+        per_sequence = self.halving or halving_settings(self.length_m).halving  # type: ignore[attr-defined]
+        joint = self.joint_halving or per_sequence.model_copy(update={"unit": self.joint_unit})
+        return per_sequence, joint
+
+
 @dataclass
 class Protocol:
-    """Core-seconds and wall seconds (N = WORKERS) of one way of running the protocol."""
+    """CPU seconds of one way of running the protocol, by part, and its wall seconds on the
+    plan's workers."""
 
-    core_s: float
+    studies_s: float
+    joint_s: float
+    evaluate_s: float
     wall_s: float
+
+    @property
+    def core_s(self) -> float:
+        return self.studies_s + self.joint_s + self.evaluate_s
 
 
 def protocol_cost(drives: dict[str, Drive], costs: dict[str, Cost], promotion: Promotion,
-                  halving: bool, joint_iterations: int, joint_unit: RungUnit = "prefix"
-                  ) -> Protocol:
-    """The model of the module docstring for one adapter's ``costs``; ``joint_unit``: the joint
-    study's rungs (``halving.unit``)."""
-    per_sequence = halving_settings(LENGTH_M).halving  # type: ignore[attr-defined]
-    joint_rungs = per_sequence.model_copy(update={"unit": joint_unit})
-    sampled = {s: frame_costs(drives[s], costs, True) for s in drives}
-    default = {s: frame_costs(drives[s], costs, False) for s in drives}
-    core = wall = 0.0
-    for s in TRAIN:
-        mean, whole = study_cost([drives[s]], [sampled[s]], promotion.rates, per_sequence)
+                  halving: bool, plan: Plan = Plan()) -> Protocol:
+    """The model of the module docstring for one adapter's ``costs`` over ``drives`` (every
+    one evaluated, ``plan.train`` tuned), whole trials or ``halving``."""
+    per_sequence, joint_rungs = plan.rungs()
+    per_frame = {kind: {s: frame_costs(drives[s], costs, kind) for s in drives}
+                 for kind in ("default", "sampled", "cached", "decode")}
+    cache = plan.cache_bytes()
+
+    def study(names: list[str], rungs: HalvingSection, budget: int) -> tuple[float, float]:
+        """(CPU seconds, wall seconds) of a study of ``budget`` trials over ``names``: its
+        trials over cached scans, every worker decoding them once, where they fit the cache."""
+        fits = sum(decoded_size(drives[s], costs) for s in names) <= cache
+        trial_costs = per_frame["cached" if fits else "sampled"]
+        mean, whole = study_cost([drives[s] for s in names], [trial_costs[s] for s in names],
+                                 promotion.rates, rungs, plan.length_m)
+        decode = (sum(float(per_frame["decode"][s].sum()) for s in names) if fits else 0.0)
         trial = mean if halving else whole
-        core += ITERATIONS * trial
-        wall += (ITERATIONS * trial / WORKERS + whole if halving
-                 else math.ceil(ITERATIONS / WORKERS) * whole)
-    mean, whole = study_cost([drives[s] for s in TRAIN], [sampled[s] for s in TRAIN],
-                             promotion.rates, joint_rungs)
-    trial = mean if halving else whole
-    core += joint_iterations * trial
-    wall += (joint_iterations * trial / WORKERS + whole if halving
-             else math.ceil(joint_iterations / WORKERS) * whole)
-    adaptive = [float(sampled[s].sum()) for s in drives]
-    evaluate = [float(default[s].sum() + sampled[s].sum()) for s in drives]
-    core += sum(adaptive) + sum(evaluate)
-    wall += makespan(adaptive, WORKERS) + makespan(evaluate, WORKERS)
-    return Protocol(core, wall)
+        wall = decode + (budget * trial / plan.workers + whole if halving
+                         else math.ceil(budget / plan.workers) * whole)
+        return budget * trial + min(plan.workers, budget) * decode, wall
+
+    parts = [study([s], per_sequence, plan.iterations) for s in plan.train]
+    joint = study(list(plan.train), joint_rungs, plan.joint_iterations)
+    adaptive = [float(per_frame["sampled"][s].sum()) for s in drives]
+    evaluate = [float(per_frame["default"][s].sum() + per_frame["sampled"][s].sum())
+                for s in drives]
+    wall = (sum(w for _, w in parts) + joint[1] + makespan(adaptive, plan.workers)
+            + makespan(evaluate, plan.workers))
+    return Protocol(sum(c for c, _ in parts), joint[0], sum(adaptive) + sum(evaluate), wall)
 
 
 def protocol_rows(name: str, costs: dict[str, Cost], drives: dict[str, Drive],
                   promotion: Promotion) -> list[Row]:
     """The bench line of ``name`` and its preset's own budgets."""
-    whole = protocol_cost(drives, costs, promotion, False, ITERATIONS)
-    halving = protocol_cost(drives, costs, promotion, True, ITERATIONS)
-    preset = [protocol_cost(drives, costs, promotion, h, PRESET_JOINT) for h in (False, True)]
+    whole = protocol_cost(drives, costs, promotion, False)
+    halving = protocol_cost(drives, costs, promotion, True)
+    preset = [protocol_cost(drives, costs, promotion, h, Plan(joint_iterations=PRESET_JOINT))
+              for h in (False, True)]
     frames = sum(d.frames for d in drives.values())
     return [
         Row(f"full protocol core-hours {name}: whole {whole.core_s / 3600:.0f}, "

@@ -1,0 +1,95 @@
+"""The KITTI protocol's cost model (bench/bench_kitti.py; docs/kitti.md, "What the full protocol
+costs"), on cases computed by hand: one frame costs 1 s with sampled parameters and 0.5 s with
+the defaults, and the path advances 1 m a frame."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+
+from pipeline.tuning.pruning import HalvingSection
+
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+
+
+@pytest.fixture(scope="module")
+def model() -> ModuleType:
+    """bench/bench_kitti.py as a module (bench/ on the path for its ``common``)."""
+    sys.path.insert(0, str(BENCH))
+    try:
+        spec = importlib.util.spec_from_file_location("bench_kitti", BENCH / "bench_kitti.py")
+        assert spec and spec.loader
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module  # dataclasses look their module up there
+        spec.loader.exec_module(module)
+        return module
+    finally:
+        sys.path.remove(str(BENCH))
+
+
+def drive(model: ModuleType, frames: int) -> object:
+    return model.Drive(["road"] * frames, np.arange(frames, dtype=float))
+
+
+RUNGS = HalvingSection(eta=3, rungs=3)  # 90 frames: rungs end at frames 9 and 29
+
+
+def test_a_trial_pays_each_rung_at_the_share_that_reaches_it(model: ModuleType) -> None:
+    costs = [np.ones(90)]
+    mean, whole = model.study_cost([drive(model, 90)], costs, [0.5, 0.25], RUNGS, length_m=5)
+    assert whole == 90
+    assert mean == pytest.approx(10 + 0.5 * 20 + 0.5 * 0.25 * 60)
+
+
+def test_a_rung_where_no_segment_has_ended_stops_no_trial(model: ModuleType) -> None:
+    # L = 15 m: no segment has ended by frame 9 (9 m), so every trial runs on to rung 1
+    mean, _ = model.study_cost([drive(model, 90)], [np.ones(90)], [0.5, 0.25], RUNGS,
+                               length_m=15)
+    assert mean == pytest.approx(10 + 20 + 0.25 * 60)
+
+
+def test_the_protocol_adds_studies_joint_study_and_evaluated_runs(model: ModuleType) -> None:
+    drives = {"a": drive(model, 90), "b": drive(model, 90)}  # "a" trained, both evaluated
+    costs = {"road": model.Cost(cpu_default=0.5, wall_default=0.5, cpu_sampled=1.0, failed=0)}
+    promotion = model.Promotion([0.5, 0.25], 0.0, 0, 0.0)
+    plan = model.Plan(train=("a",), iterations=4, joint_iterations=2, length_m=5,
+                      halving=RUNGS, workers=2)
+
+    whole = model.protocol_cost(drives, costs, promotion, False, plan)
+    assert (whole.studies_s, whole.joint_s) == (4 * 90, 2 * 90)
+    assert whole.evaluate_s == 2 * 90 + 2 * (45 + 90)  # adaptive; baseline and fixed
+    assert whole.core_s == 360 + 180 + 450
+    # waves of 2 trials; the evaluated runs 2 at a time
+    assert whole.wall_s == 2 * 90 + 1 * 90 + 90 + 135
+
+    halved = model.protocol_cost(drives, costs, promotion, True, plan)
+    trial = 10 + 0.5 * 20 + 0.5 * 0.25 * 60
+    assert (halved.studies_s, halved.joint_s) == (pytest.approx(4 * trial),
+                                                  pytest.approx(2 * trial))
+    assert halved.evaluate_s == whole.evaluate_s  # evaluation is never cut
+    # the work spread over the workers, plus one whole trial's tail
+    assert halved.wall_s == pytest.approx((4 * trial / 2 + 90) + (2 * trial / 2 + 90) + 225)
+
+
+def test_a_study_that_fits_the_scan_cache_pays_its_decoding_once_per_worker(
+        model: ModuleType) -> None:
+    # a frame: 0.25 s over cached scans, 0.1 s to decode, 1000 bytes decoded; "a": 90 kB
+    drives = {"a": drive(model, 90)}
+    costs = {"road": model.Cost(cpu_default=0.5, wall_default=0.5, cpu_sampled=1.0, failed=0,
+                                cpu_cached=0.25, cpu_decode=0.1, bytes_per_frame=1000)}
+    promotion = model.Promotion([], 0.0, 0, 0.0)
+
+    def studies(memory_bytes: int) -> float:
+        plan = model.Plan(train=("a",), iterations=4, joint_iterations=2, workers=2,
+                          memory_bytes=memory_bytes)
+        return model.protocol_cost(drives, costs, promotion, False, plan).studies_s
+
+    # 1 MB for 2 workers: a cache of 250 kB each holds "a"; both workers decode it once
+    assert studies(1_000_000) == pytest.approx(4 * 90 * 0.25 + 2 * 90 * 0.1)
+    # 300 kB: 75 kB each, every trial reads the MCAP
+    assert studies(300_000) == pytest.approx(4 * 90 * 1.0)
