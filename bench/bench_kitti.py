@@ -310,7 +310,8 @@ def promotion_row(p: Promotion, frames: int, workers: int) -> Row:
     used = "the model's" if workers == WORKERS else "not the model's"
     return Row(f"successive halving, measured: NDT study of {p.trials} proposals on "
                f"{HALVING_SEQUENCE}'s first {frames} frames (told lag {told_lag(workers)}: "
-               f"{workers} workers), fraction of frames run", 100 * p.fraction, "%",
+               f"{workers} worker{'s' if workers > 1 else ''}), fraction of frames run",
+               100 * p.fraction, "%",
                f"trials going on after {rates} ({used}); the study took "
                f"{p.cpu_s / 60:.1f} CPU-min")
 

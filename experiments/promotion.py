@@ -55,7 +55,7 @@ def main() -> None:
                                                       halving, args.workers)
         rates = ", ".join(f"{100 * r:.0f} %" for r in promotion.rates)
         line = (f"eta {eta}, rungs {rungs} (first {100 * halving.fractions()[0]:.1f} %), "
-                f"{promotion.trials} trials, told lag of {args.workers} workers: "
+                f"{promotion.trials} trials, told lag of {args.workers} worker(s): "
                 f"frames run {100 * promotion.fraction:.1f} %, going on {rates}")
         for name, cost in costs.items():
             p = bench_kitti.protocol_cost(drives, cost, promotion, True,
