@@ -16,6 +16,7 @@ from pipeline.executor import (
     THREADS_ENV,
     machine_memory_bytes,
     map_in_processes,
+    open_executor,
     process_threads,
     worker_memory_bytes,
 )
@@ -68,3 +69,10 @@ def test_pool_workers_share_the_memory(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(MEMORY_ENV, "8000")
     assert map_in_processes(worker_memory_bytes, [(), ()], 2) == [4000, 4000]
     assert map_in_processes(scan_cache_limit_bytes, [(), ()], 2) == [2000, 2000]
+
+
+def test_a_local_dask_clusters_workers_share_the_memory(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(MEMORY_ENV, "8000")
+    with open_executor(2, "local") as pool:
+        assert pool.submit(worker_memory_bytes).result() == 4000
+        assert pool.submit(scan_cache_limit_bytes).result() == 2000
