@@ -139,8 +139,7 @@ def run() -> list[Row]:
         rows.append(promotion_row(promotion, halving_frames, WORKERS))
         rows.append(promotion_row(serial, halving_frames, 1))
         for name in ADAPTERS:
-            by_path = {path: adapter_cost(name, path, samples) for path in set(paths.values())}
-            costs = {env: by_path[path] for env, path in paths.items()}
+            costs = environment_costs(name, paths, samples)
             rows += cost_rows(name, costs, points, samples)
             rows += protocol_rows(name, costs, drives, promotion)
     return rows
@@ -181,6 +180,13 @@ def simulate(trajectories: Path, frames: int, tmp: Path) -> tuple[dict[str, Path
         paths.setdefault(env, paths["rural"])
         points.setdefault(env, points["rural"])
     return paths, points
+
+
+def environment_costs(name: str, paths: dict[str, Path], samples: int) -> dict[str, Cost]:
+    """Environment -> ``adapter_cost`` of adapter ``name`` over that environment's sequence
+    (``simulate``'s ``paths``; a sequence that stands for several is timed once)."""
+    by_path = {path: adapter_cost(name, path, samples) for path in set(paths.values())}
+    return {env: by_path[path] for env, path in paths.items()}
 
 
 def adapter_cost(name: str, path: Path, samples: int) -> Cost:

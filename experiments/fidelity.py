@@ -185,9 +185,8 @@ def measure_costs(algorithm: str) -> dict[str, dict[str, float]]:
     samples = int(os.environ.get("ADAPTUNE_BENCH_KITTI_SAMPLES", "3"))
     with tempfile.TemporaryDirectory() as tmp:
         paths, _ = bench_kitti.simulate(data_root() / "kitti_trajectories", frames, Path(tmp))
-        by_path = {p: bench_kitti.adapter_cost(algorithm, p, samples)
-                   for p in set(paths.values())}
-    return {env: dataclasses.asdict(by_path[p]) for env, p in paths.items()}
+        costs = bench_kitti.environment_costs(algorithm, paths, samples)
+    return {env: dataclasses.asdict(c) for env, c in costs.items()}
 
 
 def evaluated(run: Path, sequences: dict[str, Path], costs: Costs) -> tuple[float, float]:
@@ -326,7 +325,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+", type=Path)
     parser.add_argument("--costs", type=Path, default=None,
-                        help="per-frame costs JSON {algorithm: {env: {sampled, default}}}")
+                        help="per-frame costs JSON {algorithm: {env: bench_kitti.Cost fields}}")
     parser.add_argument("--measure", action="store_true",
                         help="measure the costs of the runs' algorithms missing in --costs first")
     parser.add_argument("--rates", default=None,

@@ -1,5 +1,5 @@
 """How the rungs of successive halving change the fraction of frames run and the full KITTI
-protocol's cost (issue 33; docs/kitti.md, "Other rungs").
+protocol's cost (issue 33; docs/kitti.md, "What the told lag and the rungs do").
 
 For every ``eta:rungs`` given, runs bench/bench_kitti.py's halving study with those rungs (256
 NDT proposals on sequence 00's first 150 frames, the told lag of 16 workers, or ``--workers``;

@@ -26,12 +26,21 @@ def process_threads() -> int:
     """Threads this process's own parallel work may use (a simulated scan's ray casting and
     kernels): ``ADAPTUNE_THREADS`` where set (in a pool worker of ``open_executor``: its share
     of the CPUs), else every CPU this process may run on."""
-    value = os.environ.get(THREADS_ENV, "")
-    if not value:
+    value = _count_from_env(THREADS_ENV)
+    if value is None:
         return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
             os.cpu_count() or 1)
+    return value
+
+
+def _count_from_env(name: str, unit: str = "") -> int | None:
+    """The integer >= 1 the environment variable ``name`` holds, None where it is unset or
+    empty; ConfigError naming it otherwise (``unit``: what it counts, for the message)."""
+    value = os.environ.get(name, "")
+    if not value:
+        return None
     if not value.isdigit() or int(value) < 1:
-        raise ConfigError(f"{THREADS_ENV} must be an integer >= 1, got {value!r}")
+        raise ConfigError(f"{name} must be an integer >= 1{unit}, got {value!r}")
     return int(value)
 
 
@@ -53,12 +62,8 @@ def worker_memory_bytes() -> int | None:
     """Bytes of memory this process may use: ``ADAPTUNE_WORKER_MEMORY`` where set (a worker of
     ``open_executor``: the machine's memory divided among the workers, which all run at once),
     else the machine's; None where neither can be read."""
-    value = os.environ.get(MEMORY_ENV, "")
-    if not value:
-        return machine_memory_bytes()
-    if not value.isdigit() or int(value) < 1:
-        raise ConfigError(f"{MEMORY_ENV} must be an integer >= 1 (bytes), got {value!r}")
-    return int(value)
+    value = _count_from_env(MEMORY_ENV, " (bytes)")
+    return machine_memory_bytes() if value is None else value
 
 
 def _memory_share(workers: int) -> str:
