@@ -12,14 +12,17 @@ Two measurements, one model.
    when its study fits its worker's scan cache (``pipeline.tuning.worker``); and decoding
    alone. The figure is CPU time per frame (the process and its decoding thread).
 2. Promotion at the rungs of successive halving (``trials.fidelity: halving`` with the params'
-   ``trials.halving``): one real study of the paper's budget, 256 proposals of NDT, with the told
-   lag of 16 workers (``told_lag(16)`` = 31: the first 31 trials run whole, and every threshold
-   lags 31 trials; the same study with one worker, a lag of 1, is printed beside it: fewer
-   workers stop more), run one trial at a time (the study is the same for any executor) on the
-   first HALVING_FRAMES frames of sequence 00, L scaled so that the window is as many L long as
-   sequence 00 is 100 m. Measured: the fraction of frames its trials ran, and p_r, the fraction
-   of the trials checked at rung r that went on. NDT's p_r stand for every adapter (the rule
-   promotes the best 1/eta of what was told, whatever the odometry).
+   ``trials.halving``): one real study of the paper's budget, 256 proposals of NDT, with 16
+   workers' settings, run one trial at a time on the first HALVING_FRAMES frames of sequence
+   00, L scaled so that the window is as many L long as sequence 00 is 100 m. A trial is ranked
+   at a rung against every earlier trial (``pipeline.tuning.rung_board``), so the study is the
+   16-worker one whatever the executor; its proposals lag ``told_lag(16)`` = 31 trials. The
+   same study with one worker's settings (proposals lagging 1) is printed beside it. Measured:
+   the fraction of frames its trials ran, and p_r, the fraction of the trials checked at rung r
+   that went on (NDT's p_r stand for every adapter: the rule promotes the best 1/eta of the
+   earlier trials, whatever the odometry); and, from its trials' frames and odometry times, the
+   worker time 16 workers would spend waiting at the rungs for earlier trials
+   (``rung_schedule``).
 
 The model counts the odometry of the protocol: n_s frames of sequence s (from
 ``kitti_trajectories``: 23,201 frames, 14,136 in 00-05), each frame at the CPU cost of its
@@ -42,11 +45,12 @@ its own, ``evaluate.workers`` at a time. I = J = 256 is the paper's budget; the 
 (256 per sequence, 64 joint, warm-started) is given apart: a smaller budget is not a saving.
 
 Wall time on N workers: the six per-sequence studies one after another, each with N trials in
-flight, then the joint study: whole trials ceil(I / N) * C_s (waves of N), halving I F_s C_s / N
-+ C_s (the work spread over N workers, and one whole trial's tail; F_s = the study's fraction of
-frames); then E as the longest processing time first schedule of its jobs on N processes
-(``evaluate.workers`` = N). Left out: simulation or ingest, descriptors, RTE scoring, the
-surrogate and the selector (each a single pass over the frames or less).
+flight, then the joint study: whole trials ceil(I / N) * C_s (waves of N), halving
+I F_s C_s (1 + w) / N + C_s (the work spread over N workers, w the measured waiting at the rungs
+per unit of work, and one whole trial's tail; F_s = the study's fraction of frames); then E as
+the longest processing time first schedule of its jobs on N processes (``evaluate.workers`` =
+N). Left out: simulation or ingest, descriptors, RTE scoring, the surrogate and the selector
+(each a single pass over the frames or less).
 Environment: ADAPTUNE_BENCH_KITTI_FRAMES (default 20), ADAPTUNE_BENCH_KITTI_SAMPLES (3),
 ADAPTUNE_BENCH_HALVING_FRAMES (150), ADAPTUNE_BENCH_HALVING_TRIALS (256: a smaller study is a
 smoke test, not the figure).
@@ -112,12 +116,17 @@ class Drive:
 
 @dataclass
 class Promotion:
-    """What the halving study measured: p_r per rung, the fraction of frames run, CPU time."""
+    """What the halving study measured: p_r per rung, the fraction of frames run, CPU time;
+    ``waiting``: the worker time its trials would spend waiting at the rungs on WORKERS
+    workers, per unit of work (``rung_schedule``), and ``makespan``: that schedule's length
+    over the work / WORKERS."""
 
     rates: list[float]
     fraction: float
     trials: int
     cpu_s: float
+    waiting: float = 0.0
+    makespan: float = 1.0
 
 
 def run() -> list[Row]:
@@ -293,7 +302,7 @@ def promotion_of(out: Path, sequence: str, frames: int, settings: object) -> Pro
     from pipeline.trajectory import read_trajectory
     from pipeline.tuning.layout import trajectory_path
     from pipeline.tuning.pruning import rungs
-    from pipeline.tuning.smbo import study_adapter
+    from pipeline.tuning.smbo import study_adapter, told_lag
     from pipeline.tuning.table import read_trials, trials_path
 
     adapter = study_adapter(settings)  # type: ignore[arg-type]
@@ -306,7 +315,63 @@ def promotion_of(out: Path, sequence: str, frames: int, settings: object) -> Pro
     reached = [sum(n >= end for n in ran) for end in ends]
     went_on = [sum(n > end for n in ran) for end in ends]
     rates = [w / r if r else 1.0 for w, r in zip(went_on, reached, strict=True)]
-    return Promotion(rates, sum(ran) / (frames * len(ran)), len(ran), 0.0)
+    seconds = [r.odometry_s / n if r.odometry_s > 0 else 1.0 for r, n in zip(results, ran,
+                                                                           strict=True)]
+    schedule = rung_schedule(ran, seconds, ends, frames, WORKERS,
+                             told_lag(settings.workers))  # type: ignore[attr-defined]
+    return Promotion(rates, sum(ran) / (frames * len(ran)), len(ran), 0.0,
+                     schedule.waiting_s / schedule.work_s,
+                     schedule.makespan_s / (schedule.work_s / WORKERS))
+
+
+@dataclass
+class Schedule:
+    """A study's trials on W workers (``rung_schedule``): how long it takes, the work in it
+    and the worker time spent waiting at the rungs [s]."""
+
+    makespan_s: float
+    work_s: float
+    waiting_s: float
+
+
+def rung_schedule(ran: list[int], seconds_per_frame: list[float], ends: list[int], frames: int,
+                  workers: int, lag: int) -> Schedule:
+    """The trials of a halving study, trial t running ``ran[t]`` frames of ``frames`` at
+    ``seconds_per_frame[t]``, on ``workers`` workers as the trials stage runs them
+    (``pipeline.tuning.smbo``, ``pipeline.tuning.rung_board``): in id order, each when a
+    worker is free and trials 0..t-lag have ended; at the end of rung r (frame ``ends[r]``, a
+    count) a trial posts and waits until every earlier trial has posted there or ended; one
+    that ran exactly to a rung stopped there, after its wait. Every trial's times depend on
+    the earlier ones only, so one pass in id order schedules them."""
+    free: list[float] = []  # end times of the trials on the workers
+    ended: list[float] = []
+    ready = [0.0] * len(ends)  # when every trial so far has posted at rung r or ended
+    work = waiting = 0.0
+    for t, (n, spf) in enumerate(zip(ran, seconds_per_frame, strict=True)):
+        start = max(free[0] if len(free) == workers else 0.0,
+                    max(ended[:max(t - lag + 1, 0)], default=0.0))
+        if len(free) == workers:
+            heapq.heappop(free)
+        clock, done, posts = start, 0, []
+        for r, end in enumerate(ends):
+            if n < end:
+                break
+            clock += (end - done) * spf
+            done = end
+            posts.append(clock)
+            waited = max(ready[r] - clock, 0.0)
+            waiting += waited
+            clock += waited
+            if n == end and n < frames:
+                break
+        else:
+            clock += (frames - done) * spf
+            done = frames
+        work += done * spf
+        ended.append(clock)
+        heapq.heappush(free, clock)
+        ready = [max(ready[r], posts[r] if r < len(posts) else clock) for r in range(len(ends))]
+    return Schedule(max(ended, default=0.0), work, waiting)
 
 
 def promotion_row(p: Promotion, frames: int, workers: int) -> Row:
@@ -315,11 +380,12 @@ def promotion_row(p: Promotion, frames: int, workers: int) -> Row:
     rates = ", ".join(f"rung {r}: {100 * x:.0f} %" for r, x in enumerate(p.rates))
     used = "the model's" if workers == WORKERS else "not the model's"
     return Row(f"successive halving, measured: NDT study of {p.trials} proposals on "
-               f"{HALVING_SEQUENCE}'s first {frames} frames (told lag {told_lag(workers)}: "
-               f"{workers} worker{'s' if workers > 1 else ''}), fraction of frames run",
-               100 * p.fraction, "%",
-               f"trials going on after {rates} ({used}); the study took "
-               f"{p.cpu_s / 60:.1f} CPU-min")
+               f"{HALVING_SEQUENCE}'s first {frames} frames (proposals lag "
+               f"{told_lag(workers)}: {workers} worker{'s' if workers > 1 else ''}), fraction "
+               "of frames run", 100 * p.fraction, "%",
+               f"trials going on after {rates} ({used}); on {WORKERS} workers waiting at the "
+               f"rungs {100 * p.waiting:.1f} % of the work, makespan x{p.makespan:.2f} the "
+               f"work / {WORKERS}; the study took {p.cpu_s / 60:.1f} CPU-min")
 
 
 # -- the protocol model ------------------------------------------------------------------
@@ -444,7 +510,8 @@ def protocol_cost(drives: dict[str, Drive], costs: dict[str, Cost], promotion: P
                                  promotion.rates, rungs, plan.length_m)
         decode = (sum(float(per_frame["decode"][s].sum()) for s in names) if fits else 0.0)
         trial = mean if halving else whole
-        wall = decode + (budget * trial / plan.workers + whole if halving
+        wall = decode + (budget * trial * (1 + promotion.waiting) / plan.workers + whole
+                         if halving
                          else math.ceil(budget / plan.workers) * whole)
         return budget * trial + min(plan.workers, budget) * decode, wall
 

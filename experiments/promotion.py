@@ -2,11 +2,12 @@
 protocol's cost (issue 33; docs/kitti.md, "What the told lag and the rungs do").
 
 For every ``eta:rungs`` given, runs bench/bench_kitti.py's halving study with those rungs (256
-NDT proposals on sequence 00's first 150 frames, the told lag of 16 workers, or ``--workers``;
-ADAPTUNE_BENCH_HALVING_TRIALS sets another budget) and prints its
-fraction of frames and promotion rates, and the core-hours of the full protocol at the paper's
-budget (``bench_kitti.protocol_cost``) for every adapter of ``--costs`` (JSON {algorithm:
-{env: bench_kitti.Cost fields}}, as ``experiments/fidelity.py --measure`` writes it). Whole
+NDT proposals on sequence 00's first 150 frames, 16 workers' settings, or ``--workers``: the
+proposals lag 2 W - 1 trials, the rungs rank every earlier trial; ADAPTUNE_BENCH_HALVING_TRIALS
+sets another budget) and prints its fraction of frames, promotion rates and waiting at the
+rungs, and the core-hours of the full protocol at the paper's budget
+(``bench_kitti.protocol_cost``) for every adapter of ``--costs`` (JSON {algorithm: {env:
+bench_kitti.Cost fields}}, as ``experiments/fidelity.py --measure`` writes it). Whole
 trials do not depend on the rungs and are printed once. Quality is not measured here: a
 setting that saves more is not thereby a good one (docs/kitti.md gives the gates).
 
@@ -36,7 +37,8 @@ def main() -> None:
     parser.add_argument("settings", nargs="+", help="eta:rungs, e.g. 3:4")
     parser.add_argument("--costs", type=Path, required=True)
     parser.add_argument("--workers", type=int, default=16,
-                        help="the told lag's workers (2 W - 1; 1 worker: a lag of 1)")
+                        help="the workers the study is set for (its proposals lag 2 W - 1 "
+                        "trials; 1 worker: 1)")
     args = parser.parse_args()
     costs = {name: {env: bench_kitti.Cost(**c) for env, c in by_env.items()}
              for name, by_env in json.loads(args.costs.read_text()).items()}
@@ -55,8 +57,9 @@ def main() -> None:
                                                       halving, args.workers)
         rates = ", ".join(f"{100 * r:.0f} %" for r in promotion.rates)
         line = (f"eta {eta}, rungs {rungs} (first {100 * halving.fractions()[0]:.1f} %), "
-                f"{promotion.trials} trials, told lag of {args.workers} worker(s): "
-                f"frames run {100 * promotion.fraction:.1f} %, going on {rates}")
+                f"{promotion.trials} trials, {args.workers} worker(s)' proposals: "
+                f"frames run {100 * promotion.fraction:.1f} %, going on {rates}, waiting at "
+                f"the rungs {100 * promotion.waiting:.1f} % of the work")
         for name, cost in costs.items():
             p = bench_kitti.protocol_cost(drives, cost, promotion, True,
                                           bench_kitti.Plan(halving=halving))

@@ -93,3 +93,29 @@ def test_a_study_that_fits_the_scan_cache_pays_its_decoding_once_per_worker(
     assert studies(1_000_000) == pytest.approx(4 * 90 * 0.25 + 2 * 90 * 0.1)
     # 300 kB: 75 kB each, every trial reads the MCAP
     assert studies(300_000) == pytest.approx(4 * 90 * 1.0)
+
+
+def test_trials_wait_at_a_rung_for_the_earlier_ones(model: ModuleType) -> None:
+    """9 frames, rungs ending at frames 3 and 6, 2 workers, proposals lagging 3. Trial 0 runs
+    whole at 2 s a frame (posts at 6 and 12 s, ends at 18 s); trial 1, whole at 1 s a frame,
+    reaches the rungs at 3 and 9 s and waits 3 s at each for trial 0 (ends at 15 s); trial 2
+    starts when trial 1 frees its worker and stops at rung 0 at 18 s without waiting."""
+    schedule = model.rung_schedule([9, 9, 3], [2.0, 1.0, 1.0], [3, 6], 9, workers=2, lag=3)
+    assert (schedule.makespan_s, schedule.work_s, schedule.waiting_s) == (18.0, 30.0, 6.0)
+    # one worker: nothing is ever waited for, the trials run back to back
+    serial = model.rung_schedule([9, 9, 3], [2.0, 1.0, 1.0], [3, 6], 9, workers=1, lag=1)
+    assert (serial.makespan_s, serial.waiting_s) == (30.0, 0.0)
+
+
+def test_the_waiting_stretches_the_halving_wall_only(model: ModuleType) -> None:
+    drives = {"a": drive(model, 90)}
+    costs = {"road": model.Cost(cpu_default=0.5, wall_default=0.5, cpu_sampled=1.0, failed=0)}
+    plan = model.Plan(train=("a",), iterations=4, joint_iterations=2, length_m=5,
+                      halving=RUNGS, workers=2)
+    calm, waits = (model.Promotion([0.5, 0.25], 0.0, 0, 0.0, waiting=w) for w in (0.0, 0.5))
+    trial = 10 + 0.5 * 20 + 0.5 * 0.25 * 60
+    for halving in (False, True):
+        a, b = (model.protocol_cost(drives, costs, p, halving, plan) for p in (calm, waits))
+        assert a.core_s == b.core_s  # waiting costs wall time, no CPU
+        stretch = 0.5 * (4 + 2) * trial / 2 if halving else 0.0
+        assert b.wall_s == pytest.approx(a.wall_s + stretch)

@@ -17,8 +17,9 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import math
 import os
-from collections.abc import Iterable, Mapping, MutableMapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, MutableMapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -31,6 +32,7 @@ from pipeline.odometry.base import Adapter
 from pipeline.sequence import read_ground_truth
 from pipeline.trajectory import Trajectory
 from pipeline.tuning.layout import trajectory_path
+from pipeline.tuning.rung_board import RungBoard
 
 if TYPE_CHECKING:
     from pipeline.sequence import Scan
@@ -49,7 +51,8 @@ class TrialJob:
     adapter: a registry name (``ndt``) or ``module:factory`` (``(**options) -> Adapter``).
     space: the parameter space the study searches (``trials.space`` applied), None = built-in.
     checkpoints, thresholds: where the trial's curve is measured, and where it is pruned
-    (``pipeline.tuning.pruning``).
+    (``pipeline.tuning.pruning``); with ``rungs`` (successive halving) the thresholds are set
+    at each rung from the earlier trials' posts there (``pipeline.tuning.rung_board``).
     algorithm: the name used in output paths (the adapter's ``name``).
     sequences: ((sequence name, MCAP path), ...); more than one for a joint trial.
     """
@@ -70,6 +73,8 @@ class TrialJob:
     checkpoints: tuple[tuple[int, ...], ...] = ()  # frames per sequence: pruning.Checkpoint
     thresholds: tuple[float | None, ...] = ()  # per checkpoint: prune above it (None: no check)
     scored_only: bool = False  # values average the sequences scored so far (pruning.value_at)
+    rungs: RungBoard | None = None  # successive halving: thresholds from the board, at the rung
+    eta: int = 0  # successive halving's eta (with ``rungs``)
 
 
 @dataclass(frozen=True)
@@ -90,8 +95,8 @@ class TrialResult:
 
 def evaluate_trial(job: TrialJob, adapter: Adapter,
                    scans: Mapping[str, list[Scan]] | None = None,
-                   truths: MutableMapping[str, NDArray[np.float64]] | None = None
-                   ) -> dict[str, Any]:
+                   truths: MutableMapping[str, NDArray[np.float64]] | None = None,
+                   on_wait: Callable[[float], None] | None = None) -> dict[str, Any]:
     """Run, check, score and write every sequence of ``job`` with ``adapter``; raises on any
     failure.
 
@@ -103,7 +108,8 @@ def evaluate_trial(job: TrialJob, adapter: Adapter,
     ``pipeline.odometry.run_sequence`` checks frames, stamps, finiteness; ``check_jump`` jumps.
     A trial with thresholds runs its sequences a frame at a time when the adapter streams
     (``start``), from the cache or from the file, and passes the checkpoints in order
-    (``pipeline.tuning.pruning``); else every sequence runs whole.
+    (``pipeline.tuning.pruning``); else every sequence runs whole. ``on_wait(seconds)``: told
+    how long the trial waited at a rung for earlier trials (``RungBoard.threshold``).
     """
     from pipeline.tuning.pruning import Checkpoint
 
@@ -115,8 +121,8 @@ def evaluate_trial(job: TrialJob, adapter: Adapter,
     points = [Checkpoint(tuple(frames)) for frames in job.checkpoints]
     streams = (getattr(adapter, "start", None) is not None
                and not getattr(adapter, "accepts_time_limit", False))
-    if streams and any(t is not None for t in job.thresholds):
-        return _run_stepped(job, adapter, scans or {}, gts, points)
+    if streams and (job.rungs is not None or any(t is not None for t in job.thresholds)):
+        return _run_stepped(job, adapter, scans or {}, gts, points, on_wait)
     return _run_whole(job, adapter, scans or {}, gts, points)
 
 
@@ -219,13 +225,14 @@ class SequenceRun:
 
 
 def _run_stepped(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]],
-                 gts: list[NDArray[np.float64]], points: list[Any]) -> dict[str, Any]:
+                 gts: list[NDArray[np.float64]], points: list[Any],
+                 on_wait: Callable[[float], None] | None = None) -> dict[str, Any]:
     """``job`` run checkpoint by checkpoint: every sequence to the checkpoint's frame, then
-    the check (``pipeline.tuning.pruning.check``); a sequence that has run its last frame is
-    checked and scored at once. Pruned: the trajectories run so far are written."""
+    the check (``_threshold``); a sequence that has run its last frame is checked and scored
+    at once. Pruned: the trajectories run so far are written."""
     from pipeline.odometry import check_trajectory
     from pipeline.trajectory import write_trajectory
-    from pipeline.tuning.pruning import Pruned, check, curve_of
+    from pipeline.tuning.pruning import Pruned, curve_of, value_at
 
     rte: dict[str, float] = {}
     with contextlib.ExitStack() as stack:
@@ -244,12 +251,16 @@ def _run_stepped(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]
                     check_trajectory(traj, run.stamps_ns, f"{adapter.name} on {run.path}")
                     rte[name] = _score(job, name, gt, traj)
 
+        posted: list[float] = []
         try:
-            for index, (point, threshold) in enumerate(zip(points, job.thresholds,
-                                                           strict=True)):
+            for index, point in enumerate(points):
                 reach(point.frames)
-                check(index, point, threshold, gts, [r.estimate() for r in runs],
-                      job.length_m, job.scored_only)
+                value = value_at(point, gts, [r.estimate() for r in runs], job.length_m,
+                                 scored_only=job.scored_only)
+                posted.append(value)
+                limit = _threshold(job, index, posted, on_wait)
+                if limit is not None and value > limit:  # a NaN value never is
+                    raise Pruned(index, value, limit)
                 finish()
             for s in range(len(runs)):  # the last rung: every sequence to its end, in order
                 reach([*ends[:s + 1], *(-1 for _ in ends[s + 1:])])
@@ -270,6 +281,22 @@ def _run_stepped(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]
     return {"status": "ok", "objective": float(np.mean(list(rte.values()))), "rte_pct": rte,
             "odometry_s": odometry_s, "error": "",
             "curve": curve_of(points, gts, ests, job.length_m, job.scored_only)}
+
+
+def _threshold(job: TrialJob, index: int, posted: list[float],
+               on_wait: Callable[[float], None] | None) -> float | None:
+    """The threshold at checkpoint ``index``, where the trial's values so far are ``posted``:
+    the job's own (the percentile pruner), or, with a rung board, the rung's over the earlier
+    trials, once this trial's value is posted there (``RungBoard.threshold``: it may wait, at
+    most twice the trial's time limit, which leaves the wait out; a NaN value, which no
+    threshold stops, does not wait)."""
+    if job.rungs is None:
+        return job.thresholds[index]
+    job.rungs.post(job.trial, posted)
+    if not math.isfinite(posted[-1]):
+        return None
+    limit_s = None if job.time_limit_s is None else 2 * job.time_limit_s * len(job.sequences)
+    return job.rungs.threshold(job.trial, index, job.eta, limit_s, on_wait)
 
 
 def _metadata(job: TrialJob, name: str, out: Path) -> dict[str, str]:

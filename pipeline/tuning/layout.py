@@ -2,7 +2,9 @@
 live, the joint study's name, the best trial of a study, a reader of every trials table.
 
 ``<OUT>/trajectories/algorithm=<A>/sequence=<S>/trial=<N>/trajectory.parquet`` and
-``<OUT>/trials/algorithm=<A>/sequence=<S>/trials.parquet`` (S = ``__joint__`` for the joint SMBO).
+``<OUT>/trials/algorithm=<A>/sequence=<S>/trials.parquet`` (S = ``__joint__`` for the joint SMBO);
+a study of successive halving also posts its trials' values at the rungs under
+``<OUT>/rungs/algorithm=<A>/sequence=<S>/`` (``pipeline.tuning.rung_board``).
 """
 
 from __future__ import annotations
@@ -58,6 +60,11 @@ def trials_table_path(out_dir: str | Path, algorithm: str, sequence: str) -> Pat
     """Path of the trials table of one (algorithm, sequence) study under ``out_dir``."""
     return (Path(out_dir) / "trials" / f"algorithm={algorithm}" / f"sequence={sequence}"
             / "trials.parquet")
+
+
+def rungs_folder(out_dir: str | Path, algorithm: str, sequence: str) -> Path:
+    """Folder of one study's rung board (``pipeline.tuning.rung_board``) under ``out_dir``."""
+    return Path(out_dir) / "rungs" / f"algorithm={algorithm}" / f"sequence={sequence}"
 
 
 def trials_files(out_dir: str | Path) -> list[tuple[str, str, Path]]:

@@ -17,13 +17,13 @@ of its frames (r = 0 .. rungs - 2; the last rung is the whole sequence), all seq
 side, so that a joint trial is compared on every sequence from its first rung on; with
 ``halving.unit: sequence`` checkpoint r runs whole sequences instead, a subset spread over the
 study's holding that fraction of its frames (``sequence_rungs``: a joint trial is ranked on
-whole-sequence RTEs, as at the end). Before a trial starts, the tuner sets a threshold at every
-rung from the trials it has told the search (the finished trials 0..t-lag that reached the rung,
-ok or stopped, as deterministic as the proposals): with V their values at the rung, the trial
-goes on when its own value is among the best 1 / eta of V and itself (Optuna's rule: the
-(|V|+1)//eta-th smallest, at least the smallest), else it stops there. The search is told a
-stopped trial's failure (the penalty, ``told_loss``): TPE's good set holds whole trials only,
-and the RTE of a prefix is never ranked against a whole sequence's.
+whole-sequence RTEs, as at the end). At a rung, trial t posts its value and waits for every
+earlier trial 0..t-1 to post there or end (``pipeline.tuning.rung_board``: the threshold
+depends on trial ids, not on timing, for any number of workers): with V their values at the
+rung, the trial goes on when its own value is among the best 1 / eta of V and itself (Optuna's
+rule: the (|V|+1)//eta-th smallest, at least the smallest), else it stops there. The search
+is told a stopped trial's failure (the penalty, ``told_loss``): TPE's good set holds whole
+trials only, and the RTE of a prefix is never ranked against a whole sequence's.
 
 Percentile: ``checkpoints - 1`` evenly spaced frames of each sequence, the sequences one after
 another (a joint study also checks at the end of every sequence but the last); the threshold
@@ -49,6 +49,7 @@ from numpy.typing import NDArray
 from pydantic import Field
 
 from pipeline.config import Section
+from pipeline.tuning.rung_board import RungBoard
 
 F64 = NDArray[np.float64]
 Fidelity = Literal["whole", "halving"]
@@ -144,21 +145,18 @@ class StoppingRule:
 
     def thresholds(self, points: Sequence[Checkpoint], frame_counts: Sequence[int],
                    reference: Sequence[Sequence[float]]) -> tuple[float | None, ...]:
-        """The threshold at every checkpoint (None: no check) from the ``reference`` curves."""
-        if self.halving is not None:
-            return rung_thresholds(points, reference, self.halving.eta)
+        """The threshold at every checkpoint (None: no check, or set at the rung: successive
+        halving's ``RungBoard``) from the ``reference`` curves."""
         if self.pruning is not None:
             return thresholds(points, frame_counts, reference, self.pruning)
         return tuple(None for _ in points)
 
     def reference_curves(self, done: Mapping[int, Any], tid: int,
                          lag: int) -> list[Sequence[float]]:
-        """Curves of the trials told to the search for ``tid`` (0..tid-lag) that set the
-        thresholds: ok ones for the percentile pruner; ok and stopped ones for the rungs (a
-        trial stopped at rung r has its value there)."""
-        statuses = ("ok", "pruned") if self.kind == "halving" else ("ok",)
+        """Curves of the ok trials told to the search for ``tid`` (0..tid-lag) that set the
+        percentile pruner's thresholds."""
         return [done[t].curve for t in range(tid - lag + 1)
-                if t in done and done[t].status in statuses and done[t].curve]
+                if t in done and done[t].status == "ok" and done[t].curve]
 
     def told_loss(self, status: str, objective: float, penalty_pct: float) -> float:
         """The loss TPE is told for a finished trial: its objective; a trial stopped at a rung
@@ -259,23 +257,6 @@ def thresholds(points: Sequence[Checkpoint], frame_counts: Sequence[int],
     return tuple(out)
 
 
-def rung_thresholds(points: Sequence[Checkpoint], reference: Sequence[Sequence[float]],
-                    eta: int) -> tuple[float | None, ...]:
-    """Successive halving's threshold at every rung from the ``reference`` curves (the told
-    trials that reached it): a value goes on when it is among the best ``1 / eta`` of the
-    reference values and itself, i.e. at most the ((|V| + 1) // eta)-th smallest of V (at
-    least the smallest); None when no told trial reached the rung."""
-    out: list[float | None] = []
-    for i in range(len(points)):
-        values = sorted(float(curve[i]) for curve in reference
-                        if len(curve) > i and math.isfinite(curve[i]))
-        if not values:
-            out.append(None)
-            continue
-        out.append(values[max((len(values) + 1) // eta - 1, 0)])
-    return tuple(out)
-
-
 def running_rte(gt: F64, est: F64, frame: int, length_m: float) -> float:
     """Mean translational RTE [%] of the segments of ``length_m`` that end at or before
     ``frame`` (NaN when none does); ``gt``, ``est``: (N, 4, 4) T_world_lidar, N > frame."""
@@ -343,17 +324,6 @@ class Pruned(Exception):  # noqa: N818 - control flow inside a trial, never show
         self.threshold = threshold
 
 
-def check(index: int, point: Checkpoint, threshold: float | None, gts: Sequence[F64],
-          ests: Sequence[F64 | None], length_m: float, scored_only: bool = False) -> None:
-    """Raise Pruned when the value at checkpoint ``index`` is above its threshold (a NaN value
-    never is); ``scored_only``: as ``value_at``."""
-    if threshold is None:
-        return
-    value = value_at(point, gts, ests, length_m, scored_only=scored_only)
-    if value > threshold:
-        raise Pruned(index, value, threshold)
-
-
 class StudyPruner:
     """The stopping rule of one study: its checkpoints over the study's sequences (ground
     truths ``gts``), the curves of trials an earlier run finished, and each new trial's
@@ -388,11 +358,18 @@ class StudyPruner:
             out[tid] = r
         return out
 
-    def job_fields(self, tid: int, done: Mapping[int, Any], lag: int) -> dict[str, Any]:
-        """``checkpoints`` and ``thresholds`` of the TrialJob of trial ``tid``."""
+    def job_fields(self, tid: int, done: Mapping[int, Any], lag: int,
+                   board: RungBoard | None = None) -> dict[str, Any]:
+        """``checkpoints`` and ``thresholds`` of the TrialJob of trial ``tid``; successive
+        halving: the study's rung ``board`` and eta instead of thresholds."""
         if not self.points:
             return {}
         limits = self.rule.thresholds(self.points, [len(g) for g in self.gts],
                                       self.rule.reference_curves(done, tid, lag))
-        return {"checkpoints": tuple(p.frames for p in self.points), "thresholds": limits,
-                "scored_only": self.rule.scored_only}
+        fields = {"checkpoints": tuple(p.frames for p in self.points), "thresholds": limits,
+                  "scored_only": self.rule.scored_only}
+        if self.rule.halving is not None:
+            if board is None:
+                raise ValueError("successive halving needs the study's rung board")
+            fields |= {"rungs": board, "eta": self.rule.halving.eta}
+        return fields

@@ -7,9 +7,10 @@ connected by a socket pair over which jobs and results travel as pickles (our ow
 processes, nothing stored). The child (``pipeline.tuning.worker.serve``) imports the parent's
 ``sys.path``, decodes the sequences once and warms the adapter (its own ``WorkerState``), then
 answers each job with
-("ok", result) or ("error", one line). It ends with its parent: ``PR_SET_PDEATHSIG`` and a
-thread watching the socket (``pipeline.lifetime``); it ignores SIGINT, so that Ctrl-C is
-handled by the main process alone.
+("ok", result) or ("error", one line), after a (``worker.WAITED``, seconds) for every pause it
+made at a rung waiting for earlier trials, which the time limit leaves out. It ends with its
+parent: ``PR_SET_PDEATHSIG`` and a thread watching the socket (``pipeline.lifetime``); it
+ignores SIGINT, so that Ctrl-C is handled by the main process alone.
 
 A trial that outlives its limit takes the server down (SIGKILL); the next trial starts a new
 one. A server that dies is classified by how (``died``): killed by a signal from outside
@@ -25,6 +26,7 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -69,12 +71,25 @@ class TrialServer:
             if self._warm:  # the server says "ready" once its scans are decoded
                 self._expect("ready", WARM_LIMIT_S + limit_s)
                 self._warm = False
-            if not self.conn.poll(limit_s):
-                self.stop()
-                raise TrialTimeout(f"time limit of {limit_s:g} s exceeded (trial process killed)")
-            return self.conn.recv()  # type: ignore[no-any-return]
+            return self._answer(limit_s)
         except (EOFError, OSError):
             raise self.died() from None
+
+    def _answer(self, limit_s: float) -> tuple[str, Any]:
+        """The trial's answer within ``limit_s`` of odometry: the time it reports waiting at
+        its rungs for earlier trials ((WAITED, seconds) messages) extends the deadline."""
+        from pipeline.tuning.worker import WAITED
+
+        deadline = time.monotonic() + limit_s
+        while True:
+            if not self.conn.poll(max(deadline - time.monotonic(), 0.0)):
+                self.stop()
+                raise TrialTimeout(f"time limit of {limit_s:g} s exceeded (trial process killed)")
+            answer = self.conn.recv()
+            if isinstance(answer, tuple) and answer[0] == WAITED:
+                deadline += float(answer[1])
+                continue
+            return answer  # type: ignore[no-any-return]
 
     def _expect(self, what: str, limit_s: float) -> None:
         if not self.conn.poll(limit_s):

@@ -40,7 +40,7 @@ from pipeline.io_utils import exclusive_folder
 from pipeline.odometry.base import Adapter, Params, with_space
 from pipeline.tuning.fingerprint import check_fingerprint, study_fingerprint
 from pipeline.tuning.job import TrialJob, TrialResult, one_line
-from pipeline.tuning.layout import read_trial_trajectories
+from pipeline.tuning.layout import read_trial_trajectories, rungs_folder
 from pipeline.tuning.progress import StudyProgress
 from pipeline.tuning.pruning import (
     Fidelity,
@@ -49,6 +49,7 @@ from pipeline.tuning.pruning import (
     StoppingRule,
     StudyPruner,
 )
+from pipeline.tuning.rung_board import RULE, RungBoard
 from pipeline.tuning.table import JOINT, read_study, read_trials, trials_path, write_trials
 from pipeline.tuning.tpe import TpeSearch, trial_seed
 from pipeline.tuning.worker import run_trial
@@ -197,7 +198,9 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
     summaries = []
     with exclusive_folder(out_dir, "another adaptune trials"), \
             TrialExecutor(settings, executor) as pool:
-        check_shared(pool.executor, [p for s in studies for _, p in s.sequences], out_dir)
+        waits = settings.stopping.kind == "halving" and settings.time_limit_s is None
+        check_shared(pool.executor, [p for s in studies for _, p in s.sequences], out_dir,
+                     settings.workers if waits else 0)
         for study in studies:
             summaries.append(run_study(study, adapter, pool, Path(out_dir), settings, seed,
                                        progress, on_trial, warm_start))
@@ -284,6 +287,7 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
                  len(done), settings.iterations)
     lag = told_lag(settings.workers)
     search = TpeSearch(space, seed, settings.startup_trials)
+    board = study_board(pruner, out_dir, adapter.name, study.name, done)
 
     def told_loss(r: TrialResult) -> float:
         return pruner.rule.told_loss(r.status, r.objective, settings.penalty_pct)
@@ -299,7 +303,7 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
                 proposed[tid] = (first[tid - 1] if 0 < tid <= len(first)
                                  else propose(search, tid, done, proposed, lag, told_loss))
                 job = make_job(study, adapter, tid, trial_seed(seed, tid), proposed[tid],
-                               out_dir, settings, **pruner.job_fields(tid, done, lag))
+                               out_dir, settings, **pruner.job_fields(tid, done, lag, board))
                 in_flight[pool.submit(job)] = job
             if not in_flight:  # nothing can start: a trial before the next one was lost
                 break
@@ -312,9 +316,13 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
                     if attempts[job.trial] <= settings.retries:
                         log.warning("%s %s trial %d lost (%s); running it again", adapter.name,
                                     study.name, job.trial, result.error)
+                        if board is not None:
+                            board.clear(job.trial)
                         in_flight[pool.submit(job)] = job
                         continue
                     lost[job.trial] = result
+                    if board is not None:  # later trials stop waiting for it
+                        board.end(job.trial)
                 else:
                     done[job.trial] = result
                 write_trials(table, space, [*done.values(), *lost.values()], fingerprint)
@@ -329,6 +337,18 @@ def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path
     return summary
 
 
+def study_board(pruner: StudyPruner, out_dir: Path, algorithm: str, study: str,
+                done: dict[int, TrialResult]) -> RungBoard | None:
+    """The rung board of a study of successive halving (None for any other), with the posts of
+    its ``done`` trials only (``RungBoard.keep``: those of trials a killed run left unfinished
+    go, they run again)."""
+    if pruner.rule.kind != "halving":
+        return None
+    board = RungBoard(str(rungs_folder(out_dir, algorithm, study)))
+    board.keep({t: r.curve for t, r in done.items()})
+    return board
+
+
 def study_of(study: Study, adapter: Adapter, settings: TrialsSection, seed: int,
              stored: dict[str, Any] | None = None, warm_start: Sequence[Params] = ()
              ) -> dict[str, Any]:
@@ -339,7 +359,8 @@ def study_of(study: Study, adapter: Adapter, settings: TrialsSection, seed: int,
         penalty_pct=settings.penalty_pct, jump_limit_m=settings.jump_limit_m,
         time_limit_s=settings.time_limit_s, startup_trials=settings.startup_trials,
         told_lag=told_lag(settings.workers), pruning=settings.pruning.model_dump(),
-        fidelity=(settings.halving.model_dump() if settings.fidelity == "halving" else None),
+        fidelity=(settings.halving.model_dump() | {"thresholds": RULE}
+                  if settings.fidelity == "halving" else None),
         warm_start=[dict(p) for p in warm_start], sequences=list(study.sequences),
         stored=stored)
 
@@ -431,12 +452,20 @@ class TrialExecutor:
         self._stack.__exit__(*exc)  # type: ignore[arg-type]
 
 
-def check_shared(executor: Executor, paths: Sequence[str | Path], out_dir: str | Path) -> None:
+def check_shared(executor: Executor, paths: Sequence[str | Path], out_dir: str | Path,
+                 at_once: int = 0) -> None:
     """ConfigError unless every worker of a Dask cluster reads ``paths`` and writes ``out_dir``
-    at the same paths (workers on other machines need a shared filesystem)."""
+    at the same paths (workers on other machines need a shared filesystem), and has at least
+    ``at_once`` threads in all (trials that wait at their rungs without a time limit)."""
     client = getattr(executor, "_client", None)
     if client is None:
         return
+    threads = sum(client.nthreads().values())
+    if threads < at_once:
+        raise ConfigError(f"the Dask cluster runs {threads} trials at once, fewer than "
+                          f"trials.workers={at_once}: successive halving without a time limit "
+                          "needs every trial in flight running (set trials.time_limit_s, or "
+                          "trials.workers to at most the cluster's threads)")
     wanted = [str(Path(p).resolve()) for p in paths]
     answers = client.run(_sees, wanted, str(Path(out_dir).resolve()))
     for worker, missing in sorted(answers.items()):

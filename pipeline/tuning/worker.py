@@ -27,6 +27,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 from pipeline.errors import InfrastructureError, OdometryError
@@ -85,6 +86,7 @@ class WorkerState:
         self.truths: dict[str, Any] = {}  # ground truth by path, read once
         self.adapter: tuple[tuple[Any, ...], Adapter] | None = None
         self.idle: list[Any] = []  # TrialServer
+        self.on_wait: Callable[[float], None] | None = None  # a server's: tell the parent
         self._lock = threading.Lock()
 
     # -- running a trial -------------------------------------------------------------------
@@ -98,22 +100,27 @@ class WorkerState:
                 out = self.evaluate(job)
             else:
                 out = self._run_in_server(job, job.time_limit_s * len(job.sequences))
-        except InfrastructureError as exc:
+        except InfrastructureError as exc:  # lost: run again, its rung posts anew
             remove_trajectories(job)
             return TrialResult(job.trial, "lost", one_line(exc), math.nan,
                                time.perf_counter() - t0, job.seed, dict(job.params))
         except Exception as exc:
             remove_trajectories(job)
+            if job.rungs is not None:
+                job.rungs.end(job.trial)
             return TrialResult(job.trial, "failed", one_line(exc), job.penalty_pct,
                                time.perf_counter() - t0, job.seed, dict(job.params))
+        if job.rungs is not None:
+            job.rungs.end(job.trial, out["curve"])
         return TrialResult(job.trial, out["status"], out["error"], out["objective"],
                            time.perf_counter() - t0, job.seed, dict(job.params), out["rte_pct"],
                            out["odometry_s"], tuple(out["curve"]))
 
     def evaluate(self, job: TrialJob) -> dict[str, Any]:
-        """``evaluate_trial`` in this process, with the scan cache and the warmed adapter."""
+        """``evaluate_trial`` in this process, with the scan cache and the warmed adapter (a
+        trial server's state tells its parent how long the trial waited at its rungs)."""
         adapter = self.warm(job)
-        return evaluate_trial(job, adapter, self.scans, self.truths)
+        return evaluate_trial(job, adapter, self.scans, self.truths, self.on_wait)
 
     def outcome(self, job: TrialJob) -> tuple[str, Any]:
         """("ok", ``self.evaluate(job)``) or ("error", the exception in one line)."""
@@ -233,10 +240,16 @@ def run_trial(job: TrialJob) -> TrialResult:
     return process_state().run(job)
 
 
+WAITED = "waited"
+"""A trial server's message (WAITED, seconds): the trial waited that long at a rung for
+earlier trials (``pipeline.tuning.rung_board``); its time limit leaves the wait out."""
+
+
 def serve(fd: int, parent_pid: int) -> None:
     """A trial server's loop (``pipeline.tuning.server``, in the child): warm for the first
-    job, answer "ready", then answer every job with ``WorkerState.outcome``; returns when the
-    parent closes the socket."""
+    job, answer "ready", then answer every job with ``WorkerState.outcome`` (sending
+    (WAITED, seconds) while it runs when it waits at a rung); returns when the parent closes
+    the socket."""
     import signal
     from multiprocessing.connection import Connection
 
@@ -247,6 +260,7 @@ def serve(fd: int, parent_pid: int) -> None:
     exit_on_hangup(fd)
     conn = Connection(fd)
     state = WorkerState()
+    state.on_wait = lambda seconds: conn.send((WAITED, seconds))
     first = True
     while True:
         try:

@@ -22,13 +22,13 @@ from pipeline.tuning.pruning import (
     Checkpoint,
     HalvingSection,
     StoppingRule,
-    rung_thresholds,
     rungs,
     running_rte,
     sequence_rungs,
     spread_order,
     value_at,
 )
+from pipeline.tuning.rung_board import rung_threshold
 from pipeline.tuning.smbo import make_job, make_studies, run_trials, study_adapter
 from pipeline.tuning.table import trials_path
 
@@ -47,12 +47,11 @@ def test_rungs_and_their_thresholds() -> None:
     # a joint study: every sequence to the same fraction, side by side
     assert rungs([90, 45], h) == [Checkpoint((9, 4)), Checkpoint((29, 14))]
     assert rungs([3], h) == [Checkpoint((0,))]  # 1/3 of 3 frames is frame 0 again: one rung
-    points = rungs([90], h)
-    # the best 1/eta of the told values and the trial's own: the ((|V| + 1) // 3)-th smallest
-    curves = [(5.0, 4.0), (1.0,), (3.0, 2.0), (2.0, 9.0), (4.0,)]
-    assert rung_thresholds(points, curves, 3) == (2.0, 2.0)  # 6 // 3 = 2nd; 4 // 3 = 1st
-    assert rung_thresholds(points, curves[:1], 3) == (5.0, 4.0)  # too few: the smallest
-    assert rung_thresholds(points, [], 3) == (None, None)
+    # the best 1/eta of the earlier values and the trial's own: the ((|V| + 1) // 3)-th smallest
+    assert rung_threshold([5.0, 1.0, 3.0, 2.0, 4.0], 3) == 2.0  # 6 // 3 = 2nd
+    assert rung_threshold([4.0, 2.0, math.nan, 9.0], 3) == 2.0  # no value: left out; 4 // 3
+    assert rung_threshold([5.0], 3) == 5.0  # too few: the smallest
+    assert rung_threshold([], 3) is None and rung_threshold([math.nan], 3) is None
     rule = StoppingRule.of("halving", settings().pruning, h)
     assert rule.told_loss("pruned", 0.5, 100.0) == 100.0  # as failed
     assert rule.told_loss("ok", 0.5, 100.0) == 0.5
