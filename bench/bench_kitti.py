@@ -46,8 +46,9 @@ its own, ``evaluate.workers`` at a time. I = J = 256 is the paper's budget; the 
 
 Wall time on N workers: the six per-sequence studies one after another, each with N trials in
 flight, then the joint study: whole trials ceil(I / N) * C_s (waves of N), halving
-I F_s C_s (1 + w) / N + C_s (the work spread over N workers, w the measured waiting at the rungs
-per unit of work, and one whole trial's tail; F_s = the study's fraction of frames); then E as
+m I F_s C_s / N (F_s = the study's fraction of frames; m = the measured study's makespan on N
+workers over its work / N, ``rung_schedule``: the waiting at the rungs, the workers idle while
+the proposals' lag holds the next trial back, and the last trials' tail); then E as
 the longest processing time first schedule of its jobs on N processes (``evaluate.workers`` =
 N). Left out: simulation or ingest, descriptors, RTE scoring, the surrogate and the selector
 (each a single pass over the frames or less).
@@ -117,16 +118,16 @@ class Drive:
 @dataclass
 class Promotion:
     """What the halving study measured: p_r per rung, the fraction of frames run, CPU time;
-    ``waiting``: the worker time its trials would spend waiting at the rungs on WORKERS
-    workers, per unit of work (``rung_schedule``), and ``makespan``: that schedule's length
-    over the work / WORKERS."""
+    its trials scheduled on WORKERS workers (``rung_schedule``): ``waiting``, the worker time
+    spent waiting at the rungs per unit of work, and ``makespan``, the schedule's length over
+    the work / WORKERS (None: not measured)."""
 
     rates: list[float]
     fraction: float
     trials: int
     cpu_s: float
     waiting: float = 0.0
-    makespan: float = 1.0
+    makespan: float | None = None
 
 
 def run() -> list[Row]:
@@ -287,18 +288,24 @@ def halving_promotion(trajectories: Path, frames: int, drives: dict[str, Drive],
     drive = drives[HALVING_SEQUENCE]
     length_m = LENGTH_M * float(drive.distance_m[frames - 1]) / float(drive.distance_m[-1])
     settings = halving_settings(length_m, halving, workers)
+    odometry_s: dict[int, float] = {}
     cpu = time.process_time()
     with ThreadPoolExecutor(1) as one:  # one trial at a time: the same study as 16 workers'
         run_trials([path], tmp / "trials", settings, seed=0,  # type: ignore[arg-type]
-                   progress=False, executor=one)
-    promotion = promotion_of(tmp / "trials", path.stem, frames, settings)
+                   progress=False, executor=one,
+                   on_trial=lambda _, r: odometry_s.__setitem__(r.trial, r.odometry_s))
+    promotion = promotion_of(tmp / "trials", path.stem, frames, settings, odometry_s)
     promotion.cpu_s = time.process_time() - cpu
     return promotion
 
 
-def promotion_of(out: Path, sequence: str, frames: int, settings: object) -> Promotion:
+def promotion_of(out: Path, sequence: str, frames: int, settings: object,
+                 odometry_s: dict[int, float] | None = None) -> Promotion:
     """p_r and the fraction of frames run of the study ``sequence`` in the trials folder ``out``:
-    a trial's frames are its trajectory's (a failed trial's: all)."""
+    a trial's frames are its trajectory's (a failed trial's: all); the waiting at the rungs
+    from every trial's ``odometry_s`` (its time in the odometry, as the study ran it; the
+    trials table's wall time where not given, which counts a worker's warm-up in its first
+    trial)."""
     from pipeline.trajectory import read_trajectory
     from pipeline.tuning.layout import trajectory_path
     from pipeline.tuning.pruning import rungs
@@ -315,8 +322,8 @@ def promotion_of(out: Path, sequence: str, frames: int, settings: object) -> Pro
     reached = [sum(n >= end for n in ran) for end in ends]
     went_on = [sum(n > end for n in ran) for end in ends]
     rates = [w / r if r else 1.0 for w, r in zip(went_on, reached, strict=True)]
-    seconds = [r.odometry_s / n if r.odometry_s > 0 else 1.0 for r, n in zip(results, ran,
-                                                                           strict=True)]
+    spent = odometry_s or {}
+    seconds = [spent.get(r.trial, r.wall_time_s) / n for r, n in zip(results, ran, strict=True)]
     schedule = rung_schedule(ran, seconds, ends, frames, WORKERS,
                              told_lag(settings.workers))  # type: ignore[attr-defined]
     return Promotion(rates, sum(ran) / (frames * len(ran)), len(ran), 0.0,
@@ -378,14 +385,15 @@ def promotion_row(p: Promotion, frames: int, workers: int) -> Row:
     from pipeline.tuning.smbo import told_lag
 
     rates = ", ".join(f"rung {r}: {100 * x:.0f} %" for r, x in enumerate(p.rates))
-    used = "the model's" if workers == WORKERS else "not the model's"
+    used = (f"the model's; scheduled on {WORKERS} workers: waiting at the rungs "
+            f"{100 * p.waiting:.1f} % of the work, makespan x{p.makespan or math.nan:.2f} the "
+            f"work / {WORKERS}" if workers == WORKERS else "not the model's")
     return Row(f"successive halving, measured: NDT study of {p.trials} proposals on "
                f"{HALVING_SEQUENCE}'s first {frames} frames (proposals lag "
                f"{told_lag(workers)}: {workers} worker{'s' if workers > 1 else ''}), fraction "
                "of frames run", 100 * p.fraction, "%",
-               f"trials going on after {rates} ({used}); on {WORKERS} workers waiting at the "
-               f"rungs {100 * p.waiting:.1f} % of the work, makespan x{p.makespan:.2f} the "
-               f"work / {WORKERS}; the study took {p.cpu_s / 60:.1f} CPU-min")
+               f"trials going on after {rates} ({used}); the study took "
+               f"{p.cpu_s / 60:.1f} CPU-min")
 
 
 # -- the protocol model ------------------------------------------------------------------
@@ -510,9 +518,12 @@ def protocol_cost(drives: dict[str, Drive], costs: dict[str, Cost], promotion: P
                                  promotion.rates, rungs, plan.length_m)
         decode = (sum(float(per_frame["decode"][s].sum()) for s in names) if fits else 0.0)
         trial = mean if halving else whole
-        wall = decode + (budget * trial * (1 + promotion.waiting) / plan.workers + whole
-                         if halving
-                         else math.ceil(budget / plan.workers) * whole)
+        if not halving:
+            wall = decode + math.ceil(budget / plan.workers) * whole
+        elif promotion.makespan is None:
+            wall = decode + budget * trial / plan.workers + whole
+        else:
+            wall = decode + promotion.makespan * budget * trial / plan.workers
         return budget * trial + min(plan.workers, budget) * decode, wall
 
     parts = [study([s], per_sequence, plan.iterations) for s in plan.train]
