@@ -342,7 +342,7 @@ def study_board(pruner: StudyPruner, out_dir: Path, algorithm: str, study: str,
     """The rung board of a study of successive halving (None for any other), with the posts of
     its ``done`` trials only (``RungBoard.keep``: those of trials a killed run left unfinished
     go, they run again)."""
-    if pruner.rule.kind != "halving":
+    if pruner.rule.kind != "halving" or not pruner.active:  # no rung: the trials run whole
         return None
     board = RungBoard(str(rungs_folder(out_dir, algorithm, study)))
     board.keep({t: r.curve for t, r in done.items()})

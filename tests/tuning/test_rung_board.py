@@ -115,3 +115,23 @@ def test_waiting_at_a_rung_does_not_count_against_the_time_limit(
         state.close()
     assert result.status == "pruned", result.error  # behind trial 0's perfect values
     assert result.wall_time_s > 1.6 and board.read(1).ended
+
+
+def test_a_trial_with_no_value_at_a_rung_does_not_wait_there(
+        sequences: list[Path], tmp_path: Path) -> None:
+    """At frame 1 no segment of L = 5 m has ended: the value is NaN, which no threshold stops,
+    so the trial does not wait for trial 0 (which never posts) and runs to the end."""
+    s = settings(iterations=2, time_limit_s=None, **HALVING)
+    (study,) = make_studies(sequences[:1], joint=False)
+    board = RungBoard(str(tmp_path / "rungs"))
+    job = make_job(study, study_adapter(s), 1, 7, {"bias": 0.0, "gain": 1.0, "window": 1},
+                   tmp_path, s, checkpoints=((1,),), thresholds=(None,), scored_only=True,
+                   rungs=board, eta=2)
+    results: list[object] = []
+    runner = threading.Thread(target=lambda: results.append(WorkerState().run(job)),
+                              daemon=True)  # a trial that waited would wait for ever
+    runner.start()
+    runner.join(timeout=60)
+    assert results and results[0].status == "ok", results  # type: ignore[attr-defined]
+    post = board.read(1)
+    assert post is not None and post.ended and math.isnan(post.values[0])
