@@ -76,6 +76,11 @@ class TrialJob:
     rungs: RungBoard | None = None  # successive halving: thresholds from the board, at the rung
     eta: int = 0  # successive halving's eta (with ``rungs``)
 
+    @property
+    def limit_s(self) -> float | None:
+        """The whole trial's time limit [s]: ``time_limit_s`` per sequence (None: no limit)."""
+        return None if self.time_limit_s is None else self.time_limit_s * len(self.sequences)
+
 
 @dataclass(frozen=True)
 class TrialResult:
@@ -295,8 +300,8 @@ def _threshold(job: TrialJob, index: int, posted: list[float],
     job.rungs.post(job.trial, posted)
     if not math.isfinite(posted[-1]):
         return None
-    limit_s = None if job.time_limit_s is None else 2 * job.time_limit_s * len(job.sequences)
-    return job.rungs.threshold(job.trial, index, job.eta, limit_s, on_wait)
+    wait_s = None if job.limit_s is None else 2 * job.limit_s
+    return job.rungs.threshold(job.trial, index, job.eta, wait_s, on_wait)
 
 
 def _metadata(job: TrialJob, name: str, out: Path) -> dict[str, str]:

@@ -145,8 +145,9 @@ class StoppingRule:
 
     def thresholds(self, points: Sequence[Checkpoint], frame_counts: Sequence[int],
                    reference: Sequence[Sequence[float]]) -> tuple[float | None, ...]:
-        """The threshold at every checkpoint (None: no check, or set at the rung: successive
-        halving's ``RungBoard``) from the ``reference`` curves."""
+        """The percentile pruner's threshold at every checkpoint (None: no check) from the
+        ``reference`` curves; all None for successive halving, whose thresholds the trial
+        sets at each rung (``RungBoard``)."""
         if self.pruning is not None:
             return thresholds(points, frame_counts, reference, self.pruning)
         return tuple(None for _ in points)
@@ -364,12 +365,13 @@ class StudyPruner:
         halving: the study's rung ``board`` and eta instead of thresholds."""
         if not self.points:
             return {}
-        limits = self.rule.thresholds(self.points, [len(g) for g in self.gts],
-                                      self.rule.reference_curves(done, tid, lag))
-        fields = {"checkpoints": tuple(p.frames for p in self.points), "thresholds": limits,
+        fields = {"checkpoints": tuple(p.frames for p in self.points),
                   "scored_only": self.rule.scored_only}
-        if self.rule.halving is not None:
+        if self.rule.halving is not None:  # thresholds set at the rungs, from the board
             if board is None:
                 raise ValueError("successive halving needs the study's rung board")
-            fields |= {"rungs": board, "eta": self.rule.halving.eta}
-        return fields
+            return fields | {"thresholds": tuple(None for _ in self.points), "rungs": board,
+                             "eta": self.rule.halving.eta}
+        limits = self.rule.thresholds(self.points, [len(g) for g in self.gts],
+                                      self.rule.reference_curves(done, tid, lag))
+        return fields | {"thresholds": limits}

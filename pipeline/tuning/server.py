@@ -7,7 +7,7 @@ connected by a socket pair over which jobs and results travel as pickles (our ow
 processes, nothing stored). The child (``pipeline.tuning.worker.serve``) imports the parent's
 ``sys.path``, decodes the sequences once and warms the adapter (its own ``WorkerState``), then
 answers each job with
-("ok", result) or ("error", one line), after a (``worker.WAITED``, seconds) for every pause it
+("ok", result) or ("error", one line), after a (``WAITED``, seconds) for every pause it
 made at a rung waiting for earlier trials, which the time limit leaves out. It ends with its
 parent: ``PR_SET_PDEATHSIG`` and a thread watching the socket (``pipeline.lifetime``); it
 ignores SIGINT, so that Ctrl-C is handled by the main process alone.
@@ -39,6 +39,10 @@ LOST_SIGNALS = frozenset({signal.SIGKILL, signal.SIGTERM, signal.SIGINT, signal.
 WARM_LIMIT_S = 600.0
 """Time a new server gets to start, decode the sequences and warm the adapter [s] (on top of
 the trial's own limit, which covers the odometry alone)."""
+
+WAITED = "waited"
+"""A trial server's message (WAITED, seconds) while a trial runs: it waited that long at a rung
+for earlier trials (``pipeline.tuning.rung_board``); its time limit leaves the wait out."""
 
 _BOOT = ("import sys, json; sys.path[:] = json.loads(sys.argv[3]); "
          "from pipeline.tuning.worker import serve; serve(int(sys.argv[1]), int(sys.argv[2]))")
@@ -78,8 +82,6 @@ class TrialServer:
     def _answer(self, limit_s: float) -> tuple[str, Any]:
         """The trial's answer within ``limit_s`` of odometry: the time it reports waiting at
         its rungs for earlier trials ((WAITED, seconds) messages) extends the deadline."""
-        from pipeline.tuning.worker import WAITED
-
         deadline = time.monotonic() + limit_s
         while True:
             if not self.conn.poll(max(deadline - time.monotonic(), 0.0)):

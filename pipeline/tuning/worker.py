@@ -96,10 +96,10 @@ class WorkerState:
         never an exception."""
         t0 = time.perf_counter()
         try:
-            if job.time_limit_s is None:
+            if job.limit_s is None:
                 out = self.evaluate(job)
             else:
-                out = self._run_in_server(job, job.time_limit_s * len(job.sequences))
+                out = self._run_in_server(job, job.limit_s)
         except InfrastructureError as exc:  # lost: run again, its rung posts anew
             remove_trajectories(job)
             return TrialResult(job.trial, "lost", one_line(exc), math.nan,
@@ -240,11 +240,6 @@ def run_trial(job: TrialJob) -> TrialResult:
     return process_state().run(job)
 
 
-WAITED = "waited"
-"""A trial server's message (WAITED, seconds): the trial waited that long at a rung for
-earlier trials (``pipeline.tuning.rung_board``); its time limit leaves the wait out."""
-
-
 def serve(fd: int, parent_pid: int) -> None:
     """A trial server's loop (``pipeline.tuning.server``, in the child): warm for the first
     job, answer "ready", then answer every job with ``WorkerState.outcome`` (sending
@@ -254,6 +249,7 @@ def serve(fd: int, parent_pid: int) -> None:
     from multiprocessing.connection import Connection
 
     from pipeline.lifetime import die_with_parent, exit_on_hangup
+    from pipeline.tuning.server import WAITED
 
     die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
