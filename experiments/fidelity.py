@@ -289,7 +289,8 @@ def report(run: Path, costs: dict[str, dict[str, dict[str, float]]] | None,
     indexes = (read_index(p) for p in folders if (p / "index.json").is_file())
     index = next(i for i in indexes if i.splits.get("train"))  # each index read once
     train = {Path(p).stem: Path(p) for p in index.paths("train")}
-    every = {Path(p).stem: Path(p) for split in index.splits for p in index.paths(split)}
+    every = {Path(p).stem: Path(p) for split, names in index.splits.items() if names
+             for p in index.paths(split)}  # a split may be declared empty
     trials = frames_run(run / "results/trials", train)
     joint = frames_run(run / "results/fixed", train)
     print(f"== {run}")
@@ -302,20 +303,23 @@ def report(run: Path, costs: dict[str, dict[str, dict[str, float]]] | None,
     fractions = [float(s["fraction"]) for s in trials.values()]
     print(f"  per-sequence studies: frames run {100 * np.mean(fractions):.1f} % (mean), "
           f"joint {100 * float(next(iter(joint.values()))['fraction']):.1f} %")
-    cv = json.loads((run / "metrics/surrogate.json").read_text())
-    print(f"  surrogate LOSO: MAE {cv['mae']:.4g}, RMSE {cv['rmse']:.4g}, regret "
-          f"{cv['regret_mean']:.4g}")
-    for seq, c in coverage(run / "results/adaptune.duckdb").items():
-        print(f"  coverage {seq}: {c['frames']} frames, {c['groups']} trial sets; distinct "
-              f"trials a frame, first third {c['early_trials']:.1f}, last third "
-              f"{c['late_trials']:.1f}; rows above the median trial, first third "
-              f"{100 * c['early_bad']:.0f} %, last third {100 * c['late_bad']:.0f} %")
-    algorithm = str(json.loads((run / "records/evaluation.json").read_text())["algorithm"])
-    if costs and algorithm in costs:
-        import bench_kitti
+    if not (run / "metrics/surrogate.json").is_file():  # the verdict's: per sensor
+        print("  (no metrics/surrogate.json, results/adaptune.duckdb: studies only)")
+    else:
+        cv = json.loads((run / "metrics/surrogate.json").read_text())
+        print(f"  surrogate LOSO: MAE {cv['mae']:.4g}, RMSE {cv['rmse']:.4g}, regret "
+              f"{cv['regret_mean']:.4g}")
+        for seq, c in coverage(run / "results/adaptune.duckdb").items():
+            print(f"  coverage {seq}: {c['frames']} frames, {c['groups']} trial sets; distinct "
+                  f"trials a frame, first third {c['early_trials']:.1f}, last third "
+                  f"{c['late_trials']:.1f}; rows above the median trial, first third "
+                  f"{100 * c['early_bad']:.0f} %, last third {100 * c['late_bad']:.0f} %")
+        algorithm = str(json.loads((run / "records/evaluation.json").read_text())["algorithm"])
+        if costs and algorithm in costs:
+            import bench_kitti
 
-        cost_check(run, every, trials, joint,
-                   {env: bench_kitti.Cost(**c) for env, c in costs[algorithm].items()}, rates)
+            cost_check(run, every, trials, joint,
+                       {env: bench_kitti.Cost(**c) for env, c in costs[algorithm].items()}, rates)
     cpu = stage_cpu(run)
     if cpu:
         print("  CPU by stage [s]: " + ", ".join(f"{k} {v:.0f}" for k, v in cpu.items()))
