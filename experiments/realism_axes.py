@@ -4,9 +4,8 @@ docs/results/realism.md, "Probes of GICP's miss on the highway 01").
 ``python experiments/realism_axes.py SEQ [--algorithm gicp] [--params params.yaml]
 [--replicas 3]``: the real kitti_mini slice SEQ (frames 0-9, ``ADAPTUNE_TEST_DATA`` or
 ../shared/data) and its simulated replicas (the ``simulate_kitti`` section of ``--params``,
-world seed ``derive_seed(r, SEQ)`` for replica r, as
-``pipeline.realism.compare`` seeds them), run by the algorithm
-at its defaults; per side the step errors E (``pipeline.realism.registration``) split into
+world seed ``replica_seed(r, SEQ)`` for replica r, as the comparison seeds them), run by the
+algorithm at its defaults; per side the step errors E (``pipeline.realism.registration``) split into
 the lidar frame's axes (x forward, y left, z up): the mean and the median |component| [cm],
 and the median ||t(E)|| [cm]. Exact ground truth on the simulated side (no ground-truth error
 added).
@@ -30,9 +29,8 @@ def main() -> None:
     from pipeline.config import load_section
     from pipeline.realism.compare import SLICES
     from pipeline.realism.registration import odometry_step_errors
-    from pipeline.realism.slices import real_slice, simulated_slice
+    from pipeline.realism.slices import real_slice, replica_seed, simulated_slice
     from pipeline.sim.kitti_dataset import SimulateKittiSection
-    from pipeline.sim.simulate import derive_seed
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sequence", choices=[s for s, _, _ in SLICES])
@@ -45,7 +43,7 @@ def main() -> None:
     root = data_root()
     sides = [("real", real_slice(root / "kitti_mini" / "dataset", args.sequence, first, last))]
     sides += [(f"sim {r}", simulated_slice(root / "kitti_trajectories", args.sequence, first,
-                                           last, section, derive_seed(r, args.sequence)))
+                                           last, section, replica_seed(r, args.sequence)))
               for r in range(args.replicas)]
     print(f"{args.algorithm} on {args.sequence} {first}-{last}: step error t(E) [cm], lidar axes")
     print("| side | mean x / y / z | median abs x / y / z | median norm |\n|---|---|---|---|")

@@ -27,16 +27,27 @@ def _fmt(e: dict[str, float | None]) -> str:
 
 
 def main() -> None:
-    from pipeline.report.outputs import write_json
-    from pipeline.verdict.arms import compare_arms
+    from pipeline.errors import AdaptuneError
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("reference", type=Path)
     parser.add_argument("candidate", type=Path)
     parser.add_argument("--json", type=Path, default=None, help="write the comparison here")
     args = parser.parse_args()
-    result = compare_arms(json.loads(args.reference.read_text()),
-                          json.loads(args.candidate.read_text()))
+    try:
+        compare(args.reference, args.candidate, args.json)
+    except (AdaptuneError, OSError, ValueError) as exc:  # ValueError: a file that is not JSON
+        print(f"verdict_arms: error: {exc}", file=sys.stderr)
+        sys.exit(1)
+
+
+def compare(reference: Path, candidate: Path, out: Path | None) -> None:
+    """Print the comparison of the two suite metrics files (module docstring); write it as
+    JSON to ``out`` when given."""
+    from pipeline.report.outputs import write_json
+    from pipeline.verdict.arms import compare_arms
+
+    result = compare_arms(json.loads(reference.read_text()), json.loads(candidate.read_text()))
     print(f"{result['family']} {result['suite']} suite, {result['worlds']} worlds")
     print("| ratio | reference | candidate | worse beyond the interval |\n|---|---|---|---|")
     for name, r in result["ratios"].items():
@@ -45,8 +56,8 @@ def main() -> None:
     print("\n| setting | candidate / reference, paired by world |\n|---|---|")
     for setting, e in result["paired"].items():
         print(f"| {setting} | {_fmt(e)} |")
-    if args.json is not None:
-        write_json(args.json, result)
+    if out is not None:
+        write_json(out, result)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """The sim-to-real comparison (docs/design.md, "The sim-to-real comparison").
 
 For every slice (a KITTI sequence's frames ``first`` .. ``last``): the real scans, and
-``replicas`` simulations of the same frames (simulated KITTI, world seed ``derive_seed(r, NN)``
+``replicas`` simulations of the same frames (simulated KITTI, world seed ``replica_seed(r, NN)``
 for replica r, the ``simulate_kitti`` section's sensor). Each side gets its scan statistics and
 the frame-to-frame errors of every algorithm at its defaults: per slice the median over the
 slice's steps (simulated: over all replicas' steps, and each replica's own median for the
@@ -202,10 +202,9 @@ def _compare_slice(kitti_root: Path, trajectories: Path, section: SimulateKittiS
     """Real and simulated statistics and step errors of one slice."""
     from pipeline.realism.ground_truth import shared_error, twists, white_noise, white_sigma
     from pipeline.realism.registration import odometry_step_errors
-    from pipeline.realism.slices import real_slice, simulated_slice
+    from pipeline.realism.slices import real_slice, replica_seed, simulated_slice
     from pipeline.sim.kitti import kitti_lidar_poses
     from pipeline.sim.kitti_world import frame_environments
-    from pipeline.sim.simulate import derive_seed
 
     real = real_slice(kitti_root, sequence, first, last)
     what = f"{sequence} {first}-{last}"
@@ -219,7 +218,7 @@ def _compare_slice(kitti_root: Path, trajectories: Path, section: SimulateKittiS
     with_gt: dict[str, list[NDArray[np.float64]]] = {a: [] for a in algorithms}
     for r in range(replicas):
         scans = simulated_slice(trajectories, sequence, first, last, section,
-                                derive_seed(r, sequence))
+                                replica_seed(r, sequence))
         sim_points += [s.points_lidar for s in scans]
         for k, a in enumerate(algorithms):
             E = odometry_step_errors(a, scans, f"simulated {what}, replica {r}")

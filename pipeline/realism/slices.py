@@ -19,6 +19,13 @@ def real_slice(kitti_root: Path, sequence: str, first: int, last: int) -> list[S
             for k, f in enumerate(source.frames())]
 
 
+def replica_seed(replica: int, sequence: str) -> int:
+    """The world seed of the comparison's simulated replica ``replica`` of ``sequence``."""
+    from pipeline.sim.simulate import derive_seed
+
+    return derive_seed(replica, sequence)
+
+
 def simulated_slice(trajectories: Path, sequence: str, first: int, last: int,
                     section: SimulateKittiSection, seed: int) -> list[Scan]:
     """The same frames simulated: the simulated-KITTI world of ``sequence`` (seed ``seed``)

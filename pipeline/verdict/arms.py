@@ -20,11 +20,14 @@ from collections.abc import Mapping
 from typing import Any
 
 from pipeline.errors import InputError
+from pipeline.verdict.runs import FIXED_SETTINGS
 from pipeline.verdict.statistics import CONFIDENCE, ratio_estimate
 from pipeline.verdict.summary import RATIOS
 
-SETTINGS = ("baseline", "fixed", "adaptive")
-"""The settings a suite runs on every world (``median_rte_pct`` of each world's entry)."""
+SETTINGS = (*FIXED_SETTINGS, "adaptive")
+"""The settings paired by world (``median_rte_pct`` of each world's entry)."""
+KEYS = ("family", "suite", "seed_root", "per_world", "ratios")
+"""What a suite's metrics hold that the comparison reads."""
 
 
 def compare_arms(reference: Mapping[str, Any], candidate: Mapping[str, Any],
@@ -34,8 +37,8 @@ def compare_arms(reference: Mapping[str, Any], candidate: Mapping[str, Any],
 
     Returns {"worlds": n, "ratios": {name: {"reference": {geomean, low, high},
     "candidate": {...}, "worse_beyond_interval": bool}}, "paired": {setting: {value, low,
-    high}}, "worse_beyond_intervals": bool}. InputError when the two do not hold the same
-    family, suite and worlds.
+    high}}, "worse_beyond_intervals": bool}. InputError when either is not a suite's metrics,
+    or the two do not hold the same family, suite and worlds.
     """
     _check_same_suite(reference, candidate)
     ratios = {name: _ratio_against(reference["ratios"][name], candidate["ratios"][name])
@@ -62,6 +65,11 @@ def _median(metrics: Mapping[str, Any], world: str, setting: str) -> float:
 
 
 def _check_same_suite(reference: Mapping[str, Any], candidate: Mapping[str, Any]) -> None:
+    for arm, metrics in (("reference", reference), ("candidate", candidate)):
+        missing = [k for k in KEYS if k not in metrics]
+        if missing:
+            raise InputError(f"the {arm} is not a suite's metrics (metrics/<family>.json), "
+                             f"got no {missing[0]!r}")
     for key in ("family", "suite", "seed_root"):
         if reference.get(key) != candidate.get(key):
             raise InputError(f"the two arms must run the same suite, got {key}="

@@ -3,6 +3,10 @@ interval" and the paired per-setting ratios, on hand-made suite metrics."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -11,6 +15,8 @@ import pytest
 from pipeline.errors import InputError
 from pipeline.verdict.arms import compare_arms
 from pipeline.verdict.summary import RATIOS, ratio_summary
+
+SCRIPT = Path(__file__).resolve().parents[2] / "experiments" / "verdict_arms.py"
 
 
 def _suite(medians: dict[str, dict[str, float]], suite: str = "dev") -> dict[str, Any]:
@@ -75,3 +81,28 @@ def test_arms_of_other_suites_or_worlds_are_refused() -> None:
     fewer = dict(list(medians.items())[:5])
     with pytest.raises(InputError, match="same worlds"):
         compare_arms(_suite(medians), _suite(fewer))
+
+
+def test_a_file_that_is_not_a_suite_is_refused() -> None:
+    medians = _medians(np.ones(6))
+    with pytest.raises(InputError, match=r"candidate is not a suite's metrics.*'per_world'"):
+        compare_arms(_suite(medians), {"family": "id", "suite": "dev", "seed_root": 70101})
+
+
+@pytest.mark.parametrize("case", ["other suite", "not json", "missing"])
+def test_the_script_ends_bad_input_in_one_line(tmp_path: Path, case: str) -> None:
+    """experiments/verdict_arms.py: one line on stderr naming the problem, exit code 1."""
+    medians = _medians(np.ones(6))
+    ref, cand = tmp_path / "ref.json", tmp_path / "cand.json"
+    ref.write_text(json.dumps(_suite(medians)))
+    if case == "other suite":
+        cand.write_text(json.dumps(_suite(medians, suite="test")))
+    elif case == "not json":
+        cand.write_text("{not json")
+    out = subprocess.run([sys.executable, str(SCRIPT), str(ref), str(cand)],
+                         capture_output=True, text=True, check=False)
+    assert out.returncode == 1
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("verdict_arms: error: ")
+    assert {"other suite": "same suite", "not json": "Expecting", "missing": "cand.json"}[case] \
+        in lines[0]
