@@ -186,7 +186,7 @@ def _floor_profile(route: Route, ground: _Terrain, rng: np.random.Generator) -> 
         z = np.concatenate([[0.0], np.cumsum(slope[1:] * DS_M)])
         z0 = floor[a - 1] if a > 0 else None
         z1 = floor[b] if b < n else None
-        if z0 is not None and z1 is not None:
+        if z0 is not None and z1 is not None and b - a > 1:
             z = z0 + z + (z1 - z0 - z[-1]) * s / s[-1]
         elif z0 is not None:
             z = z0 + z

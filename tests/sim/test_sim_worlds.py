@@ -97,6 +97,15 @@ def test_composite_follows_the_given_segment_order() -> None:
     assert ranges[-1].end == 89
 
 
+def test_a_composite_world_shorter_than_its_segments_is_finite() -> None:
+    """Two frames through four segments: the cave is one route sample between two others
+    (its floor's slope once divided by its zero length, giving NaN poses and an SVD error)."""
+    w = make_world(SimSpec("composite", 1634085409, 2, "hdl64",
+                           segments=("open", "street", "cave", "open")))
+    assert np.isfinite(w.poses.T_world_lidar).all() and np.isfinite(w.vertices).all()
+    assert len(list(iter_scans(w, get_sensor("hdl64"), 1))) == 2
+
+
 def test_speeds_fit_the_world() -> None:
     for world, lo, hi in (("cave", 0.8, 2.0), ("street", 3.0, 10.0)):
         T = make_world(SimSpec(world, 2, 200)).poses.T_world_lidar
