@@ -143,6 +143,27 @@ def scan_frame(caster: Raycaster, world: World, seed: int, k: int,
     return Scan(k, stamp_ns, pts, T, None if motion == "compensated" else time_s)
 
 
+@dataclass(frozen=True)
+class SimulatedScans:
+    """A simulated sequence held in memory: the scans (``Scan``: (N, 4) float32 points in the
+    lidar frame, the ground-truth pose, per-point times where swept) and each frame's
+    environment label. What ``simulate_sequence`` writes and ``SequenceReader`` gives back."""
+
+    name: str
+    scans: list[Scan]
+    labels: list[str]
+
+
+def simulate_scans(spec: SimSpec, name: str) -> SimulatedScans:
+    """Simulate ``spec`` into memory, for a world that is run and thrown away (the verdict's
+    suites): the same scans as ``simulate_sequence`` writes, without encoding, compressing
+    and decoding them (about a third of a suite world's time, docs/design.md "The verdict")."""
+    world = make_world(spec)
+    scans = list(iter_scans(world, spec.sensor_model(), spec.seed, motion=spec.motion))
+    return SimulatedScans(check_plain_name(name, "the sequence name"), scans,
+                          list(world.poses.frame_labels))
+
+
 def simulate_sequence(
     spec: SimSpec, out_path: str | Path, name: str | None = None, progress: bool = False
 ) -> SimSummary:

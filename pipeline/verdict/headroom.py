@@ -131,12 +131,12 @@ def class_choice(name: str,
 
 
 def first_pass(world: VerdictWorld, inputs: SuiteInputs, candidates: list[Params],
-               period_s: float, out_dir: Path) -> CandidateRuns:
+               period_s: float) -> CandidateRuns:
     """Every candidate on the selection replica, then the cross-fitted oracle on the suite's."""
     from pipeline.verdict.runs import load_world
 
     t0 = time.perf_counter()
-    loaded = load_world(world, inputs, out_dir / "worlds")
+    loaded = load_world(world, inputs)
     selection_replica = inputs.replicas + 1
     per_label = [label_means(loaded.run(c, selection_replica, inputs.replica_scale)[0],
                              loaded.labels) for c in candidates]
@@ -147,12 +147,12 @@ def first_pass(world: VerdictWorld, inputs: SuiteInputs, candidates: list[Params
 
 
 def second_pass(world: VerdictWorld, inputs: SuiteInputs, candidates: list[Params],
-                choice: dict[str, int], period_s: float, out_dir: Path) -> WorldResult:
+                choice: dict[str, int], period_s: float) -> WorldResult:
     """The class oracle's runs on the suite's replicas."""
     from pipeline.verdict.runs import load_world
 
     t0 = time.perf_counter()
-    loaded = load_world(world, inputs, out_dir / "worlds")
+    loaded = load_world(world, inputs)
     return _oracle_runs(world, loaded, inputs, "class_oracle", choice, candidates, period_s, t0)
 
 
@@ -177,8 +177,6 @@ def run_headroom(worlds: Sequence[VerdictWorld], inputs: SuiteInputs,
                  workers: int) -> tuple[list[CandidateRuns], list[WorldResult]]:
     """Both passes over ``worlds`` (module docstring); ``out_dir`` written atomically: every
     world's oracle runs (``<world>/rte.parquet`` and ``world.json``, as the suite's)."""
-    import shutil
-
     from pipeline.executor import map_in_processes
     from pipeline.io_utils import atomic_dir, atomic_write_text
     from pipeline.verdict.runs import write_world
@@ -186,16 +184,15 @@ def run_headroom(worlds: Sequence[VerdictWorld], inputs: SuiteInputs,
     PROGRESS.info("headroom: %d worlds, %d candidates", len(worlds), len(candidates))
     t0 = time.monotonic()
     with atomic_dir(out_dir) as tmp:
-        first = map_in_processes(first_pass, [(w, inputs, candidates, period_s, tmp)
+        first = map_in_processes(first_pass, [(w, inputs, candidates, period_s)
                                               for w in worlds], workers,
                                  on_done=lambda i, r: _logged("cross-fitted", r.oracle, i,
                                                               len(worlds), t0))
         label_rte = {r.name: r.label_rte for r in first}
         second = map_in_processes(second_pass, [(w, inputs, candidates,
-                                                 class_choice(w.name, label_rte), period_s, tmp)
+                                                 class_choice(w.name, label_rte), period_s)
                                                 for w in worlds], workers,
                                   on_done=lambda i, r: _logged("class", r, i, len(worlds), t0))
-        shutil.rmtree(tmp / "worlds", ignore_errors=True)
         merged = []
         for a, b in zip(first, second, strict=True):
             both = a.oracle

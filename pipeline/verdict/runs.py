@@ -2,7 +2,7 @@
 (docs/results/verdict.md, "Protocol").
 
 For every world (``pipeline.verdict.worlds``), ``score_world``
-1. simulates it into a scratch MCAP and decodes it once (``LoadedWorld``), then deletes the MCAP;
+1. simulates it into memory once (``LoadedWorld``);
 2. computes the schedule of every adaptive setting (the model's selector with that setting's
    ``select`` settings: ``adaptive`` in the stage, more in a dev study of selector variants);
    with one model per sensor, the world's sensor's; a sensor without one (kept out of
@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import json
 import logging
-import shutil
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -45,8 +44,6 @@ PROGRESS = logging.getLogger("pipeline.progress")  # shown at any CLI verbosity 
 
 F64 = NDArray[np.float64]
 FIXED_SETTINGS = ("baseline", "fixed")
-SCRATCH = "worlds"
-"""The folder of the worlds' MCAPs while they are decoded (removed at the end)."""
 
 
 @dataclass(frozen=True)
@@ -157,10 +154,8 @@ def run_suite(worlds: Sequence[VerdictWorld], inputs: SuiteInputs, out_dir: Path
                   sum(w.spec.frames for w in worlds), inputs.replicas, workers)
     t0 = time.monotonic()
     with atomic_dir(out_dir) as tmp:
-        results = map_in_processes(score_world, [(w, inputs, tmp) for w in worlds], workers,
-                                   on_done=lambda i, r: _logged(r, i, len(worlds), t0))
-        shutil.rmtree(tmp / SCRATCH, ignore_errors=True)
-        return results
+        return map_in_processes(score_world, [(w, inputs, tmp) for w in worlds], workers,
+                                on_done=lambda i, r: _logged(r, i, len(worlds), t0))
 
 
 def _logged(result: WorldResult, i: int, n: int, t0: float) -> WorldResult:
@@ -175,7 +170,7 @@ def _logged(result: WorldResult, i: int, n: int, t0: float) -> WorldResult:
 def score_world(world: VerdictWorld, inputs: SuiteInputs, out_dir: Path) -> WorldResult:
     """Simulate ``world``, run every setting on every replica, write and return its runs."""
     t0 = time.perf_counter()
-    loaded = load_world(world, inputs, out_dir / SCRATCH)
+    loaded = load_world(world, inputs)
     from pipeline.adaptive import loaded_model
 
     nominal: dict[str, Any] = {"baseline": inputs.baseline, "fixed": inputs.fixed}
@@ -214,19 +209,14 @@ def _edge_share(params: Mapping[str, float], space: Any) -> float:
     return edge_share(np.array([[params[n] for n in space.names]]), space.to_json())
 
 
-def load_world(world: VerdictWorld, inputs: SuiteInputs, scratch: Path) -> Any:
-    """Simulate ``world`` into ``scratch``, decode it (``LoadedWorld``), delete the MCAP."""
-    from pipeline.sim.simulate import simulate_sequence
+def load_world(world: VerdictWorld, inputs: SuiteInputs) -> Any:
+    """Simulate ``world`` into memory, the adapter warmed over its scans (``LoadedWorld``)."""
+    from pipeline.sim.simulate import simulate_scans
     from pipeline.verdict.world import LoadedWorld
 
-    scratch.mkdir(parents=True, exist_ok=True)
-    path = scratch / f"{world.name}.mcap"
-    try:
-        simulate_sequence(world.spec, path, name=world.name)
-        return LoadedWorld(path, inputs.algorithm, inputs.adapter_options, inputs.space,
-                           inputs.length_m, inputs.penalty_pct)
-    finally:
-        path.unlink(missing_ok=True)
+    sim = simulate_scans(world.spec, world.name)
+    return LoadedWorld(sim.name, sim.scans, sim.labels, inputs.algorithm, inputs.adapter_options,
+                       inputs.space, inputs.length_m, inputs.penalty_pct)
 
 
 def write_world(folder: Path, result: WorldResult) -> None:

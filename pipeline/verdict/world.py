@@ -1,10 +1,11 @@
-"""One simulated world, decoded once, on which every setting runs (``LoadedWorld``).
+"""One simulated world, held in memory, on which every setting runs (``LoadedWorld``).
 
 A world of a suite is run many times: baseline, fixed and adaptive, each on the nominal
-parameters and on every replica, and the headroom study's candidates. Decoding its MCAP and
-down-sampling its scans (``Adapter.warm``) cost more than an NDT run on the cached scans, so
-they happen once: the scans stay decoded in memory (a 1200-frame HDL-64E world takes about
-2.4 GB) and every run goes over them.
+parameters and on every replica, and the headroom study's candidates. Simulating it and
+down-sampling its scans (``Adapter.warm``) cost more than an NDT run on them, so they happen
+once: the scans are simulated straight into memory (``pipeline.sim.simulate.simulate_scans``:
+no MCAP is written, compressed and decoded again for a world that is thrown away; a 1200-frame
+HDL-64E world takes about 2.4 GB) and every run goes over them.
 
 A run on replica r (``pipeline.evaluate.replicas``: r = 0 the nominal parameters, r >= 1 every
 parameter times the factor drawn from (the world's name, r), the adaptive schedule scaled as a
@@ -19,15 +20,15 @@ import logging
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.errors import OdometryError
+from pipeline.errors import InputError, OdometryError
 from pipeline.odometry.base import Schedule
 from pipeline.selection import SelectionSettings
+from pipeline.sequence import Scan
 
 log = logging.getLogger(__name__)
 
@@ -47,21 +48,23 @@ class Selection:
 
 
 class LoadedWorld:
-    """A sequence MCAP decoded once with the adapter warmed over its scans (module docstring).
+    """A world's scans held in memory with the adapter warmed over them (module docstring).
 
-    ``stamps_ns`` and ``__getitem__`` make it a reader for ``Selector`` (the scans' points)."""
+    ``scans``: every frame in order, each with its ground-truth pose; ``labels``: each frame's
+    environment label. ``stamps_ns`` and ``__getitem__`` make it a reader for ``Selector``."""
 
-    def __init__(self, path: Path, algorithm: str, adapter_options: Mapping[str, Any] | None,
-                 space: Any, length_m: float, penalty_pct: float) -> None:
+    def __init__(self, name: str, scans: list[Scan], labels: list[str], algorithm: str,
+                 adapter_options: Mapping[str, Any] | None, space: Any, length_m: float,
+                 penalty_pct: float) -> None:
         from pipeline.odometry.registry import build_adapter
-        from pipeline.sequence import SequenceReader
 
-        self.name = path.stem
-        self.path = path
-        with SequenceReader(path) as reader:
-            self.gt = reader.require_ground_truth("to score the verdict's runs against")
-            self.labels = [reader.info.label_of(i) or "" for i in range(len(reader))]
-            self.scans = list(reader)
+        if len(labels) != len(scans) or any(s.T_world_lidar is None for s in scans):
+            raise InputError(f"{name}: {len(scans)} scans, {len(labels)} labels; every scan "
+                             "needs a ground-truth pose to score the verdict's runs against")
+        self.name = name
+        self.scans = scans
+        self.labels = labels
+        self.gt = np.stack([s.T_world_lidar for s in scans])
         self.stamps_ns = np.array([s.stamp_ns for s in self.scans], np.int64)
         self.adapter = build_adapter(algorithm, adapter_options, space)
         warm = getattr(self.adapter, "warm", None)
@@ -118,7 +121,7 @@ class LoadedWorld:
                         replica_scale)
             setting = perturbed(params_or_schedule, self.adapter.space, f)
         try:
-            traj = run_scans(self.adapter, self.scans, self.stamps_ns, setting, str(self.path))
+            traj = run_scans(self.adapter, self.scans, self.stamps_ns, setting, self.name)
         except OdometryError as exc:
             log.info("%s replica %d: %s", self.name, replica, exc)
             return np.where(self.scored, self.penalty_pct, np.nan), True
