@@ -156,8 +156,8 @@ class SimulatedScans:
 
 def simulate_scans(spec: SimSpec, name: str) -> SimulatedScans:
     """Simulate ``spec`` into memory, for a world that is run and thrown away (the verdict's
-    suites): the same scans as ``simulate_sequence`` writes, without encoding, compressing
-    and decoding them (about a third of a suite world's time, docs/design.md "The verdict")."""
+    suites): the same scans as ``simulate_sequence`` writes, without encoding, compressing and
+    decoding them (x0.71 of a suite's wall time: docs/performance.md, "The verdict's suites")."""
     world = make_world(spec)
     scans = list(iter_scans(world, spec.sensor_model(), spec.seed, motion=spec.motion))
     return SimulatedScans(check_plain_name(name, "the sequence name"), scans,
