@@ -60,7 +60,7 @@ def _best(fn: Callable[[SimSpec, str], int], spec: SimSpec, name: str, repeat: i
 def _in_memory(spec: SimSpec, name: str) -> int:
     from pipeline.sim.simulate import simulate_scans
 
-    return len(simulate_scans(spec, name).scans)
+    return len(simulate_scans(spec).scans)
 
 
 def _through_mcap(spec: SimSpec, name: str) -> int:

@@ -149,19 +149,17 @@ class SimulatedScans:
     lidar frame, the ground-truth pose, per-point times where swept) and each frame's
     environment label. What ``simulate_sequence`` writes and ``SequenceReader`` gives back."""
 
-    name: str
     scans: list[Scan]
     labels: list[str]
 
 
-def simulate_scans(spec: SimSpec, name: str) -> SimulatedScans:
+def simulate_scans(spec: SimSpec) -> SimulatedScans:
     """Simulate ``spec`` into memory, for a world that is run and thrown away (the verdict's
     suites): the same scans as ``simulate_sequence`` writes, without encoding, compressing and
     decoding them (x0.71 of a suite's wall time: docs/performance.md, "The verdict's suites")."""
     world = make_world(spec)
     scans = list(iter_scans(world, spec.sensor_model(), spec.seed, motion=spec.motion))
-    return SimulatedScans(check_plain_name(name, "the sequence name"), scans,
-                          list(world.poses.frame_labels))
+    return SimulatedScans(scans, list(world.poses.frame_labels))
 
 
 def simulate_sequence(

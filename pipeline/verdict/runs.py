@@ -214,8 +214,8 @@ def load_world(world: VerdictWorld, inputs: SuiteInputs) -> Any:
     from pipeline.sim.simulate import simulate_scans
     from pipeline.verdict.world import LoadedWorld
 
-    sim = simulate_scans(world.spec, world.name)
-    return LoadedWorld(sim.name, sim.scans, sim.labels, inputs.algorithm, inputs.adapter_options,
+    sim = simulate_scans(world.spec)
+    return LoadedWorld(world.name, sim.scans, sim.labels, inputs.algorithm, inputs.adapter_options,
                        inputs.space, inputs.length_m, inputs.penalty_pct)
 
 

@@ -58,9 +58,12 @@ class LoadedWorld:
                  penalty_pct: float) -> None:
         from pipeline.odometry.registry import build_adapter
 
-        if len(labels) != len(scans) or any(s.T_world_lidar is None for s in scans):
-            raise InputError(f"{name}: {len(scans)} scans, {len(labels)} labels; every scan "
-                             "needs a ground-truth pose to score the verdict's runs against")
+        if len(labels) != len(scans):
+            raise InputError(f"{name}: {len(scans)} scans, {len(labels)} labels (one a frame)")
+        missing = [s.frame for s in scans if s.T_world_lidar is None]
+        if missing:
+            raise InputError(f"{name}: frame {missing[0]} needs a ground-truth pose to score the "
+                             f"verdict's runs against ({len(missing)} frames have none)")
         self.name = name
         self.scans = scans
         self.labels = labels

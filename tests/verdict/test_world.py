@@ -11,7 +11,7 @@ import pytest
 
 from pipeline.errors import InputError
 from pipeline.odometry.ndt import SPACE
-from pipeline.sequence import SequenceReader
+from pipeline.sequence import Scan, SequenceReader
 from pipeline.sim.dataset import SimulateSection
 from pipeline.sim.simulate import simulate_scans, simulate_sequence
 from pipeline.verdict.section import VerdictSection
@@ -27,13 +27,13 @@ def _world(sensor: str) -> VerdictWorld:
     return replace(w, spec=replace(w.spec, frames=FRAMES))
 
 
-def _loaded(name: str, scans: list, labels: list[str]) -> LoadedWorld:
+def _loaded(name: str, scans: list[Scan], labels: list[str]) -> LoadedWorld:
     return LoadedWorld(name, scans, labels, "ndt", None, SPACE, 5.0, 100.0)
 
 
 def test_a_world_in_memory_is_the_world_its_mcap_gives_back(tmp_path: Path) -> None:
     world = _world("hdl32")
-    memory = simulate_scans(world.spec, world.name)
+    memory = simulate_scans(world.spec)
     path = simulate_sequence(world.spec, tmp_path / f"{world.name}.mcap", name=world.name).path
     with SequenceReader(path) as reader:
         decoded = list(reader)
@@ -58,9 +58,9 @@ def test_a_world_in_memory_is_the_world_its_mcap_gives_back(tmp_path: Path) -> N
 
 def test_a_world_without_ground_truth_or_labels_is_refused() -> None:
     world = _world("hdl32")
-    sim = simulate_scans(replace(world.spec, frames=3), world.name)
+    sim = simulate_scans(replace(world.spec, frames=3))
     with pytest.raises(InputError, match="3 scans, 2 labels"):
         _loaded(world.name, sim.scans, sim.labels[:2])
     sim.scans[1] = replace(sim.scans[1], T_world_lidar=None)
-    with pytest.raises(InputError, match="needs a ground-truth pose"):
+    with pytest.raises(InputError, match="frame 1 needs a ground-truth pose"):
         _loaded(world.name, sim.scans, sim.labels)
