@@ -96,7 +96,7 @@ def tuning_suite(params_path: Path, out: Path) -> None:
 
     section, settings = load_settings(params_path)
     worlds = simulate_tuning_suite(tuning_worlds(section, settings.template), out,
-                                   section.workers)
+                                   section.workers, section.tuning.compression)
     for w in worlds:
         click.echo(f"{out / w.name}.mcap: {w.description}", err=True)
     click.echo(f"{out / 'index.json'}: {len(worlds)} worlds", err=True)

@@ -13,6 +13,7 @@ from pydantic import Field, field_validator
 from pipeline.config import Section
 from pipeline.io_utils import output_folder
 from pipeline.progress import PROGRESS
+from pipeline.sequence import Compression
 from pipeline.sequence_index import write_index
 from pipeline.sim.effects import SensorEffects
 from pipeline.sim.route import LABELS
@@ -21,6 +22,7 @@ from pipeline.sim.simulate import (
     MotionMode,
     SimSpec,
     SimSummary,
+    costliest_first,
     derive_seed,
     simulate_sequence,
 )
@@ -110,21 +112,22 @@ def simulate_set(
 
 
 def simulate_folder(specs: Mapping[str, SimSpec], index: Mapping[str, list[str]],
-                    out_dir: str | Path, workers: int, progress: bool = False
-                    ) -> list[SimSummary]:
-    """A sequences folder: ``out_dir``/<name>.mcap for every spec, then ``index`` (split ->
-    names) as its index.json, written last; returns what was written, in ``specs``' order.
+                    out_dir: str | Path, workers: int, progress: bool = False,
+                    compression: Compression = "zstd") -> list[SimSummary]:
+    """A sequences folder: ``out_dir``/<name>.mcap for every spec (chunks compressed by
+    ``compression``), then ``index`` (split -> names) as its index.json, written last; returns
+    what was written, in ``specs``' order.
 
-    ``workers`` sequences at a time in spawned processes, the longest first; each sequence
-    depends only on its own spec, so the files are the same whatever ``workers``.
-    ``progress``: a bar per sequence (one worker only); a log line per finished sequence
-    otherwise."""
+    ``workers`` sequences at a time in spawned processes, the costliest first
+    (``costliest_first``); each sequence depends only on its own spec, so the files are the
+    same whatever ``workers``. ``progress``: a bar per sequence (one worker only); a log line
+    per finished sequence otherwise."""
     out = output_folder(Path(out_dir))
     bars = progress and workers == 1
-    jobs = [(spec, out / f"{name}.mcap", name, bars) for name, spec in specs.items()]
-    longest_first = sorted(range(len(jobs)), key=lambda i: -jobs[i][0].frames)
+    jobs = [(spec, out / f"{name}.mcap", name, bars, compression)
+            for name, spec in specs.items()]
     summaries = simulate_all(simulate_sequence, jobs, [job[1] for job in jobs], workers,
-                             not bars, longest_first)
+                             not bars, costliest_first(list(specs.values())))
     write_index(out, dict(index))
     return summaries
 

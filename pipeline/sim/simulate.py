@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from pipeline.errors import ConfigError
 from pipeline.geometry import inv_se3
 from pipeline.io_utils import check_plain_name, refuse_input_as_output
-from pipeline.sequence import EnvLabel, Scan, SequenceInfo, SequenceWriter
+from pipeline.sequence import Compression, EnvLabel, Scan, SequenceInfo, SequenceWriter
 from pipeline.sim.effects import SensorEffects
 from pipeline.sim.kitti_world import KittiWorldEffects, check_kitti_args
 from pipeline.sim.sensors import SENSOR_TITLES, SensorModel, get_sensor
@@ -55,6 +55,12 @@ class SimSpec:
     def sensor_model(self) -> SensorModel:
         return get_sensor(self.sensor, self.effects)
 
+    def rays(self) -> int:
+        """Rays fired over the whole world (frames x beams x azimuths): what simulating it,
+        and running odometry on its points, costs in proportion."""
+        sensor = self.sensor_model()
+        return self.frames * sensor.beams * sensor.azimuths
+
     def check(self) -> None:
         """ConfigError for an unknown world / sensor / segment, a bad frame count or seed."""
         if not 0 <= self.seed < 2**63:
@@ -79,6 +85,13 @@ class SimSummary:
     points: int
     length_m: float
     labels: list[EnvLabel]
+
+
+def costliest_first(specs: Sequence[SimSpec]) -> list[int]:
+    """Indices of ``specs`` by falling ``SimSpec.rays``, ties in list order: the order to start
+    worlds in on a pool, so that no worker is left with a long world at the end (an HDL-64E
+    world costs about twice an HDL-32E one of as many frames)."""
+    return sorted(range(len(specs)), key=lambda i: -specs[i].rays())
 
 
 def derive_seed(base_seed: int, name: str) -> int:
@@ -163,32 +176,34 @@ def simulate_scans(spec: SimSpec) -> SimulatedScans:
 
 
 def simulate_sequence(
-    spec: SimSpec, out_path: str | Path, name: str | None = None, progress: bool = False
+    spec: SimSpec, out_path: str | Path, name: str | None = None, progress: bool = False,
+    compression: Compression = "zstd",
 ) -> SimSummary:
-    """Simulate ``spec`` and write the sequence MCAP at ``out_path`` (atomically)."""
+    """Simulate ``spec`` and write the sequence MCAP at ``out_path`` (atomically), its chunks
+    compressed by ``compression``."""
     refuse_input_as_output(out_path, [spec.kitti_trajectory])
     name = check_plain_name(name or Path(out_path).stem, "the sequence name")  # before the work
     world = make_world(spec)
     source = "simulation:" + (f"kitti {Path(spec.kitti_trajectory).name}"
                               if spec.kitti_trajectory else spec.world)
     return write_world(world, spec.sensor_model(), spec.seed, out_path,
-                       name, source, _extra(spec, world), progress, spec.motion)
+                       name, source, _extra(spec, world), progress, spec.motion, compression)
 
 
 def write_world(world: World, sensor: SensorModel, seed: int, out_path: str | Path, name: str,
                 source: str, extra: dict[str, str], progress: bool = False,
-                motion: MotionMode = "none") -> SimSummary:
+                motion: MotionMode = "none", compression: Compression = "zstd") -> SimSummary:
     """Ray-cast every frame of ``world`` (noise from ``seed``, sweeps by ``motion``, as
-    ``iter_scans``) into the sequence MCAP ``out_path`` (atomically), labels per frame range
-    from the world's poses. ``progress``: a bar on a terminal, log lines elsewhere
-    (``pipeline.progress``)."""
+    ``iter_scans``) into the sequence MCAP ``out_path`` (atomically, chunks compressed by
+    ``compression``), labels per frame range from the world's poses. ``progress``: a bar on a
+    terminal, log lines elsewhere (``pipeline.progress``)."""
     from pipeline.progress import progress as shown
 
     labels = label_ranges(world.poses.frame_labels)
     info = SequenceInfo(name=name, sensor=SENSOR_TITLES[sensor.name], source=source,
                         labels=labels, extra=extra)
     points = 0
-    with SequenceWriter(out_path, info) as w:
+    with SequenceWriter(out_path, info, compression=compression) as w:
         scans = iter_scans(world, sensor, seed, motion=motion)
         for scan in shown(scans, world.frames, f"simulate {name}", "scan", enabled=progress):
             w.add(scan.stamp_ns, scan.points_lidar, scan.T_world_lidar, scan.time_s)

@@ -22,6 +22,7 @@ start from it).
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import time
@@ -146,21 +147,26 @@ class WorldResult:
 
 def run_suite(worlds: Sequence[VerdictWorld], inputs: SuiteInputs, out_dir: Path,
               workers: int) -> list[WorldResult]:
-    """Score every world (module docstring); ``out_dir`` is written atomically."""
+    """Score every world (module docstring), the costliest started first; ``out_dir`` is
+    written atomically."""
     from pipeline.executor import map_in_processes
     from pipeline.io_utils import atomic_dir
+    from pipeline.sim.simulate import costliest_first
 
     PROGRESS.info("%d worlds (%d frames), %d replicas, %d workers", len(worlds),
                   sum(w.spec.frames for w in worlds), inputs.replicas, workers)
     t0 = time.monotonic()
+    finished = itertools.count(1)
     with atomic_dir(out_dir) as tmp:
         return map_in_processes(score_world, [(w, inputs, tmp) for w in worlds], workers,
-                                on_done=lambda i, r: _logged(r, i, len(worlds), t0))
+                                on_done=lambda _, r: _logged(r, next(finished), len(worlds), t0),
+                                order=costliest_first([w.spec for w in worlds]))
 
 
-def _logged(result: WorldResult, i: int, n: int, t0: float) -> WorldResult:
+def _logged(result: WorldResult, finished: int, n: int, t0: float) -> WorldResult:
+    """A progress line for the ``finished``-th world of ``n`` to finish."""
     m = {s: result.median(s) for s in result.settings}
-    PROGRESS.info("[%d/%d] %s (%s, %s, %d frames): %s; %.0f s (%.0f s in all)", i + 1, n,
+    PROGRESS.info("[%d/%d] %s (%s, %s, %d frames): %s; %.0f s (%.0f s in all)", finished, n,
                   result.name, "-".join(result.segments), result.sensor, result.frames,
                   ", ".join(f"{s} {v:.3f} %" for s, v in m.items()), result.wall_time_s,
                   time.monotonic() - t0)

@@ -15,6 +15,7 @@ from pydantic import Field, field_validator, model_validator
 
 from pipeline.config import Section
 from pipeline.generalization.suite import labels_rule, range_rule, seed_roots_rule
+from pipeline.sequence import Compression
 from pipeline.sim.route import LABELS
 from pipeline.sim.sensors import SensorName
 
@@ -84,10 +85,14 @@ class Suites(Section):
 class TuningDraw(Section):
     """The coverage model's tuning suite (``pipeline.verdict.tuning``): ``worlds`` worlds drawn
     exactly as the in-distribution suites draw theirs (``suites.id``: its sensors, labels,
-    segments and frames) from ``seed_root``, a root of its own (frozen with the others)."""
+    segments and frames) from ``seed_root``, a root of its own (frozen with the others).
+    compression: of the worlds' MCAPs (``pipeline.sequence.Compression``); ``none`` by default:
+    three stages read them again at once, and zstd would save a quarter of their size at x3
+    the write and x2 the read (docs/performance.md, "The verdict's suites")."""
 
     seed_root: int = 45453
     worlds: int = Field(default=24, ge=1)
+    compression: Compression = "none"
 
 
 class VerdictSection(Section):

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from pipeline.sequence import Compression
 from pipeline.sim.simulate import SimSpec
 from pipeline.verdict.section import VerdictSection
 from pipeline.verdict.worlds import VerdictWorld, check_generator, world_of
@@ -42,11 +43,13 @@ def tuning_index(worlds: list[VerdictWorld]) -> dict[str, list[str]]:
     return index
 
 
-def simulate_tuning_suite(worlds: list[VerdictWorld], out_dir: str | Path,
-                          workers: int) -> list[VerdictWorld]:
-    """Write ``out_dir``/<name>.mcap for every world (``workers`` at a time, the longest first;
-    each world depends on its own spec alone) and the index (``tuning_index``) last."""
+def simulate_tuning_suite(worlds: list[VerdictWorld], out_dir: str | Path, workers: int,
+                          compression: Compression = "none") -> list[VerdictWorld]:
+    """Write ``out_dir``/<name>.mcap for every world (``workers`` at a time, the costliest
+    first; each world depends on its own spec alone; chunks compressed by ``compression``:
+    ``verdict.tuning.compression``) and the index (``tuning_index``) last."""
     from pipeline.sim.dataset import simulate_folder
 
-    simulate_folder({w.name: w.spec for w in worlds}, tuning_index(worlds), out_dir, workers)
+    simulate_folder({w.name: w.spec for w in worlds}, tuning_index(worlds), out_dir, workers,
+                    compression=compression)
     return worlds
