@@ -6,8 +6,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.mcap_chunks import chunk_compressions
 
-from pipeline.errors import InputError
+from pipeline.errors import ConfigError, InputError
 from pipeline.geometry import pose_from_xyz_quat
 from pipeline.ros2_cdr import POINTCLOUD2, POSE_STAMPED, TF_MESSAGE
 from pipeline.sequence import (
@@ -21,12 +22,13 @@ from pipeline.sequence import (
 )
 
 
-def _write(path: Path, rng: np.random.Generator, n: int = 5, gt: bool = True) -> list[np.ndarray]:
+def _write(path: Path, rng: np.random.Generator, n: int = 5, gt: bool = True,
+           compression: str = "zstd") -> list[np.ndarray]:
     clouds = []
     info = SequenceInfo(
         name="t", sensor="hdl32", source="test", labels=[EnvLabel(0, n - 1, "cave")]
     )
-    with SequenceWriter(path, info) as w:
+    with SequenceWriter(path, info, compression=compression) as w:  # type: ignore[arg-type]
         for i in range(n):
             pts = rng.normal(size=(100 + i, 4)).astype(np.float32)
             T = pose_from_xyz_quat(
@@ -47,6 +49,25 @@ def test_round_trip_random_access_and_iteration(tmp_path: Path, rng: np.random.G
         assert [s.frame for s in scans] == list(range(5))
         np.testing.assert_allclose(scans[2].T_world_lidar[:3, 3], [2, 1, 0], atol=1e-12)
         np.testing.assert_array_equal(scans[4].points_lidar, clouds[4])
+
+
+def test_uncompressed_chunks_read_back_the_same(tmp_path: Path) -> None:
+    """``compression="none"`` writes chunks without zstd (larger) that read back exactly what
+    the zstd file holds; another compression is refused naming the choices."""
+    zstd, none = tmp_path / "z.mcap", tmp_path / "n.mcap"
+    clouds = _write(zstd, np.random.default_rng(3))
+    _write(none, np.random.default_rng(3), compression="none")
+    assert chunk_compressions(zstd) == {"zstd"} and chunk_compressions(none) == {""}
+    assert none.stat().st_size > zstd.stat().st_size
+    with SequenceReader(zstd) as a, SequenceReader(none) as b:
+        assert a.info == b.info and np.array_equal(a.stamps_ns, b.stamps_ns)
+        for sa, sb, cloud in zip(a, b, clouds, strict=True):
+            np.testing.assert_array_equal(sb.points_lidar, cloud)
+            np.testing.assert_array_equal(sb.points_lidar, sa.points_lidar)
+            np.testing.assert_array_equal(sb.T_world_lidar, sa.T_world_lidar)
+    with pytest.raises(ConfigError, match="compression must be one of zstd, none, got 'lz4'"):
+        SequenceWriter(tmp_path / "x.mcap", SequenceInfo(name="x"), compression="lz4")  # type: ignore[arg-type]
+    assert not list(tmp_path.glob("x*"))
 
 
 def test_without_ground_truth(tmp_path: Path, rng: np.random.Generator) -> None:

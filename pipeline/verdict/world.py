@@ -60,14 +60,15 @@ class LoadedWorld:
 
         if len(labels) != len(scans):
             raise InputError(f"{name}: {len(scans)} scans, {len(labels)} labels (one a frame)")
-        missing = [s.frame for s in scans if s.T_world_lidar is None]
+        poses = [s.T_world_lidar for s in scans]
+        missing = [s.frame for s, T in zip(scans, poses, strict=True) if T is None]
         if missing:
             raise InputError(f"{name}: frame {missing[0]} needs a ground-truth pose to score the "
                              f"verdict's runs against ({len(missing)} frames have none)")
         self.name = name
         self.scans = scans
         self.labels = labels
-        self.gt = np.stack([s.T_world_lidar for s in scans])
+        self.gt = np.stack([T for T in poses if T is not None])
         self.stamps_ns = np.array([s.stamp_ns for s in self.scans], np.int64)
         self.adapter = build_adapter(algorithm, adapter_options, space)
         warm = getattr(self.adapter, "warm", None)

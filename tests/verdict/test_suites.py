@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from helpers.mcap_chunks import chunk_compressions
 from helpers.verdict_data import world
 
 from pipeline.config import load_params, validate_section
@@ -305,5 +306,6 @@ def test_the_tuning_suite_stage_writes_the_worlds_and_their_index(tmp_path: Path
     for name in index["train"]:
         with SequenceReader(out / f"{name}.mcap") as reader:
             assert len(reader.stamps_ns) == 60 and len(reader.info.labels) == 2
+        assert chunk_compressions(out / f"{name}.mcap") == {""}  # verdict.tuning.compression
     assert sorted(p.name for p in out.iterdir()) == ["id_tune_00.mcap", "id_tune_01.mcap",
                                                     "index.json"]
