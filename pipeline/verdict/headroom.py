@@ -24,6 +24,7 @@ second, which needs every world's candidates, simulates them again and runs the 
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import math
@@ -175,24 +176,31 @@ def _oracle_runs(world: VerdictWorld, loaded: Any, inputs: SuiteInputs, setting:
 def run_headroom(worlds: Sequence[VerdictWorld], inputs: SuiteInputs,
                  candidates: list[Params], period_s: float, out_dir: Path,
                  workers: int) -> tuple[list[CandidateRuns], list[WorldResult]]:
-    """Both passes over ``worlds`` (module docstring); ``out_dir`` written atomically: every
-    world's oracle runs (``<world>/rte.parquet`` and ``world.json``, as the suite's)."""
+    """Both passes over ``worlds`` (module docstring), the costliest worlds started first;
+    ``out_dir`` written atomically: every world's oracle runs (``<world>/rte.parquet`` and
+    ``world.json``, as the suite's)."""
     from pipeline.executor import map_in_processes
     from pipeline.io_utils import atomic_dir, atomic_write_text
+    from pipeline.sim.simulate import costliest_first
     from pipeline.verdict.runs import write_world
 
     PROGRESS.info("headroom: %d worlds, %d candidates", len(worlds), len(candidates))
     t0 = time.monotonic()
+    order = costliest_first([w.spec for w in worlds])
+    firsts, seconds = itertools.count(1), itertools.count(1)
     with atomic_dir(out_dir) as tmp:
         first = map_in_processes(first_pass, [(w, inputs, candidates, period_s)
                                               for w in worlds], workers,
-                                 on_done=lambda i, r: _logged("cross-fitted", r.oracle, i,
-                                                              len(worlds), t0))
+                                 on_done=lambda _, r: _logged("cross-fitted", r.oracle,
+                                                              next(firsts), len(worlds), t0),
+                                 order=order)
         label_rte = {r.name: r.label_rte for r in first}
         second = map_in_processes(second_pass, [(w, inputs, candidates,
                                                  class_choice(w.name, label_rte), period_s)
                                                 for w in worlds], workers,
-                                  on_done=lambda i, r: _logged("class", r, i, len(worlds), t0))
+                                  on_done=lambda _, r: _logged("class", r, next(seconds),
+                                                               len(worlds), t0),
+                                  order=order)
         merged = []
         for a, b in zip(first, second, strict=True):
             both = a.oracle
@@ -208,9 +216,11 @@ def run_headroom(worlds: Sequence[VerdictWorld], inputs: SuiteInputs,
     return first, merged
 
 
-def _logged(what: str, r: WorldResult, i: int, n: int, t0: float) -> Any:
+def _logged(what: str, r: WorldResult, finished: int, n: int, t0: float) -> Any:
+    """A progress line for the ``finished``-th world of ``n`` to finish a pass."""
     setting = next(iter(r.t_err_pct))
-    PROGRESS.info("[%d/%d] %s %s oracle %.3f %%; %.0f s (%.0f s in all)", i + 1, n, r.name, what,
+    PROGRESS.info("[%d/%d] %s %s oracle %.3f %%; %.0f s (%.0f s in all)", finished, n, r.name,
+                  what,
                   r.median(setting), r.wall_time_s, time.monotonic() - t0)
     return r
 
