@@ -59,10 +59,10 @@ LIDAR_FRAME = "lidar"
 META_SEQUENCE = "adaptune.sequence"
 META_FRAMES = "adaptune.frames"
 CHANNEL_TYPES = {POINTS_TOPIC: POINTCLOUD2, GT_TOPIC: POSE_STAMPED}
+"""The message type of every channel SequenceReader decodes."""
 Compression = Literal["zstd", "none"]
 """How a sequence's chunks are compressed (the MCAP compressions a reader takes)."""
 COMPRESSIONS: tuple[str, ...] = get_args(Compression)
-"""The message type of every channel SequenceReader decodes."""
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,7 @@ def tuning_index(worlds: list[VerdictWorld]) -> dict[str, list[str]]:
 
 
 def simulate_tuning_suite(worlds: list[VerdictWorld], out_dir: str | Path, workers: int,
-                          compression: Compression = "none") -> list[VerdictWorld]:
+                          compression: Compression) -> list[VerdictWorld]:
     """Write ``out_dir``/<name>.mcap for every world (``workers`` at a time, the costliest
     first; each world depends on its own spec alone; chunks compressed by ``compression``:
     ``verdict.tuning.compression``) and the index (``tuning_index``) last."""

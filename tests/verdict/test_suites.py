@@ -309,3 +309,20 @@ def test_the_tuning_suite_stage_writes_the_worlds_and_their_index(tmp_path: Path
         assert chunk_compressions(out / f"{name}.mcap") == {""}  # verdict.tuning.compression
     assert sorted(p.name for p in out.iterdir()) == ["id_tune_00.mcap", "id_tune_01.mcap",
                                                     "index.json"]
+
+
+def test_the_tuning_suite_refuses_an_unknown_compression(tmp_path: Path) -> None:
+    """``verdict.tuning.compression: lz4`` ends ``adaptune tuning-suite`` in one line naming
+    the setting and exit code 1, before any world is written."""
+    from click.testing import CliRunner
+
+    from stages.cli import main
+
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump({"verdict": {"tuning": {"compression": "lz4"}}}))
+    out = tmp_path / "tune"
+    res = CliRunner().invoke(main, ["tuning-suite", "--params", str(params), "--out", str(out)])
+    assert res.exit_code == 1
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and "verdict.tuning.compression" in lines[0] and "lz4" in lines[0]
+    assert not out.exists()
