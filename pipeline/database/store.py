@@ -132,15 +132,28 @@ def load_sequences(con: duckdb.DuckDBPyConnection, sequences_dir: Path) -> None:
         con.execute("INSERT INTO sequences VALUES (?, ?, ?, ?, ?, ?, ?)",
                     [name, str(path), len(stamps_ns), info.sensor, info.source,
                      splits.get(name), json.dumps(labels)])
-        frames = np.arange(len(stamps_ns), dtype=np.int32)
-        label_rows = [(name, int(f), lab) for a, b, lab in labels
-                      for f in frames[(frames >= a) & (frames <= b)]]
-        if label_rows:
-            con.executemany("INSERT OR REPLACE INTO frame_labels VALUES (?, ?, ?)", label_rows)
+        insert_arrow(con, "frame_labels", frame_label_table(name, len(stamps_ns), labels))
         if gt is None:
             log.warning("%s: no ground truth; its trials cannot be scored", path)
             continue
         insert_arrow(con, "ground_truth", ground_truth_table(name, stamps_ns, gt))
+
+
+def frame_label_table(sequence: str, n_frames: int, labels: list[tuple[int, int, str]]
+                      ) -> pa.Table:
+    """Arrow rows of the frame_labels table for one sequence of ``n_frames`` frames: every
+    frame inside a label's range [start, end] (inclusive) with that label; where ranges overlap
+    (a boundary frame) the later label wins. Built in numpy: DuckDB's ``executemany`` took a
+    minute over a tuning suite's 25,000 frames."""
+    of_frame = np.full(n_frames, None, dtype=object)
+    for start, end, label in labels:
+        first, stop = max(start, 0), min(end + 1, n_frames)
+        if stop > first:
+            of_frame[first:stop] = label
+    frames = np.flatnonzero(of_frame != None)  # noqa: E711 - elementwise test for None
+    return pa.table({"sequence": pa.array([sequence] * len(frames), pa.string()),
+                     "frame": pa.array(frames.astype(np.int32)),
+                     "label": pa.array(of_frame[frames].tolist(), pa.string())})
 
 
 def ground_truth_table(sequence: str, stamps_ns: np.ndarray, gt: np.ndarray) -> pa.Table:

@@ -16,6 +16,7 @@ import pytest
 from click.testing import CliRunner
 from helpers.evaluation_data import cli_fails, gt_path, write_sequence, write_study
 
+from pipeline.database.store import frame_label_table
 from pipeline.errors import InputError
 from pipeline.metrics.kitti import kitti_errors
 from pipeline.metrics.rte import per_frame_rte
@@ -345,3 +346,19 @@ def test_export_cli_round_trip(world: World, tmp_path: Path) -> None:
     cli_fails(["export", str(src), "--format", "kitti", "--out", str(tmp_path / "c.kitti"),
                "--sequence", str(seq), "--frame", "kitti-camera"], "no camera calibration",
               "--calib")
+
+
+def test_frame_labels_keep_the_later_label_at_overlaps_and_clip_to_the_sequence() -> None:
+    """The frame_labels rows of a sequence equal what row-by-row INSERT OR REPLACE gave: every
+    frame of every inclusive range inside the sequence, the later range winning an overlap."""
+    labels = [(-3, 4, "cave"), (4, 9, "open"), (7, 7, "street"), (12, 30, "cave"), (6, 2, "open")]
+    table = frame_label_table("w", 15, labels)
+    expected: dict[int, str] = {}
+    for start, end, label in labels:
+        expected.update({f: label for f in range(15) if start <= f <= end})
+    assert table.column_names == ["sequence", "frame", "label"]
+    pairs = zip(table["frame"].to_pylist(), table["label"].to_pylist(), strict=True)
+    assert dict(pairs) == expected
+    assert table["frame"].to_pylist() == sorted(expected)
+    assert set(table["sequence"].to_pylist()) == {"w"}
+    assert frame_label_table("w", 5, []).num_rows == 0
