@@ -85,23 +85,27 @@ def _start_worker(parent_pid: int, threads: int, memory: str = "") -> None:
 
 
 @contextlib.contextmanager
-def open_executor(workers: int, dask: str | None = None) -> Iterator[Executor]:
+def open_executor(workers: int, dask: str | None = None,
+                  share: int | None = None) -> Iterator[Executor]:
     """A concurrent.futures Executor with ``workers`` processes, shut down on exit.
 
     ``dask=None``: ProcessPoolExecutor (spawn context; its workers end with this process and
-    share this process's threads: ``process_threads() // workers`` each, at least 1, and its
-    memory: ``worker_memory_bytes() // workers`` each, which sizes their scan caches).
+    share this process's threads: ``process_threads() // share`` each, at least 1, and its
+    memory: ``worker_memory_bytes() // share`` each, which sizes their scan caches; ``share``
+    is the number of processes started here that run at once, default ``workers``: more when
+    several pools run side by side).
     ``"local"``: a Dask LocalCluster (``workers`` processes, one thread each, the memory shared
     the same way). An address: a
     client of that scheduler, whose workers may be started the plain way (``dask worker
     tcp://...``): trial servers are started with subprocess, which daemonic processes may do.
     """
     if dask is None:
+        share = workers if share is None else share
         pool = ProcessPoolExecutor(max_workers=workers,
                                    mp_context=multiprocessing.get_context("spawn"),
                                    initializer=_start_worker,
-                                   initargs=(os.getpid(), max(1, process_threads() // workers),
-                                             _memory_share(workers)))
+                                   initargs=(os.getpid(), max(1, process_threads() // share),
+                                             _memory_share(share)))
         try:
             yield pool
         except BaseException:  # Ctrl-C, SIGTERM, an error: do not wait for running trials

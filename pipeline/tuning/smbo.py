@@ -12,6 +12,12 @@ sequence (``joint=False``) or one study whose objective is the mean over all seq
 3. after every finished trial rewrites the trials table atomically, so a kill loses at most the
    trials in flight, and a restart runs exactly the missing trial ids 0..iterations-1.
 
+Where the studies run (``drive``): one after another on one pool of W workers, or, on a
+process pool opened here with several studies and no halving, side by side (``side_by_side``):
+W single-process pools, each running one study at a time, the largest first, a pool left
+without a study taking trials of the last ones. The trials and their results are the same
+either way (docs/design.md, "Trials").
+
 Failures: a trial whose odometry fails is *failed* and scored with the penalty. A trial the
 machinery lost (its process killed from outside, a broken executor) is run again, up to
 ``retries`` times; after that it is stored as *lost*, the study stops proposing, and the run
@@ -21,10 +27,11 @@ ends with an InfrastructureError once the other studies are done; a resume runs 
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -188,6 +195,7 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
     ``warm_start``: parameters every study tries first, after its baseline (trials 1..n; e.g.
     the predicted best ones for the joint study: ``warm_start.warm_start_params``).
     ``on_trial(study, result)`` is called after each finished trial is saved.
+    Several studies on a process pool of its own run side by side (``side_by_side``).
     InfrastructureError when trials were lost beyond ``settings.retries`` (all others saved).
     """
     adapter = study_adapter(settings)
@@ -195,15 +203,18 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
     for study in studies:
         for _, path in study.sequences:
             check_scorable(path, settings.length_m)
-    summaries = []
-    with exclusive_folder(out_dir, "another adaptune trials"), \
-            TrialExecutor(settings, executor) as pool:
+    lanes = side_by_side(settings, len(studies), executor)
+    order = costliest_studies(studies) if lanes > 1 else studies
+    with exclusive_folder(out_dir, "another adaptune trials"), contextlib.ExitStack() as stack:
+        pools = [stack.enter_context(TrialExecutor(settings, executor, workers=1 if lanes > 1
+                                                   else None)) for _ in range(lanes)]
         waits = settings.stopping.kind == "halving" and settings.time_limit_s is None
-        check_shared(pool.executor, [p for s in studies for _, p in s.sequences], out_dir,
+        check_shared(pools[0].executor, [p for s in studies for _, p in s.sequences], out_dir,
                      settings.workers if waits else 0)
-        for study in studies:
-            summaries.append(run_study(study, adapter, pool, Path(out_dir), settings, seed,
-                                       progress, on_trial, warm_start))
+        runs = [functools.partial(StudyRun, study, adapter, Path(out_dir), settings, seed,
+                                  progress, on_trial, warm_start) for study in order]
+        done = dict(zip([s.name for s in order], drive(runs, pools), strict=True))
+    summaries = [done[s.name] for s in studies]
     lost = [(s, r) for s in summaries for r in s.lost]
     if lost:
         s, r = lost[0]
@@ -212,6 +223,190 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
             f"{s.sequence} trial {r.trial}: {r.error}; finished trials are saved, run again to "
             "resume")
     return summaries
+
+
+def side_by_side(settings: TrialsSection, studies: int, executor: Executor | None) -> int:
+    """How many studies run at once: ``settings.workers`` on a process pool opened here (one
+    single-process pool a study, ``drive``'s lanes) when there are several studies and no
+    successive halving, else 1 (the studies one after another on the W workers of one pool).
+
+    Why: a worker decodes and warms the sequences of every study it runs a trial of (a tuning
+    suite's HDL-64E world: 5-10 s), so on one shared pool every worker warms every study, and
+    the told lag idles a worker when a trial is slower than the ones after it. Side by side
+    each study is warmed once and its trials run back to back; the trials, their proposals
+    and their results are the same (``told_lag`` is the settings' own). Not with halving: a
+    trial waits at its rung for the study's other trials in flight, which would queue behind
+    it on the same worker."""
+    if executor is not None or settings.dask is not None or settings.stopping.kind == "halving":
+        return 1
+    return max(1, min(settings.workers, studies))
+
+
+def costliest_studies(studies: Sequence[Study]) -> list[Study]:
+    """``studies``, the largest first by the decoded size of their sequences (what a trial's
+    odometry goes through), so that the last study to start is a small one (LPT order)."""
+    from pipeline.tuning.worker import decoded_bytes
+
+    size = {s.name: sum(decoded_bytes(p) for _, p in s.sequences) for s in studies}
+    return sorted(studies, key=lambda s: -size[s.name])
+
+
+def drive(runs: Sequence[Callable[[], StudyRun]], lanes: Sequence[TrialExecutor]
+          ) -> list[StudySummary]:
+    """Run the studies ``runs`` makes (in order; each made when it starts) on ``lanes`` and
+    return their summaries in that order.
+
+    Each lane runs one study at a time, its home: one lane (a pool of W workers) runs the
+    studies one after another with W trials in flight. With several lanes (one worker each),
+    a lane whose study is over takes the next; with none left, it takes the trials of running
+    studies whose home lane is busy, so the last study does not run on one worker alone."""
+    pending = list(enumerate(runs))[::-1]
+    home: dict[int, tuple[int, StudyRun]] = {}
+    load = [0] * len(lanes)
+    in_flight: dict[Future[TrialResult], tuple[int, int, StudyRun, TrialJob]] = {}
+    summaries: dict[int, StudySummary] = {}
+    with contextlib.ExitStack() as shown:
+        while pending or home:
+            for lane in range(len(lanes)):
+                if lane not in home and pending:
+                    i, make = pending.pop()
+                    home[lane] = (i, shown.enter_context(make()))
+            for lane, (i, run) in sorted(home.items(), key=lambda kv: kv[1][0]):
+                while run.can_start():
+                    at = _lane_for(lane, load, home, len(lanes) > 1)
+                    job = run.next_job()
+                    in_flight[lanes[at].submit(job)] = (at, i, run, job)
+                    load[at] += 1
+            for lane, (i, run) in list(home.items()):
+                if run.over():
+                    summaries[i] = run.summary()
+                    del home[lane]
+            if not in_flight:
+                continue
+            finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
+            for fut in sorted(finished, key=lambda f: (in_flight[f][1], in_flight[f][3].trial)):
+                at, i, run, job = in_flight.pop(fut)
+                load[at] -= 1
+                if run.finish(job, _result_of(fut, job)):  # lost: again, on the same lane
+                    in_flight[lanes[at].submit(job)] = (at, i, run, job)
+                    load[at] += 1
+    return [summaries[i] for i in range(len(runs))]
+
+
+def _lane_for(lane: int, load: list[int], home: Mapping[int, Any], stealing: bool) -> int:
+    """Where a trial of the study at home on ``lane`` runs: there, unless its worker is busy
+    and a lane with no study of its own is idle (``stealing``: several single-worker lanes)."""
+    if not stealing or load[lane] == 0:
+        return lane
+    idle = [k for k in range(len(load)) if k not in home and load[k] == 0]
+    return idle[0] if idle else lane
+
+
+class StudyRun:
+    """One study (or its resumption) as ``drive`` runs it: which trial may start
+    (``can_start``, ``next_job``), what a finished one changes (``finish``), when it is over and
+    its summary. A context manager: its progress is shown while it is entered.
+
+    Up to ``settings.workers`` trials are in flight; trial t starts once trials 0..t-lag are
+    finished (``told_lag``) and is proposed from exactly those, so where and in which order
+    its trials run changes nothing. A lost trial runs again up to ``settings.retries`` times;
+    after that the study stops starting trials."""
+
+    def __init__(self, study: Study, adapter: Adapter, out_dir: Path, settings: TrialsSection,
+                 seed: int, progress: bool = True,
+                 on_trial: Callable[[Study, TrialResult], None] | None = None,
+                 warm_start: Sequence[Params] = ()) -> None:
+        space = adapter.space
+        self.study, self.adapter, self.out_dir = study, adapter, out_dir
+        self.settings, self.seed, self.on_trial = settings, seed, on_trial
+        self.table = trials_path(out_dir, adapter.name, study.name)
+        self.first = [space.validate(p) for p in warm_start]
+        self.fingerprint = study_of(study, adapter, settings, seed, stored=read_study(self.table),
+                                    warm_start=self.first)
+        if self.table.is_file():
+            check_fingerprint(read_study(self.table), self.fingerprint, str(self.table))
+        stored = [r for r in read_trials(self.table, space) if r.trial < settings.iterations]
+        self.pruner = study_pruner(study, settings)
+        self.done = self.pruner.restore(
+            {r.trial: r for r in stored if r.status != "lost"},
+            lambda tid: read_trial_trajectories(out_dir, adapter.name, study.sequences, tid))
+        self.lost: dict[int, TrialResult] = {}
+        self.proposed = {t: r.params for t, r in self.done.items()}
+        self.todo = [t for t in range(settings.iterations) if t not in self.done]
+        self.ran = 0
+        self.running = 0
+        self.attempts: dict[int, int] = {}
+        if self.done:
+            log.info("%s %s: resuming, %d of %d trials finished", adapter.name, study.name,
+                     len(self.done), settings.iterations)
+        self.lag = told_lag(settings.workers)
+        self.search = TpeSearch(space, seed, settings.startup_trials)
+        self.board = study_board(self.pruner, out_dir, adapter.name, study.name, self.done)
+        self.shown = StudyProgress(f"trials {adapter.name} {study.name}", settings.iterations,
+                                   len(self.done), progress)
+
+    def __enter__(self) -> StudyRun:
+        self.shown.__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.shown.__exit__(*exc)
+
+    def can_start(self) -> bool:
+        """Whether the next trial may start now."""
+        return bool(self.todo and not self.lost and self.running < self.settings.workers
+                    and all(t in self.done for t in range(self.todo[0] - self.lag + 1)))
+
+    def next_job(self) -> TrialJob:
+        """The job of the next trial (proposed now), counted as running."""
+        tid = self.todo.pop(0)
+        self.proposed[tid] = (self.first[tid - 1] if 0 < tid <= len(self.first)
+                              else propose(self.search, tid, self.done, self.proposed, self.lag,
+                                           self._told_loss))
+        self.running += 1
+        return make_job(self.study, self.adapter, tid, trial_seed(self.seed, tid),
+                        self.proposed[tid], self.out_dir, self.settings,
+                        **self.pruner.job_fields(tid, self.done, self.lag, self.board))
+
+    def _told_loss(self, r: TrialResult) -> float:
+        return self.pruner.rule.told_loss(r.status, r.objective, self.settings.penalty_pct)
+
+    def finish(self, job: TrialJob, result: TrialResult) -> bool:
+        """Record the ``result`` of ``job`` (saved in the trials table); True when the job is
+        to run again (lost, within its retries: it counts as running still)."""
+        if result.status == "lost":
+            self.attempts[job.trial] = self.attempts.get(job.trial, 0) + 1
+            if self.attempts[job.trial] <= self.settings.retries:
+                log.warning("%s %s trial %d lost (%s); running it again", self.adapter.name,
+                            self.study.name, job.trial, result.error)
+                if self.board is not None:
+                    self.board.clear(job.trial)
+                return True
+            self.lost[job.trial] = result
+            if self.board is not None:  # later trials stop waiting for it
+                self.board.end(job.trial)
+        else:
+            self.done[job.trial] = result
+        self.running -= 1
+        write_trials(self.table, self.adapter.space, [*self.done.values(), *self.lost.values()],
+                     self.fingerprint)
+        self.ran += 1
+        self.shown.update({**self.done, **self.lost})
+        if result.status == "failed":
+            log.debug("trial %d failed: %s", result.trial, result.error)
+        if self.on_trial is not None:
+            self.on_trial(self.study, result)
+        return False
+
+    def over(self) -> bool:
+        """Nothing running and nothing that may start: every trial finished, or one lost."""
+        return not self.running and not self.can_start()
+
+    def summary(self) -> StudySummary:
+        """Counts, the best trial and the lost trials."""
+        summary = summarize(self.adapter.name, self.study.name, self.done, self.ran, self.table)
+        summary.lost = sorted(self.lost.values(), key=lambda r: r.trial)
+        return summary
 
 
 def study_adapter(settings: TrialsSection) -> Adapter:
@@ -259,82 +454,6 @@ def check_scorable(path: str | Path, length_m: float) -> None:
     from pipeline.tuning.job import TRIALS_PURPOSE
 
     check_ground_truth(read_ground_truth(path, TRIALS_PURPOSE), length_m, str(path))
-
-
-def run_study(study: Study, adapter: Adapter, pool: TrialExecutor, out_dir: Path,
-              settings: TrialsSection, seed: int, progress: bool = True,
-              on_trial: Callable[[Study, TrialResult], None] | None = None,
-              warm_start: Sequence[Params] = ()) -> StudySummary:
-    """Run (or resume) one study until trials 0..iterations-1 are all finished."""
-    space = adapter.space
-    table = trials_path(out_dir, adapter.name, study.name)
-    first = [space.validate(p) for p in warm_start]
-    fingerprint = study_of(study, adapter, settings, seed, stored=read_study(table),
-                           warm_start=first)
-    if table.is_file():
-        check_fingerprint(read_study(table), fingerprint, str(table))
-    stored = [r for r in read_trials(table, space) if r.trial < settings.iterations]
-    pruner = study_pruner(study, settings)
-    done = pruner.restore(
-        {r.trial: r for r in stored if r.status != "lost"},
-        lambda tid: read_trial_trajectories(out_dir, adapter.name, study.sequences, tid))
-    lost: dict[int, TrialResult] = {}
-    proposed = {t: r.params for t, r in done.items()}
-    todo = [t for t in range(settings.iterations) if t not in done]
-    ran = 0
-    if done:
-        log.info("%s %s: resuming, %d of %d trials finished", adapter.name, study.name,
-                 len(done), settings.iterations)
-    lag = told_lag(settings.workers)
-    search = TpeSearch(space, seed, settings.startup_trials)
-    board = study_board(pruner, out_dir, adapter.name, study.name, done)
-
-    def told_loss(r: TrialResult) -> float:
-        return pruner.rule.told_loss(r.status, r.objective, settings.penalty_pct)
-
-    attempts: dict[int, int] = {}
-    with StudyProgress(f"trials {adapter.name} {study.name}", settings.iterations, len(done),
-                       progress) as shown:
-        in_flight: dict[Future[TrialResult], TrialJob] = {}
-        while todo or in_flight:
-            while (todo and not lost and len(in_flight) < settings.workers
-                   and all(t in done for t in range(todo[0] - lag + 1))):
-                tid = todo.pop(0)
-                proposed[tid] = (first[tid - 1] if 0 < tid <= len(first)
-                                 else propose(search, tid, done, proposed, lag, told_loss))
-                job = make_job(study, adapter, tid, trial_seed(seed, tid), proposed[tid],
-                               out_dir, settings, **pruner.job_fields(tid, done, lag, board))
-                in_flight[pool.submit(job)] = job
-            if not in_flight:  # nothing can start: a trial before the next one was lost
-                break
-            finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
-            for fut in sorted(finished, key=lambda f: in_flight[f].trial):
-                job = in_flight.pop(fut)
-                result = _result_of(fut, job)
-                if result.status == "lost":
-                    attempts[job.trial] = attempts.get(job.trial, 0) + 1
-                    if attempts[job.trial] <= settings.retries:
-                        log.warning("%s %s trial %d lost (%s); running it again", adapter.name,
-                                    study.name, job.trial, result.error)
-                        if board is not None:
-                            board.clear(job.trial)
-                        in_flight[pool.submit(job)] = job
-                        continue
-                    lost[job.trial] = result
-                    if board is not None:  # later trials stop waiting for it
-                        board.end(job.trial)
-                else:
-                    done[job.trial] = result
-                write_trials(table, space, [*done.values(), *lost.values()], fingerprint)
-                ran += 1
-                shown.update({**done, **lost})
-                if result.status == "failed":
-                    log.debug("trial %d failed: %s", result.trial, result.error)
-                if on_trial is not None:
-                    on_trial(study, result)
-    summary = summarize(adapter.name, study.name, done, ran, table)
-    summary.lost = sorted(lost.values(), key=lambda r: r.trial)
-    return summary
 
 
 def study_board(pruner: StudyPruner, out_dir: Path, algorithm: str, study: str,
@@ -422,14 +541,19 @@ class TrialExecutor:
     anew when it breaks (a process-pool worker killed: its trials come back lost and are
     retried)."""
 
-    def __init__(self, settings: TrialsSection, executor: Executor | None = None) -> None:
+    def __init__(self, settings: TrialsSection, executor: Executor | None = None,
+                 workers: int | None = None) -> None:
         self.settings = settings
         self.given = executor
+        self.workers = settings.workers if workers is None else workers
+        """Processes of an opened pool (fewer than ``settings.workers`` when several pools
+        run side by side: each gets ``1 / settings.workers`` of the machine)."""
         self._stack = contextlib.ExitStack()
         self.executor = executor if executor is not None else self._open()
 
     def _open(self) -> Executor:
-        return self._stack.enter_context(open_executor(self.settings.workers, self.settings.dask))
+        return self._stack.enter_context(open_executor(self.workers, self.settings.dask,
+                                                       share=self.settings.workers))
 
     def submit(self, job: TrialJob) -> Future[TrialResult]:
         """``run_trial(job)`` on the executor."""

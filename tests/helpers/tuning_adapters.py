@@ -151,6 +151,29 @@ class SleepyDriftAdapter(DriftAdapter):
         return super().run(scans, schedule)
 
 
+class WarmLogAdapter(SleepyDriftAdapter):
+    """SleepyDriftAdapter that leaves a file in ``log_dir`` every time a process warms it:
+    ``<pid>-<n>.warm`` holding the warmed sequence's first stamp and last ground-truth x [m]
+    (which process warmed which study)."""
+
+    name = "warm_log"
+
+    def __init__(self, log_dir: str) -> None:
+        super().__init__()
+        self.log_dir = Path(log_dir)
+
+    def warm(self, scans: list[Scan]) -> None:
+        super().warm(scans)
+        n = len(list(self.log_dir.glob(f"{os.getpid()}-*.warm")))
+        last = scans[-1].T_world_lidar
+        x = float(last[0, 3]) if last is not None else math.nan
+        (self.log_dir / f"{os.getpid()}-{n}.warm").write_text(f"{len(scans)} {x:.6f}")
+
+
+def warm_log(log_dir: str) -> WarmLogAdapter:
+    return WarmLogAdapter(log_dir)
+
+
 def sleepy() -> SleepyDriftAdapter:
     return SleepyDriftAdapter()
 
