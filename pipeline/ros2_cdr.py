@@ -165,6 +165,8 @@ def _rows(height: int, width: int, point_step: int, row_step: int,
     if point_step <= 0 or row_step < width * point_step or buf.size < needed:
         raise InputError(f"{what}: PointCloud2 data is {buf.size} bytes, expected {needed} "
                          f"({height}x{width} points, point_step {point_step}, row_step {row_step})")
+    if row_step == width * point_step:  # rows without padding (a dense cloud): a view
+        return buf[: n * point_step].reshape(n, point_step)
     padded = np.zeros(row_step * height, dtype=np.uint8)
     padded[: min(buf.size, padded.size)] = buf[: padded.size]
     return padded.reshape(height, row_step)[:, : width * point_step].reshape(n, point_step)

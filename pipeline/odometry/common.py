@@ -79,9 +79,8 @@ def voxel_downsample(points: NDArray[np.floating], voxel_m: float) -> F64:
 
     if voxel_m <= 0 or len(points) == 0:
         return np.array(points, dtype=np.float64)
-    pts = np.ascontiguousarray(points)
-    keys = voxel_keys_of(pts, 1.0 / voxel_m)
-    return sorted_centroids(pts, keys, np.argsort(keys))
+    keys = voxel_keys_of(points, 1.0 / voxel_m)  # strided views as they are: no copy
+    return sorted_centroids(points, keys, np.argsort(keys))
 
 
 class DownsampleCache:
