@@ -100,8 +100,8 @@ class RungBoard:
         folder = Path(self.folder)
         if folder.is_dir():
             for path in folder.glob("trial=*.json"):
-                trial = path.stem.removeprefix("trial=")
-                if not trial.isdigit() or int(trial) not in finished:
+                tid = path.stem.removeprefix("trial=")
+                if not tid.isdigit() or int(tid) not in finished:
                     path.unlink(missing_ok=True)
         for trial, curve in finished.items():
             if self.read(trial) is None:

@@ -265,12 +265,12 @@ def drive(runs: Sequence[Callable[[], StudyRun]], lanes: Sequence[TrialExecutor]
     load = [0] * len(lanes)
     in_flight: dict[Future[TrialResult], tuple[int, int, StudyRun, TrialJob]] = {}
     summaries: dict[int, StudySummary] = {}
-    with contextlib.ExitStack() as shown:
+    try:
         while pending or home:
             for lane in range(len(lanes)):
                 if lane not in home and pending:
                     i, make = pending.pop()
-                    home[lane] = (i, shown.enter_context(make()))
+                    home[lane] = (i, make().__enter__())
             for lane, (i, run) in sorted(home.items(), key=lambda kv: kv[1][0]):
                 while run.can_start():
                     at = _lane_for(lane, load, home, len(lanes) > 1)
@@ -278,9 +278,10 @@ def drive(runs: Sequence[Callable[[], StudyRun]], lanes: Sequence[TrialExecutor]
                     in_flight[lanes[at].submit(job)] = (at, i, run, job)
                     load[at] += 1
             for lane, (i, run) in list(home.items()):
-                if run.over():
-                    summaries[i] = run.summary()
+                if run.over():  # its progress ends now, its summary is kept
                     del home[lane]
+                    run.__exit__(None, None, None)
+                    summaries[i] = run.summary()
             if not in_flight:
                 continue
             finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
@@ -290,6 +291,9 @@ def drive(runs: Sequence[Callable[[], StudyRun]], lanes: Sequence[TrialExecutor]
                 if run.finish(job, _result_of(fut, job)):  # lost: again, on the same lane
                     in_flight[lanes[at].submit(job)] = (at, i, run, job)
                     load[at] += 1
+    finally:  # an error or Ctrl-C: the progress of the studies still running ends too
+        for _, run in home.values():
+            run.__exit__(None, None, None)
     return [summaries[i] for i in range(len(runs))]
 
 

@@ -5,10 +5,12 @@ another on one pool of W workers."""
 
 from __future__ import annotations
 
+import logging
 from concurrent.futures import Executor
 from pathlib import Path
 
 import pyarrow.parquet as pq
+import pytest
 from helpers import tuning_adapters
 from helpers.tuning_settings import settings
 
@@ -63,3 +65,18 @@ def test_side_by_side_only_on_a_pool_of_its_own_without_halving(pool: Executor) 
     assert side_by_side(settings(workers=2), 12, pool) == 1  # a given executor
     assert side_by_side(settings(workers=2, dask="local"), 12, None) == 1
     assert side_by_side(settings(workers=2, **HALVING), 12, None) == 1  # trials wait at rungs
+
+
+def test_a_study_side_by_side_logs_its_end_when_it_ends(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """Three studies on two lanes: the third starts when one of the first two has ended, and
+    that one's "finished" line comes before the third's first line."""
+    sequences = four_sequences(tmp_path / "sequences")[:3]
+    s = settings(workers=2, iterations=6)
+    with caplog.at_level(logging.INFO, logger="pipeline.progress"):
+        run_trials(sequences, tmp_path / "out", s, seed=3, progress=True)
+    lines = [r.getMessage() for r in caplog.records if r.name == "pipeline.progress"]
+    starts = [i for i, line in enumerate(lines) if line.endswith("6 trials, 0 finished before")]
+    ends = [i for i, line in enumerate(lines) if " finished: 6/6 done" in line]
+    assert len(starts) == len(ends) == 3
+    assert ends[0] < starts[2]
