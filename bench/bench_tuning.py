@@ -8,7 +8,12 @@ length of a toy training sequence; adapter ``ndt`` at its baseline.
   worker's trial server, scans decoded once: run + check + RTE + write Parquet, result back
   through a socket; best of 3, warm);
   overhead = (trial - bare) / bare;
-- trials/s: ``run_trials`` of 8 trials on an already started process pool of W workers.
+- trials/s: ``run_trials`` of 8 trials on an already started process pool of W workers;
+- studies side by side: ``run_trials`` of STUDIES studies (the sequence under as many names) of
+  8 trials on 2 workers, side by side (one single-process pool a study, each study warmed once:
+  ``pipeline.tuning.smbo.side_by_side``) against the reference in the same run, one shared pool
+  of 2 workers running the studies one after another (every worker warms every study); both
+  timings include starting the pools, the trials tables must be equal.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from common import Row, best_of, size
 N_FRAMES = size(300, 8)
 LENGTH_M = size(25.0, 2.0)
 ITERATIONS = size(8, 2)
+STUDIES = 4
 
 
 def run() -> list[Row]:
@@ -80,6 +86,7 @@ def run() -> list[Row]:
                     [seq], Path(tmp) / f"w{workers}", settings, seed=0, progress=False, executor=ex
                 )
                 rates[workers] = ITERATIONS / (time.perf_counter() - t0)
+        side_s, shared_s = studies_side_by_side(Path(tmp), seq)
 
     fps = N_FRAMES / bare_s
     return [
@@ -107,4 +114,45 @@ def run() -> list[Row]:
             "trials/s",
             f"{rates[2] / rates[1]:.2f}x of 1 worker (2 shared cores)",
         ),
+        Row(
+            f"{STUDIES} studies of {ITERATIONS} trials ({N_FRAMES} frames), 2 workers side by side",
+            side_s,
+            "s",
+            f"one shared pool {shared_s:.1f} s (same run): x{side_s / shared_s:.2f}",
+            "<= the shared pool",
+        ),
     ]
+
+
+def studies_side_by_side(tmp: Path, seq: Path) -> tuple[float, float]:
+    """Wall times [s] of STUDIES studies (``seq`` linked under as many names) on 2 workers:
+    side by side, and on one shared pool (given to ``run_trials``: one study at a time); both
+    with the pools' start. The two runs' trials tables are checked equal."""
+    import os
+
+    import pyarrow.parquet as pq
+
+    from pipeline.executor import open_executor
+    from pipeline.tuning.smbo import TrialsSection, run_trials
+    from pipeline.tuning.table import trials_path
+
+    paths = []
+    for i in range(STUDIES):
+        path = tmp / "studies" / f"s{i}.mcap"
+        path.parent.mkdir(exist_ok=True)
+        os.link(seq, path)
+        paths.append(path)
+    settings = TrialsSection(algorithm="ndt", iterations=ITERATIONS, workers=2, length_m=LENGTH_M,
+                             time_limit_s=600.0)
+    t0 = time.perf_counter()
+    run_trials(paths, tmp / "side", settings, seed=0, progress=False)
+    side_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    with open_executor(2) as ex:
+        run_trials(paths, tmp / "shared", settings, seed=0, progress=False, executor=ex)
+    shared_s = time.perf_counter() - t0
+    for path in paths:
+        tables = [pq.read_table(trials_path(tmp / out, "ndt", path.stem)).drop(["wall_time_s"])
+                  for out in ("side", "shared")]
+        assert tables[0].equals(tables[1]), f"{path.stem}: side by side changed the trials"
+    return side_s, shared_s
