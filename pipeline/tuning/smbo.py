@@ -270,7 +270,7 @@ def drive(runs: Sequence[Callable[[], StudyRun]], lanes: Sequence[TrialExecutor]
             for lane in range(len(lanes)):
                 if lane not in home and pending:
                     i, make = pending.pop()
-                    home[lane] = (i, make().__enter__())
+                    home[lane] = (i, make().start())
             for lane, (i, run) in sorted(home.items(), key=lambda kv: kv[1][0]):
                 while run.can_start():
                     at = _lane_for(lane, load, home, len(lanes) > 1)
@@ -280,7 +280,7 @@ def drive(runs: Sequence[Callable[[], StudyRun]], lanes: Sequence[TrialExecutor]
             for lane, (i, run) in list(home.items()):
                 if run.over():  # its progress ends now, its summary is kept
                     del home[lane]
-                    run.__exit__(None, None, None)
+                    run.close()
                     summaries[i] = run.summary()
             if not in_flight:
                 continue
@@ -293,7 +293,7 @@ def drive(runs: Sequence[Callable[[], StudyRun]], lanes: Sequence[TrialExecutor]
                     load[at] += 1
     finally:  # an error or Ctrl-C: the progress of the studies still running ends too
         for _, run in home.values():
-            run.__exit__(None, None, None)
+            run.close()
     return [summaries[i] for i in range(len(runs))]
 
 
@@ -309,7 +309,7 @@ def _lane_for(lane: int, load: list[int], home: Mapping[int, Any], stealing: boo
 class StudyRun:
     """One study (or its resumption) as ``drive`` runs it: which trial may start
     (``can_start``, ``next_job``), what a finished one changes (``finish``), when it is over and
-    its summary. A context manager: its progress is shown while it is entered.
+    its summary. Its progress is shown from ``start`` to ``close``.
 
     Up to ``settings.workers`` trials are in flight; trial t starts once trials 0..t-lag are
     finished (``told_lag``) and is proposed from exactly those, so where and in which order
@@ -349,12 +349,14 @@ class StudyRun:
         self.shown = StudyProgress(f"trials {adapter.name} {study.name}", settings.iterations,
                                    len(self.done), progress)
 
-    def __enter__(self) -> StudyRun:
+    def start(self) -> StudyRun:
+        """Show the study's progress (a bar, or its first line); returns the study."""
         self.shown.__enter__()
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.shown.__exit__(*exc)
+    def close(self) -> None:
+        """End the study's progress (its last line)."""
+        self.shown.__exit__(None, None, None)
 
     def can_start(self) -> bool:
         """Whether the next trial may start now."""
