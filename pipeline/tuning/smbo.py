@@ -251,59 +251,76 @@ def costliest_studies(studies: Sequence[Study]) -> list[Study]:
     return sorted(studies, key=lambda s: -size[s.name])
 
 
-def drive(runs: Sequence[Callable[[], StudyRun]], lanes: Sequence[TrialExecutor]
+def drive(runs: Sequence[Callable[[], StudyRun]], pools: Sequence[TrialExecutor]
           ) -> list[StudySummary]:
-    """Run the studies ``runs`` makes (in order; each made when it starts) on ``lanes`` and
+    """Run the studies ``runs`` makes (in order; each made when it starts) on ``pools`` and
     return their summaries in that order.
 
-    Each lane runs one study at a time, its home: one lane (a pool of W workers) runs the
-    studies one after another with W trials in flight. With several lanes (one worker each),
-    a lane whose study is over takes the next; with none left, it takes the trials of running
-    studies whose home lane is busy, so the last study does not run on one worker alone."""
+    Each pool (a lane) runs one study at a time, its home: one lane (a pool of W workers) runs
+    the studies one after another with W trials in flight. With several lanes (one worker
+    each), a lane whose study is over takes the next; with none left, it takes the trials of
+    running studies whose home lane is busy, so the last study does not run on one worker
+    alone."""
     pending = list(enumerate(runs))[::-1]
-    home: dict[int, tuple[int, StudyRun]] = {}
-    load = [0] * len(lanes)
-    in_flight: dict[Future[TrialResult], tuple[int, int, StudyRun, TrialJob]] = {}
+    home: dict[int, tuple[int, StudyRun]] = {}  # lane -> (index of the study, the study)
+    lanes = _Lanes(pools)
     summaries: dict[int, StudySummary] = {}
     try:
         while pending or home:
-            for lane in range(len(lanes)):
+            for lane in range(len(pools)):
                 if lane not in home and pending:
                     i, make = pending.pop()
                     home[lane] = (i, make().start())
             for lane, (i, run) in sorted(home.items(), key=lambda kv: kv[1][0]):
                 while run.can_start():
-                    at = _lane_for(lane, load, home, len(lanes) > 1)
-                    job = run.next_job()
-                    in_flight[lanes[at].submit(job)] = (at, i, run, job)
-                    load[at] += 1
+                    lanes.submit(lanes.place(lane, home), i, run, run.next_job())
             for lane, (i, run) in list(home.items()):
                 if run.over():  # its progress ends now, its summary is kept
                     del home[lane]
                     run.close()
                     summaries[i] = run.summary()
-            if not in_flight:
-                continue
-            finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
-            for fut in sorted(finished, key=lambda f: (in_flight[f][1], in_flight[f][3].trial)):
-                at, i, run, job = in_flight.pop(fut)
-                load[at] -= 1
-                if run.finish(job, _result_of(fut, job)):  # lost: again, on the same lane
-                    in_flight[lanes[at].submit(job)] = (at, i, run, job)
-                    load[at] += 1
+            for at, i, run, job, result in lanes.finished():
+                if run.finish(job, result):  # lost: again, on the same lane
+                    lanes.submit(at, i, run, job)
     finally:  # an error or Ctrl-C: the progress of the studies still running ends too
         for _, run in home.values():
             run.close()
     return [summaries[i] for i in range(len(runs))]
 
 
-def _lane_for(lane: int, load: list[int], home: Mapping[int, Any], stealing: bool) -> int:
-    """Where a trial of the study at home on ``lane`` runs: there, unless its worker is busy
-    and a lane with no study of its own is idle (``stealing``: several single-worker lanes)."""
-    if not stealing or load[lane] == 0:
-        return lane
-    idle = [k for k in range(len(load)) if k not in home and load[k] == 0]
-    return idle[0] if idle else lane
+class _Lanes:
+    """The pools of ``drive`` and the trials in flight on each."""
+
+    def __init__(self, pools: Sequence[TrialExecutor]) -> None:
+        self.pools = pools
+        self.load = [0] * len(pools)
+        self.in_flight: dict[Future[TrialResult], tuple[int, int, StudyRun, TrialJob]] = {}
+
+    def place(self, lane: int, home: Mapping[int, Any]) -> int:
+        """Where a trial of the study at home on ``lane`` runs: there, unless its worker is
+        busy and a lane with no study of its own is idle (several single-worker lanes)."""
+        if len(self.pools) == 1 or self.load[lane] == 0:
+            return lane
+        idle = [k for k in range(len(self.load)) if k not in home and self.load[k] == 0]
+        return idle[0] if idle else lane
+
+    def submit(self, at: int, i: int, run: StudyRun, job: TrialJob) -> None:
+        """Run ``job`` of study ``i`` (``run``) on lane ``at``."""
+        self.in_flight[self.pools[at].submit(job)] = (at, i, run, job)
+        self.load[at] += 1
+
+    def finished(self) -> list[tuple[int, int, StudyRun, TrialJob, TrialResult]]:
+        """The trials that finish next (waiting for at least one; none when none is in
+        flight): (lane, study index, study, job, result), by study index and trial."""
+        if not self.in_flight:
+            return []
+        done, _ = wait(self.in_flight, return_when=FIRST_COMPLETED)
+        out = []
+        for fut in done:
+            at, i, run, job = self.in_flight.pop(fut)
+            self.load[at] -= 1
+            out.append((at, i, run, job, _result_of(fut, job)))
+        return sorted(out, key=lambda x: (x[1], x[3].trial))
 
 
 class StudyRun:
