@@ -342,10 +342,11 @@ class StudyRun:
         self.settings, self.seed, self.on_trial = settings, seed, on_trial
         self.table = trials_path(out_dir, adapter.name, study.name)
         self.first = [space.validate(p) for p in warm_start]
-        self.fingerprint = study_of(study, adapter, settings, seed, stored=read_study(self.table),
+        stored_study = read_study(self.table)
+        self.fingerprint = study_of(study, adapter, settings, seed, stored=stored_study,
                                     warm_start=self.first)
         if self.table.is_file():
-            check_fingerprint(read_study(self.table), self.fingerprint, str(self.table))
+            check_fingerprint(stored_study, self.fingerprint, str(self.table))
         stored = [r for r in read_trials(self.table, space) if r.trial < settings.iterations]
         self.pruner = study_pruner(study, settings)
         self.done = self.pruner.restore(

@@ -220,8 +220,7 @@ def _logged(what: str, r: WorldResult, finished: int, n: int, t0: float) -> Any:
     """A progress line for the ``finished``-th world of ``n`` to finish a pass."""
     setting = next(iter(r.t_err_pct))
     PROGRESS.info("[%d/%d] %s %s oracle %.3f %%; %.0f s (%.0f s in all)", finished, n, r.name,
-                  what,
-                  r.median(setting), r.wall_time_s, time.monotonic() - t0)
+                  what, r.median(setting), r.wall_time_s, time.monotonic() - t0)
     return r
 
 
