@@ -7,6 +7,9 @@ from collections.abc import Callable
 
 from pipeline.tuning.smbo import TrialsSection
 
+HALVING: dict[str, object] = {"fidelity": "halving", "halving": {"eta": 2, "rungs": 3}}
+"""Successive halving for ``settings(**HALVING)``: eta 2, 3 rungs."""
+
 
 def settings(**kw: object) -> TrialsSection:
     """Small, fast settings for the drift adapter (no pruning unless asked for)."""

@@ -12,7 +12,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from helpers.tuning_adapters import DriftAdapter
-from helpers.tuning_settings import Interrupt, interrupt_after, settings
+from helpers.tuning_settings import HALVING, Interrupt, interrupt_after, settings
 
 from pipeline.errors import ConfigError
 from pipeline.sequence import SequenceReader
@@ -31,8 +31,6 @@ from pipeline.tuning.pruning import (
 from pipeline.tuning.rung_board import rung_threshold
 from pipeline.tuning.smbo import make_job, make_studies, run_trials, study_adapter
 from pipeline.tuning.table import trials_path
-
-HALVING = {"fidelity": "halving", "halving": {"eta": 2, "rungs": 3}}
 
 
 def table(out: Path, study: str = "seq_a") -> dict[str, list]:

@@ -13,14 +13,12 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-from helpers.tuning_settings import settings
+from helpers.tuning_settings import HALVING, settings
 
 from pipeline.tuning.rung_board import RungBoard
 from pipeline.tuning.smbo import make_job, make_studies, run_trials, study_adapter
 from pipeline.tuning.table import trials_path
 from pipeline.tuning.worker import WorkerState
-
-HALVING = {"fidelity": "halving", "halving": {"eta": 2, "rungs": 3}}
 
 
 def later(seconds: float, action: object) -> threading.Thread:

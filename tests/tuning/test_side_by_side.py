@@ -12,12 +12,10 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 from helpers import tuning_adapters
-from helpers.tuning_settings import settings
+from helpers.tuning_settings import HALVING, settings
 
 from pipeline.tuning.smbo import run_trials, side_by_side
 from pipeline.tuning.table import trials_path
-
-HALVING = {"fidelity": "halving", "halving": {"eta": 2, "rungs": 3}}
 
 
 def four_sequences(root: Path) -> list[Path]:
