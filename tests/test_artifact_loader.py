@@ -11,6 +11,7 @@ import io
 import json
 import os
 import shutil
+import tokenize
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -64,7 +65,7 @@ def declare(manifest: dict[str, Any], name: str, path: Path) -> None:
             read = fmt.read_array_header_1_0 if version == (1, 0) else \
                 fmt.read_array_header_2_0
             shape, _, dtype = read(fh)
-        except (ValueError, SyntaxError, TypeError):
+        except (ValueError, SyntaxError, TypeError, tokenize.TokenError):
             return
     manifest["arrays"][name] = {"shape": list(shape), "dtype": dtype.str}
 

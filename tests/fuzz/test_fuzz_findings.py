@@ -116,6 +116,21 @@ def test_an_npy_header_numpy_cannot_tokenize_is_an_artifact_error() -> None:
     assert "not a plain numpy array" in one_line(exc)
 
 
+def test_the_fuzz_signer_skips_an_npy_header_numpy_cannot_tokenize(tmp_path: Path) -> None:
+    """The artifact fuzz target re-signs a damaged model (tests/test_artifact_loader.py's
+    ``declare``); a header whose first brace a mutation replaced made numpy's tokenizer raise
+    TokenError there, in the test, before the loader ran (make fuzz, 2026-11-27)."""
+    from test_artifact_loader import declare
+
+    header = b"z'descr': '<f8', 'fortran_order': False, 'shape': (2,), }  \n"
+    path = tmp_path / "x.npy"
+    path.write_bytes(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header
+                     + bytes(16))
+    manifest = {"arrays": {"x.npy": {"shape": [2], "dtype": "<f8"}}}
+    declare(manifest, "x.npy", path)
+    assert manifest["arrays"]["x.npy"] == {"shape": [2], "dtype": "<f8"}
+
+
 def test_a_huge_extrinsic_is_refused_without_a_warning() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
