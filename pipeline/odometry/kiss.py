@@ -8,7 +8,9 @@ Not tuned (options): ``deskew`` (True: KISS-ICP corrects each scan's motion dist
 its per-point times, where the sequence MCAP has them: the PointCloud2 field ``time``, kept by
 ``ingest`` from the drivers' ``t`` / ``time`` / ``timestamp`` / ``offset_time``, or written by
 ``simulate`` for swept scans, its default; a scan without them, as KITTI's, is registered as it
-is; False: never),
+is; False: never; KISS-ICP deskews a scan with its previous motion estimate, so the first
+scan of a drive that starts moving enters the map smeared: docs/results/realism.md, "Why
+KISS-ICP breaks on swept scans"),
 ``max_num_threads`` (1), ``max_num_iterations`` (500), ``convergence_criterion`` (1e-4).
 
 Parameter changes (``set_params``) rebuild the KissICP object with the new configuration and
