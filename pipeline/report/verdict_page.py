@@ -62,7 +62,7 @@ def verdict_page(metrics: Mapping[str, Mapping[str, Any]], provenance: Sequence[
     for m in suites:
         lines += [*_suite(m), ""]
     if head is not None:
-        lines += [*_headroom(head), ""]
+        lines += [*_headroom(head), *_headroom_per_sensor(head, metrics.get(ID)), ""]
     models = {sensor: m for n, m in metrics.items() if (sensor := surrogate_sensor(n))}
     if models:
         lines += [*_models(models), ""]
@@ -200,6 +200,34 @@ def _headroom(h: Mapping[str, Any]) -> list[str]:
             *_table(["ratio", "geometric mean (95 % interval)", "win rate", "worst world"], rows),
             "", "Closed gap, log(SBS / adaptive) / log(SBS / oracle):", "",
             *_table(["oracle", "closed gap", "95 % interval"], gaps)]
+
+
+def _headroom_per_sensor(h: Mapping[str, Any], suite: Mapping[str, Any] | None) -> list[str]:
+    """The headroom's worlds split by sensor, each world's sensor read from the in-distribution
+    suite's metrics of the same suite (the oracles ran on its worlds): geometric means of each
+    world's adaptive, cross-fitted oracle and class oracle RTE against the SBS's, no intervals.
+    Nothing without that suite or with a single sensor."""
+    if suite is None or suite.get("suite") != h["suite"]:
+        return []
+    sensor_of = {name: w["sensor"] for name, w in suite["per_world"].items()}
+    by_sensor: dict[str, list[Mapping[str, float]]] = {}
+    for name, w in h["per_world"].items():
+        if name in sensor_of:
+            by_sensor.setdefault(sensor_of[name], []).append(w)
+    if len(by_sensor) < 2:
+        return []
+    names = ("adaptive", "oracle", "class_oracle")
+    rows = []
+    for sensor, worlds in by_sensor.items():
+        ratios = {k: np.array([w[f"{k}_rte_pct"] / w["sbs_rte_pct"] for w in worlds])
+                  for k in names}
+        rows.append([sensor, len(worlds),
+                     *(f"{_f(geometric_mean(ratios[k]), 2)} ({int((ratios[k] < 1).sum())} / "
+                       f"{len(worlds)})" for k in names)])
+    return ["", "Per sensor (geometric means of the per-world ratios to SBS, in brackets the "
+            "worlds below 1; no intervals: the suite is sized as a whole, not per sensor):", "",
+            *_table(["sensor", "worlds", "adaptive / SBS", "cross-fitted oracle / SBS",
+                     "class oracle / SBS"], rows)]
 
 
 def _models(models: Mapping[str, Mapping[str, Any]]) -> list[str]:

@@ -78,3 +78,31 @@ def test_a_suite_of_two_sensors_is_also_given_per_sensor() -> None:
                     "| hdl64 | 3 | 1.00 | 0 / 3 | 1.00 | 0.50 |"]
     one_sensor = verdict_page({ID: suite("id", 0.6, 4)[0]}, ["> provenance"], {})
     assert "Per sensor" not in one_sensor
+
+
+def test_the_headroom_is_also_given_per_sensor() -> None:
+    """Per sensor, each world's adaptive and oracles against the SBS (the fixed set, 1 %), the
+    sensor read from the in-distribution suite of the same worlds: adaptive at 0.8 everywhere,
+    the cross-fitted oracle at 0.5 on the HDL-32E and at 2 and 0.5 on the HDL-64E (geometric
+    mean 1), the class oracle at 1.5."""
+    cases = [("hdl32", 0.5), ("hdl64", 2.0), ("hdl32", 0.5), ("hdl64", 0.5)]
+    worlds = [dataclasses.replace(world(f"id_test_{i:02d}",
+                                        {"baseline": [[2.0, 2.0]], "fixed": [[1.0, 1.0]],
+                                         "adaptive": [[0.8, 0.8]]}, ["cave", "street"]),
+                                  sensor=sensor)
+              for i, (sensor, _) in enumerate(cases)]
+    oracles = [WorldResult(w.name, "id", w.segments, w.sensor, w.frames, w.seed, w.labels,
+                           {"oracle": np.full((1, 2), o), "class_oracle": np.full((1, 2), 1.5)},
+                           {"oracle": [False], "class_oracle": [False]},
+                           {"oracle": {"choice": {}}, "class_oracle": {"choice": {}}}, 0.0)
+               for w, (_, o) in zip(worlds, cases, strict=True)]
+    header = {**HEADER, "family": "id"}
+    ids = suite_metrics(worlds, header, 10.0, 0.95, 999, 0)
+    head = headroom_metrics(worlds, oracles, [HEADER["baseline"]], header, 0.95, 999, 0)
+    section = verdict_page({ID: ids, HEADROOM: head}, ["> provenance"], {}).split(
+        "## Headroom on the id test suite")[1].split("\n## ")[0]
+    rows = [line for line in section.splitlines() if line.startswith("| hdl")]
+    assert rows == ["| hdl32 | 2 | 0.80 (2 / 2) | 0.50 (2 / 2) | 1.50 (0 / 2) |",
+                    "| hdl64 | 2 | 0.80 (2 / 2) | 1.00 (1 / 2) | 1.50 (0 / 2) |"]
+    other = verdict_page({ID: {**ids, "suite": "dev"}, HEADROOM: head}, ["> provenance"], {})
+    assert "to SBS" not in other  # the id suite of other worlds: no split
