@@ -1,0 +1,40 @@
+"""experiments/realism_drift.py's figures on hand-made trajectories: a step error every step
+shares adds up over the slice, alternating ones cancel."""
+
+from __future__ import annotations
+
+import importlib.util
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SCRIPT = Path(__file__).resolve().parents[2] / "experiments" / "realism_drift.py"
+
+
+def _drift_figures() -> Callable[[np.ndarray, np.ndarray], tuple[float, float, float]]:
+    spec = importlib.util.spec_from_file_location("realism_drift", SCRIPT)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.drift_figures
+
+
+def _path(steps: np.ndarray) -> np.ndarray:
+    """(N + 1, 4, 4) poses from the origin along translation steps (N, 3) [m], no rotation."""
+    T = np.tile(np.eye(4), (len(steps) + 1, 1, 1))
+    T[1:, :3, 3] = np.cumsum(steps, axis=0)
+    return T
+
+
+def test_a_shared_step_error_drifts_in_full_and_alternating_ones_cancel() -> None:
+    drift_figures = _drift_figures()
+    truth = _path(np.tile([1.0, 0.0, 0.0], (9, 1)))  # 9 steps of 1 m
+    long = _path(np.tile([1.01, 0.0, 0.0], (9, 1)))  # every step 1 cm too long
+    assert drift_figures(truth, long) == pytest.approx((1.0, 1.0, 1.0))
+    side = np.array([[1.0, 0.01 * (-1) ** k, 0.0] for k in range(9)])  # +-1 cm sideways
+    step, bias, drift = drift_figures(truth, _path(side))
+    assert step == pytest.approx(1.0)
+    assert bias == pytest.approx(100 * 0.01 / 9)  # five +1 cm, four -1 cm: 1 cm / 9 a step
+    assert drift == pytest.approx(100 * 0.01 / 9)  # 1 cm over the 9 m
