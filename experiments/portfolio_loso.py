@@ -163,7 +163,7 @@ def label_gains(y: np.ndarray, seq: np.ndarray, label: np.ndarray, ref: int,
         if len(names) < 2:
             continue
         means = np.log(np.array([y[(seq == s) & (label == lab)].mean(axis=0) for s in names]))
-        gain = means - means[:, [ref]]  # (sequences, members) log ratio to the SBS
+        gain = means - means[:, [ref]]  # (sequences, members) log ratio to member ref
         best = int(np.argmin(gain.mean(axis=0)))
         held_out = [gain[i, int(np.argmin(np.delete(gain, i, axis=0).mean(axis=0)))]
                     for i in range(len(names))]
@@ -197,8 +197,9 @@ def main() -> None:
     parser.add_argument("--first", type=int, default=None,
                         help="Only the sequences <world>_<i> with i < FIRST (a learning curve).")
     args = parser.parse_args()
-    E, y, seq, label = frame_table(args.db, args.portfolio)
-    names = member_params(args.portfolio or args.db.parent / "portfolio")
+    portfolio = args.portfolio or args.db.parent / "portfolio"
+    E, y, seq, label = frame_table(args.db, portfolio)
+    names = member_params(portfolio)
     args.reference = args.reference % len(names)  # before --also's members join
     if args.also is not None:
         y = np.hstack([y, same_frames(frame_table(args.also), E, seq, label)])
@@ -218,8 +219,8 @@ def main() -> None:
     print(f"Per environment label against member {ref} {names[ref]}: sequences, its mean RTE "
           "[%], the label's best member in sample and its geometric-mean ratio, the ratio of "
           "the member chosen on the other sequences (leave one out)")
-    for lab, n, sbs_rte, best, ratio, held_out in label_gains(y, seq, label, ref):
-        print(f"  {lab:8s} {n:3d}  {sbs_rte:.3f}  {best:3d} {names[best]:44s} {ratio:.3f}  "
+    for lab, n, ref_rte, best, ratio, held_out in label_gains(y, seq, label, ref):
+        print(f"  {lab:8s} {n:3d}  {ref_rte:.3f}  {best:3d} {names[best]:44s} {ratio:.3f}  "
               f"{held_out:.3f}")
 
 

@@ -29,8 +29,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 
-ALGORITHMS = ("gicp", "kiss_icp")
-
 
 def drift_figures(T_gt: np.ndarray, T_est: np.ndarray) -> tuple[float, float, float]:
     """(step, bias, drift) in % of the distance (module docstring) of an estimate T_est
@@ -47,22 +45,12 @@ def drift_figures(T_gt: np.ndarray, T_est: np.ndarray) -> tuple[float, float, fl
     return 100.0 * step, 100.0 * bias, 100.0 * drift
 
 
-def trajectory(algorithm: str, scans: list) -> tuple[np.ndarray, np.ndarray]:
-    """(ground truth, estimate) (N, 4, 4) of ``algorithm`` at its defaults over ``scans``."""
-    from pipeline.odometry import run_scans
-    from pipeline.odometry.registry import build_adapter
-
-    adapter = build_adapter(algorithm)
-    stamps_ns = np.array([s.stamp_ns for s in scans], np.int64)
-    traj = run_scans(adapter, scans, stamps_ns, adapter.space.defaults(), algorithm)
-    return np.stack([s.T_world_lidar for s in scans]), traj.T_world_lidar
-
-
 def main() -> None:
     from common import data_root
 
     from pipeline.config import load_section
-    from pipeline.realism.compare import SLICES
+    from pipeline.realism.compare import ALGORITHMS, SLICES
+    from pipeline.realism.registration import odometry_trajectory
     from pipeline.realism.slices import real_slice, replica_seed, simulated_slice
     from pipeline.sim.kitti_dataset import SimulateKittiSection
 
@@ -81,7 +69,8 @@ def main() -> None:
                   for r in range(args.replicas)]
         for algorithm in ALGORITHMS:
             for name, scans in sides:
-                step, bias, drift = drift_figures(*trajectory(algorithm, scans))
+                step, bias, drift = drift_figures(
+                    *odometry_trajectory(algorithm, scans, f"{name} {seq}"))
                 print(f"| {seq} {first}-{last} | {algorithm} | {name} | {step:.2f} | "
                       f"{bias:.2f} | {drift:.2f} |", flush=True)
 

@@ -5,12 +5,12 @@ process; the test checks that it returns its rows, never what they measure."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
 from pathlib import Path
 from types import ModuleType
 
 import pytest
+from helpers.scripts import load_script
 
 BENCH = Path(__file__).resolve().parents[1] / "bench"
 MODULES = sorted(p.stem.removeprefix("bench_") for p in BENCH.glob("bench_*.py"))
@@ -18,11 +18,7 @@ MODULES = sorted(p.stem.removeprefix("bench_") for p in BENCH.glob("bench_*.py")
 
 def bench_runner() -> ModuleType:
     """bench/run.py as a module (``run_module`` imports and runs one bench module)."""
-    spec = importlib.util.spec_from_file_location("bench_run", BENCH / "run.py")
-    assert spec and spec.loader
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(BENCH / "run.py")
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -4,13 +4,13 @@ the defaults, and the path advances 1 m a frame."""
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import pytest
+from helpers.scripts import load_script
 
 from pipeline.tuning.pruning import HalvingSection
 
@@ -22,12 +22,7 @@ def model() -> ModuleType:
     """bench/bench_kitti.py as a module (bench/ on the path for its ``common``)."""
     sys.path.insert(0, str(BENCH))
     try:
-        spec = importlib.util.spec_from_file_location("bench_kitti", BENCH / "bench_kitti.py")
-        assert spec and spec.loader
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = module  # dataclasses look their module up there
-        spec.loader.exec_module(module)
-        return module
+        return load_script(BENCH / "bench_kitti.py")
     finally:
         sys.path.remove(str(BENCH))
 

@@ -50,10 +50,17 @@ def odometry_step_errors(algorithm: str, scans: list[Scan], what: str) -> F64:
     """(N - 1, 4, 4) step errors (``step_error_poses``) of ``algorithm`` at its default
     parameters over ``scans`` (each with its ground truth; ``what`` names them in errors).
     OdometryError for a failed run, InputError for a scan without ground truth."""
+    return step_error_poses(*odometry_trajectory(algorithm, scans, what))
+
+
+def odometry_trajectory(algorithm: str, scans: list[Scan], what: str) -> tuple[F64, F64]:
+    """(ground truth, estimate), both (N, 4, 4) T_world_lidar, of ``algorithm`` at its default
+    parameters over the N ``scans`` (each with its ground truth; ``what`` names them in
+    errors). OdometryError for a failed run, InputError for a scan without ground truth."""
     T_gt = [s.T_world_lidar for s in scans]
     if any(T is None for T in T_gt):
         raise InputError(f"{what}: every scan of a realism slice needs its ground truth")
     adapter = build_adapter(algorithm)
     stamps_ns = np.array([s.stamp_ns for s in scans], np.int64)
     traj = run_scans(adapter, scans, stamps_ns, adapter.space.defaults(), what)
-    return step_error_poses(np.stack(T_gt), traj.T_world_lidar)  # type: ignore[arg-type]
+    return np.stack(T_gt), traj.T_world_lidar  # type: ignore[arg-type]

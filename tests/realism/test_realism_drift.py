@@ -3,22 +3,13 @@ shares adds up over the slice, alternating ones cancel."""
 
 from __future__ import annotations
 
-import importlib.util
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[2] / "experiments" / "realism_drift.py"
-
-
-def _drift_figures() -> Callable[[np.ndarray, np.ndarray], tuple[float, float, float]]:
-    spec = importlib.util.spec_from_file_location("realism_drift", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.drift_figures
 
 
 def _path(steps: np.ndarray) -> np.ndarray:
@@ -29,7 +20,7 @@ def _path(steps: np.ndarray) -> np.ndarray:
 
 
 def test_a_shared_step_error_drifts_in_full_and_alternating_ones_cancel() -> None:
-    drift_figures = _drift_figures()
+    drift_figures = load_script(SCRIPT).drift_figures
     truth = _path(np.tile([1.0, 0.0, 0.0], (9, 1)))  # 9 steps of 1 m
     long = _path(np.tile([1.01, 0.0, 0.0], (9, 1)))  # every step 1 cm too long
     assert drift_figures(truth, long) == pytest.approx((1.0, 1.0, 1.0))

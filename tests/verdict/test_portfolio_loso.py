@@ -3,22 +3,13 @@ portfolio: the in-sample best member and the member chosen leave one sequence ou
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
+from helpers.scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[2] / "experiments" / "portfolio_loso.py"
-
-
-def _script() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("portfolio_loso", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _portfolio() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -33,7 +24,7 @@ def _portfolio() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def test_label_gains_in_sample_and_held_out() -> None:
     y, seq, label = _portfolio()
-    rows = _script().label_gains(y, seq, label, ref=0, min_frames=2)
+    rows = load_script(SCRIPT).label_gains(y, seq, label, ref=0, min_frames=2)
     # log ratios to member 0: member 1 (ln .5, ln .5, ln 1.5), member 2 (ln 2, ln 2, ln .25).
     # In sample member 1 is best: (0.5 * 0.5 * 1.5) ** (1/3). Held out, A and B each see
     # member 2 best on the other two (ln 2 + ln .25 < ln .5 + ln 1.5) and lose x2; C sees
@@ -49,7 +40,7 @@ def test_label_gains_in_sample_and_held_out() -> None:
 def test_also_refuses_other_frames() -> None:
     y, seq, label = _portfolio()
     E = np.arange(len(y), dtype=float)[:, None]
-    module = _script()
+    module = load_script(SCRIPT)
     assert module.same_frames((E, y[:, :1], seq, label), E, seq, label).shape == (7, 1)
     with pytest.raises(SystemExit, match="not the first database's"):
         module.same_frames((E + 1.0, y, seq, label), E, seq, label)
