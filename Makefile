@@ -21,14 +21,16 @@ $(STAMP): pyproject.toml
 # (3 were no faster than 2 in three idle runs on 2 cores, and used more CPU); the slow modules
 # go out first (tests/conftest.py's order, --no-loadscope-reorder)
 TEST_WORKERS ?= 2
+# every command below runs through `adaptune exec`: the pinned CPU dispatch of the stages
+# (pipeline/dispatch.py), so that in-process code gives the numbers the stages give
 test: setup
-	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
+	$(BIN)/adaptune exec -- $(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
 # the fuzz suite of tests/fuzz at length: FUZZ_EXAMPLES examples a target, random seeds
 # (make test runs it small and seeded); a failure prints the blob that replays it
 FUZZ_EXAMPLES ?= 2000
 fuzz: setup
-	ADAPTUNE_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) nice -n 10 $(BIN)/pytest -q tests/fuzz \
+	ADAPTUNE_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) nice -n 10 $(BIN)/adaptune exec -- $(BIN)/pytest -q tests/fuzz \
 		--hypothesis-show-statistics --durations=0
 
 lint: setup
@@ -42,7 +44,7 @@ deps: setup
 	$(PY) tests/helpers/dvc_deps.py
 
 bench: setup
-	$(PY) bench/run.py
+	$(BIN)/adaptune exec -- $(PY) bench/run.py
 
 # DVC hashes every output it caches on min(4, cores / 2) threads by default, one on 2 cores;
 # DVC_HASH_JOBS threads instead (this clone's .dvc/config.local): the verdict's tuning suite,

@@ -18,7 +18,8 @@ the parameters baseline and fixed ran with, trial counts, the replica runs' raw 
 
 def trials_summary(studies: Mapping[str, Path]) -> dict[str, dict[str, float]]:
     """Trial counts by status (failed: the odometry failed; pruned: stopped early as hopeless;
-    lost: to the machinery) and total wall time [s] of every SMBO output folder."""
+    lost: to the machinery) of every SMBO output folder (their wall times: the trials stages'
+    records)."""
     from pipeline.tuning.layout import read_trials_tables
 
     out = {}
@@ -27,8 +28,7 @@ def trials_summary(studies: Mapping[str, Path]) -> dict[str, dict[str, float]]:
         out[study] = {"studies": len({(r["algorithm"], r["sequence"]) for r in rows}),
                       "trials": len(rows),
                       **{status: sum(r["status"] == status for r in rows)
-                         for status in ("failed", "pruned", "lost")},
-                      "wall_time_s": float(sum(r["wall_time_s"] for r in rows))}
+                         for status in ("failed", "pruned", "lost")}}
     return out
 
 
