@@ -4,17 +4,25 @@ PY := $(VENV)/bin/python
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test fuzz lint deps bench repro verdict verdict-headroom docs kitti clean
+.PHONY: constraints setup test fuzz lint deps bench repro verdict verdict-headroom docs kitti clean
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	python3 -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
-	@$(PY) -c "import open3d" >/dev/null 2>&1 || bash .ci/install-system-deps
+	$(BIN)/pip install --quiet -c constraints.txt -e '.[dev]'
+	@{ $(PY) -c "import open3d" && command -v qemu-x86_64; } >/dev/null 2>&1 || bash .ci/install-system-deps
 	@$(PY) -c "import open3d" >/dev/null
 	touch $(STAMP)
+
+# constraints.txt: the exact versions of every package the venv holds (pip freeze), which
+# `make setup` installs: numpy, OpenBLAS, numba, open3d or DuckDB of another version give other
+# numbers; after a dependency change in pyproject.toml: make constraints, then commit both
+constraints: setup
+	$(BIN)/pip install --quiet -e '.[dev]'
+	{ sed -n '1,3p' constraints.txt; $(BIN)/pip freeze --exclude-editable; } > constraints.txt.new
+	mv constraints.txt.new constraints.txt
 
 # the suite in TEST_WORKERS processes (pytest-xdist), a test file per process so that a file's
 # module fixtures (the DVC projects of tests/test_pipeline_dvc.py) are built once; 2 on 2 cores

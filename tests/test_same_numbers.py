@@ -7,7 +7,9 @@ an older OpenBLAS kernel, numba's generic target, glibc's libm without FMA. Ever
 have the same bytes. Each setting is shown to take effect (an unknown feature name would be
 ignored silently): it changes what the library reports when adaptune does not pin the dispatch
 (``ADAPTUNE_CPU_DISPATCH=native``), and there it changes the simulated scans, which is what the
-pins are for.
+pins are for. Last, the ray caster on another CPU model altogether (qemu's user-mode emulation
+of a Haswell: its own CPUID, so Embree picks its kernels for that CPU, and its own approximate
+reciprocals): the same scans.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -47,7 +50,10 @@ STEPS = [
     ["surrogate", "--db", "results.duckdb", "--pca", "pca", "--out", "model", "--trials",
      "trials"],
     ["select", "model", "seq/street_0.mcap", "--out", "schedule.parquet"],
+    ["run", "--algorithm", "gicp", "seq/street_0.mcap", "--out", "gicp.parquet"],
+    ["run", "--algorithm", "kiss_icp", "seq/street_0.mcap", "--out", "kiss_icp.parquet"],
 ]
+"""The commands run, in order; the compiled odometry wheels (small_gicp, kiss_icp) too."""
 
 
 def tiny_params() -> dict[str, Any]:
@@ -186,3 +192,31 @@ def test_an_unknown_dispatch_mode_is_one_line() -> None:
     assert done.returncode == 1
     assert done.stderr.strip() == ("adaptune: error: ADAPTUNE_CPU_DISPATCH must be portable or "
                                    "native, got 'fast'")
+
+
+SCAN_SCRIPT = """
+import hashlib, numpy as np
+from pipeline.sim.simulate import SimSpec, iter_scans, make_world
+spec = SimSpec(world="street", seed=7, frames=2, sensor="vlp16")
+scans = iter_scans(make_world(spec), spec.sensor_model(), spec.seed, motion=spec.motion)
+print(hashlib.sha256(np.concatenate([s.points_lidar for s in scans]).tobytes()).hexdigest())
+"""
+
+
+@pytest.mark.skipif(not X86, reason="qemu-x86_64 emulates an x86-64 CPU")
+def test_the_ray_caster_gives_the_same_scans_on_an_emulated_cpu() -> None:
+    qemu = shutil.which("qemu-x86_64")
+    if qemu is None:
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail("qemu-x86_64 not found: make setup installs qemu-user")
+        pytest.skip("qemu-x86_64 not found (Debian's qemu-user; make setup installs it)")
+
+    def scans(*prefix: str) -> str:
+        done = subprocess.run([ADAPTUNE, "exec", "--", *prefix, sys.executable, "-c",
+                               SCAN_SCRIPT], env=clean_env(), capture_output=True, text=True,
+                              timeout=1800)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.strip()
+
+    native = scans()  # first: compiles and caches the kernels (generic: qemu reuses them)
+    assert scans(qemu, "-cpu", "Haswell-noTSX") == native
