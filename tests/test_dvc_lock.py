@@ -54,9 +54,9 @@ def stale(status: dict[str, Any], outputs: set[str]) -> dict[str, Any]:
             if "changed command" in change:
                 out.setdefault(stage, []).append("changed command")
             for dep, what in (change.get("changed deps") or {}).items():
-                if isinstance(what, dict):  # a params file: {key: "modified" | "new" | ...}
-                    out.setdefault(stage, []).append({dep: what})
-                elif not is_output(dep.removeprefix("../"), outputs) and what != "deleted":
+                params = isinstance(what, dict)  # a params file: {key: "modified" | "new" ...}
+                code = not is_output(dep.removeprefix("../"), outputs) and what != "deleted"
+                if params or code:
                     out.setdefault(stage, []).append({dep: what})
     return out
 
