@@ -8,12 +8,15 @@ STAMP := $(VENV)/.installed
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml
+# the Debian packages (.ci/install-system-deps: open3d's libusb, ROS 1 for `adaptune node`) when
+# one is missing, then Debian's ROS modules for the venv, after its own (.ci/ros-python)
+$(STAMP): pyproject.toml .ci/install-system-deps .ci/ros-python
 	python3 -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[dev]'
-	@$(PY) -c "import open3d" >/dev/null 2>&1 || bash .ci/install-system-deps
+	@bash .ci/install-system-deps
 	@$(PY) -c "import open3d" >/dev/null
+	@$(PY) .ci/ros-python
 	touch $(STAMP)
 
 # the suite in TEST_WORKERS processes (pytest-xdist), a test file per process so that a file's
