@@ -5,8 +5,8 @@ Foxglove server of ``pipeline.live_view`` (``adaptune live --serve``). The frame
 (``pipeline.progress``).
 
 The output holds the sequence's ground truth (``/ground_truth/pose``, ``/tf`` world -> lidar),
-its scans (``/lidar/points``) only when asked (``scans``: a KITTI scan is ~1 MB compressed, 166
-MB for 177 frames; without them the MCAP is a record of the run, a few KB a frame), and:
+its scans (``/lidar/points``) only when asked (``scans``: 1.4 MB a KITTI frame compressed;
+without them the MCAP is a record of the run, 1.2 KB a frame), and:
 - ``/odometry/pose`` (geometry_msgs/msg/PoseStamped, frame ``world``): the estimate, anchored at
   the first frame's ground-truth pose, so ground truth and estimate start at the same place;
 - ``/tf``: ``world`` -> ``odom`` (that anchor, ``T_world_odom``) and ``odom`` ->

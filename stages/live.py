@@ -19,7 +19,7 @@ from stages.common import model_run_options, params_option, report_selection
 @model_run_options("Output MCAP (ground truth, estimated poses, chosen parameters; the scans "
                    "with --scans).")
 @click.option("--scans/--no-scans", default=False, show_default=True,
-              help="Keep the scans in the output MCAP (about 1 MB a KITTI frame).")
+              help="Keep the scans in the output MCAP (1.4 MB a KITTI frame).")
 @click.option("--serve", is_flag=True,
               help="Show the run in Foxglove while it runs: a WebSocket server on "
               "--host:--port; the run starts when a client connects, and the server stays "
