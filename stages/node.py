@@ -46,7 +46,8 @@ def _rename(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]
 @click.option("--name", default="adaptune", show_default=True, help="The ROS node's name.")
 @click.option("--queue-size", type=click.IntRange(0), default=1, show_default=True,
               help="Clouds kept waiting while a selection runs (1: the newest only; 0: all).")
-@click.option("--wait", "wait_s", type=float, default=30.0, show_default=True,
+@click.option("--wait", "wait_s", type=click.FloatRange(0, min_open=True), default=30.0,
+              show_default=True,
               help="How long to wait for the odometry node's dynamic_reconfigure server [s].")
 @json_option
 def node(params_path: Path | None, model_dir: Path, algorithm: str | None, cloud_topic: str,

@@ -182,6 +182,28 @@ def test_node_sets_parameters_of_a_running_odometry(tmp_path: Path, kitti_root: 
     assert all(np.isfinite(s["pose"]).all() for s in scans)
 
 
+def test_node_refuses_an_odometry_it_cannot_set(tmp_path: Path, model_dir: Path) -> None:
+    """One line and exit code 1: no dynamic_reconfigure server under the target's name, or a
+    server without one of the model's parameters (as renamed)."""
+    require_ros()
+    log = tmp_path / "odometry.jsonl"
+    with RosGraph(tmp_path) as graph:
+        graph.start("odometry", [sys.executable, str(HELPERS / "ros_odometry_node.py"),
+                                 "--via", "dynamic_reconfigure", "--log", str(log)])
+        graph.wait_until(lambda: "/odometry/set_parameters" in graph.services(),
+                         "the odometry node's server runs")
+        absent = graph.start("absent", [ADAPTUNE, "node", str(model_dir), "--target", "/lio",
+                                        "--wait", "1"])
+        renamed = graph.start("renamed", [ADAPTUNE, "node", str(model_dir), "--target",
+                                          "/odometry", "--rename", "resolution=ndt_resolution",
+                                          "--name", "adaptune_renamed"])
+        assert absent.status() == 1 and renamed.status() == 1
+    assert "adaptune: error: /lio: no dynamic_reconfigure server answered within 1 s" in \
+        absent.text()
+    assert ("adaptune: error: /odometry: its dynamic_reconfigure server has no parameter "
+            "ndt_resolution (its parameters: keyframe_interval, resolution)") in renamed.text()
+
+
 def events(log: Path, kind: str) -> list[dict[str, Any]]:
     """The odometry node's events of one kind, in order (a line still being written is not
     read)."""
