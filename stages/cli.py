@@ -49,6 +49,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "stages.live:live",
         "Stream a sequence through odometry with online parameter selection.",
     ),
+    "node": (
+        "stages.node:node",
+        "Live ROS 1 node: select from a PointCloud2 topic, set the odometry's parameters.",
+    ),
     "adaptive": (
         "stages.adaptive:adaptive",
         "Adaptive runs on the evaluated sequences (dvc stage).",
