@@ -10,7 +10,12 @@ from pathlib import Path
 
 import click
 
-from stages.common import model_run_options, params_option, report_selection
+from stages.common import (
+    model_run_options,
+    params_option,
+    refuse_json_on_stdout,
+    report_selection,
+)
 
 
 @click.command()
@@ -26,6 +31,7 @@ def live(params_path: Path | None, model_dir: Path, sequence: Path, out: Path,
     from pipeline.runtime import Selector, load_model
     from pipeline.tuning.smbo import TrialsSection
 
+    refuse_json_on_stdout(out, as_json)
     refuse_input_as_output(out, [sequence, params_path, *sorted(model_dir.glob("*"))])
     # the adapter's untuned settings as in the trials (without a params file, its defaults)
     options = load_section(params_path, "trials", TrialsSection).adapter_options

@@ -17,9 +17,10 @@ import click
 from stages.common import (
     FILE,
     algorithm_option,
-    file_option,
     json_option,
+    out_option,
     refuse_dash,
+    refuse_json_on_stdout,
     report,
     sequence_argument,
 )
@@ -109,7 +110,7 @@ def parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
               "baseline).")
 @click.option("--schedule", "schedule_path", type=FILE, default=None,
               help="Per-frame parameter schedule (Parquet).")
-@file_option("--out", "out_path", help="Trajectory Parquet to write.")
+@out_option("out_path", help="Trajectory Parquet to write")
 @click.option("--option", "-o", "options", multiple=True,
               help="Adapter option key=value (repeatable), e.g. -o source_voxel_m=0.5.")
 @click.option("--time-limit", "time_limit_s", type=float, default=None, help="Seconds.")
@@ -125,6 +126,7 @@ def run(algorithm: str | None, params_arg: str | None, values_json: str | None,
     from pipeline.odometry.base import Schedule
     from pipeline.trajectory import write_trajectory
 
+    refuse_json_on_stdout(out_path, as_json)
     params_path = None
     values_flag = "--values"
     if params_arg is not None and is_values(params_arg):

@@ -7,7 +7,12 @@ from pathlib import Path
 
 import click
 
-from stages.common import model_run_options, params_option, report_selection
+from stages.common import (
+    model_run_options,
+    params_option,
+    refuse_json_on_stdout,
+    report_selection,
+)
 
 
 @click.command()
@@ -28,6 +33,7 @@ def select(
     from pipeline.runtime import Selector, load_model
     from pipeline.sequence import SequenceReader
 
+    refuse_json_on_stdout(out, as_json)
     refuse_input_as_output(out, [sequence, params_path, *sorted(model_dir.glob("*"))])
     try:
         selection = load_section(params_path, "select", SelectSection).settings().replace(

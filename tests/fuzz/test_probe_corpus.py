@@ -320,17 +320,19 @@ def test_a_dask_address_without_a_port_is_one_line(address: str) -> None:
 
 
 @pytest.mark.parametrize("args", [
-    ["export", "{traj}", "--format", "kitti", "--out", "-"],
     ["metric", "rte", "{seq}", "-", "--length", "2"],
     ["info", "-"],
     ["run", "-a", "ndt", "--params", "@-", "{seq}", "--out", "{tmp}/t.parquet"],
     ["ingest", "folder", "{tmp}", "--poses", "-", "--out", "{tmp}/x.mcap"],
-], ids=["export --out -", "metric rte SEQ -", "info -", "run --params @-", "--poses -"])
+    ["descriptors", "--sequences", "{tmp}", "--out", "-", "--environment", "{tmp}/e.parquet",
+     "--pca", "{tmp}/pca"],
+], ids=["metric rte SEQ -", "info -", "run --params @-", "--poses -", "descriptors --out -"])
 def test_a_dash_is_no_file_name(tmp_path: Path, args: list[str],
                                 monkeypatch: pytest.MonkeyPatch) -> None:
     """Case 6: `export --out -` wrote a file named `-`, `metric rte seq -` scored a stale file
-    of that name. Only `query` reads stdin / writes stdout for `-`; elsewhere it is refused
-    (a file named - is ./-)."""
+    of that name. `-` is stdin only for query's SQL, stdout only for the one file a command
+    writes (issue 58: `export --out -` writes stdout, test_an_output_is_written_through);
+    elsewhere it is refused (a file named - is ./-)."""
     seq = straight_sequence(tmp_path / "s.mcap")
     traj = trajectory_file(tmp_path / "t0.parquet", seq, [0, 1, 2])
     monkeypatch.chdir(tmp_path)
