@@ -78,11 +78,10 @@ def read_manifest(path: Path) -> dict[str, Any]:
     mpath = path / MANIFEST_NAME
     if not mpath.exists() and not mpath.is_symlink():
         raise ArtifactError(f"{path}: not a model artifact (no manifest.json)")
+    from pipeline.json_yaml import parse_json
+
     data = read_regular_file(mpath, MAX_MANIFEST_BYTES)
-    try:
-        manifest = json.loads(data.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
-        raise ArtifactError(f"{mpath}: damaged manifest ({exc})") from None
+    manifest = parse_json(data, f"{mpath}: damaged manifest", error=ArtifactError)
     if not isinstance(manifest, dict) or manifest.get("kind") != ARTIFACT_KIND:
         raise ArtifactError(f"{mpath}: not an adaptune surrogate manifest")
     if manifest.get(MANIFEST_HASH_KEY) != canonical_manifest_hash(manifest):

@@ -41,10 +41,9 @@ def parse_params(text: str | None, flag: str = "--values") -> dict[str, float]:
         path = Path(text[1:])
         text = read_input_text(path, "parameters file", error=ConfigError, strict=True)
         source = str(path)
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ConfigError(f"{source}: not valid JSON ({exc.msg})") from None
+    from pipeline.json_yaml import parse_json
+
+    data = parse_json(text, source, error=ConfigError)
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: must be a JSON object of parameter name -> value")
     return data
@@ -86,12 +85,14 @@ def configured_adapter(params_path: Path | None, algorithm: str | None,
 def parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
     """``--option key=value`` pairs; a value that parses as JSON is taken as JSON."""
     from pipeline.errors import ConfigError
+    from pipeline.json_yaml import check_json_nesting
 
     out: dict[str, Any] = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
         if not sep or not key:
             raise ConfigError(f"--option must be key=value, got {pair!r}")
+        check_json_nesting(value, f"--option {key}", error=ConfigError)
         try:
             out[key] = json.loads(value)
         except json.JSONDecodeError:
