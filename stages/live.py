@@ -28,6 +28,7 @@ def live(params_path: Path | None, model_dir: Path, sequence: Path, out: Path,
     from pipeline.config import SelectSection, load_section
     from pipeline.io_utils import refuse_input_as_output
     from pipeline.live import run_live
+    from pipeline.odometry.registry import declared_space
     from pipeline.runtime import Selector, load_model
     from pipeline.tuning.smbo import TrialsSection
 
@@ -36,7 +37,8 @@ def live(params_path: Path | None, model_dir: Path, sequence: Path, out: Path,
     # the adapter's untuned settings as in the trials (without a params file, its defaults)
     options = load_section(params_path, "trials", TrialsSection).adapter_options
     selection = load_section(params_path, "select", SelectSection).settings()
-    model = load_model(model_dir, expected_algorithm=algorithm)
+    model = load_model(model_dir, expected_algorithm=algorithm,
+                       declared_space=declared_space)
     selector = Selector(model, selection)
     report_selection({"algorithm": model.algorithm,
                       **run_live(model, sequence, out, selector, adapter_options=options),

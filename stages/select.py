@@ -30,6 +30,7 @@ def select(
     from pipeline.config import SelectSection, load_section
     from pipeline.errors import ConfigError
     from pipeline.io_utils import refuse_input_as_output
+    from pipeline.odometry.registry import declared_space
     from pipeline.runtime import Selector, load_model
     from pipeline.sequence import SequenceReader
 
@@ -40,7 +41,8 @@ def select(
             period_s=period_s)
     except ValueError as exc:  # --period-s out of range, named as its params key
         raise ConfigError(str(exc)) from None
-    model = load_model(model_dir, expected_algorithm=algorithm)
+    model = load_model(model_dir, expected_algorithm=algorithm,
+                       declared_space=declared_space)
     selector = Selector(model, selection)
     with SequenceReader(sequence) as reader:
         schedule = selector.schedule(reader)
