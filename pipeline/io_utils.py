@@ -240,8 +240,11 @@ def input_file(path: str | os.PathLike[str], kind: str, hint: str = "") -> Path:
     return p
 
 
-PLAIN_NAME_RULE = ("a plain file name: not empty, no '/', '\\' or control characters, "
-                   "not starting with '.'")
+PLAIN_NAME_MAX = 200
+"""The longest name [bytes] that becomes files under an output folder: room for what is added
+to it (``.mcap``, ``sequence=``, a temporary's 32) within a file name's 255."""
+PLAIN_NAME_RULE = (f"a plain file name: not empty, at most {PLAIN_NAME_MAX} bytes, no '/', "
+                   "'\\' or control characters, not starting with '.'")
 """What a name that becomes a file in an output folder must be (``check_plain_name``)."""
 
 
@@ -251,6 +254,7 @@ def check_plain_name(name: object, what: str, error: type[Exception] = ConfigErr
     entries); ``error`` naming ``what`` and the rule otherwise (a name like ``../../x`` or
     ``a/b`` would write outside the folder, or record such a path)."""
     if (not isinstance(name, str) or not name or name.startswith(".")
+            or len(name.encode("utf-8", "surrogatepass")) > PLAIN_NAME_MAX
             or any(c in name for c in "/\\") or any(ord(c) < 32 or ord(c) == 127 for c in name)):
         raise error(f"{what} must be {PLAIN_NAME_RULE}, got {name!r}")
     return name
@@ -360,11 +364,11 @@ def atomic_path(final: str | os.PathLike[str]) -> Iterator[Path]:
             yield tmp
         return
     final = output_path(final)
-    target = link_target(final)
-    if through_kind(target) is not None:
-        with written_through(target) as tmp:
+    if through_kind(final) is not None:  # stat follows every link (/dev/stdout's too)
+        with written_through(final) as tmp:
             yield tmp
         return
+    target = link_target(final)
     remove_stale_temps(target)
     tmp = _temp_beside(target)
     try:

@@ -747,7 +747,8 @@ def test_an_output_name_past_the_limit_is_one_line(tmp_path: Path, out_inputs: d
                                                    ) -> None:
     """Issue 58, 3: an output name of 300 characters was `OSError: [Errno 36] File name too
     long` from io_utils.refuse_input_as_output. A name past 223 bytes (the file system's 255,
-    less the temporary's 32) is one line naming the limit; so is an input's past 255."""
+    less the temporary's 32) is one line naming the limit; so is an input's past 255, and a
+    sequence name past 200 (the files named after it need the room)."""
     long = tmp_path / ("a" * 300)
     fails(out_args("export", out_inputs, long), "a name of 300 bytes", "255")
     fails(out_args("export", out_inputs, tmp_path / ("b" * 240)), "a name of 240 bytes",
@@ -757,6 +758,11 @@ def test_an_output_name_past_the_limit_is_one_line(tmp_path: Path, out_inputs: d
     done = invoke(out_args("export", out_inputs, tmp_path / ("c" * 223)))
     assert done.exit_code == 0, done.output
     assert not (tmp_path / "x.txt").exists()
+    for command in (["simulate", "--frames", "3"], ["ingest", "mcap", out_inputs["seq"]]):
+        # a sequence's name becomes files later (<name>.mcap, sequence=<name>/): at most 200
+        fails([*command, "--name", "n" * 201, "--out", tmp_path / "s.mcap"],
+              "the sequence name must be a plain file name: not empty, at most 200 bytes")
+    assert not (tmp_path / "s.mcap").exists()
 
 
 @pytest.mark.parametrize("where", ["--values @FILE", "-o KEY=VALUE", "params.yaml",
