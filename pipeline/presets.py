@@ -28,7 +28,7 @@ from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
-from pipeline.config import SEQUENCE_FOLDERS, Section, check_params
+from pipeline.config import SEQUENCE_FOLDERS, IterationCount, Section, check_params
 from pipeline.errors import ConfigError
 
 KITTI_TRAIN = ("00", "01", "02", "03", "04", "05")
@@ -66,8 +66,8 @@ class KittiProtocol(Section):
     windows: dict[str, tuple[int, int]] = Field(default_factory=dict)
     change_windows: int | None = Field(None, ge=2)
     algorithm: str | None = None
-    iterations: int | None = Field(None, ge=1)
-    joint_iterations: int | None = Field(None, ge=1)
+    iterations: IterationCount | None = None
+    joint_iterations: IterationCount | None = None
     time_limit_s: float | None = Field(None, gt=0)
     length_m: float = Field(KITTI_LENGTH_M, gt=0)
     kitti_lengths_m: list[float] | None = Field(None, min_length=1)

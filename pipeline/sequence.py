@@ -484,6 +484,18 @@ class SequenceReader:
         if count != len(self):
             raise InputError(f"{self.path}: {count} point clouds for {len(self)} frames")
 
+    def iter_every_chunk(self) -> Iterator[tuple[str, Any]]:
+        """(topic, message) of every message of every chunk of the file, each chunk's CRC
+        checked; InputError naming the file on a mismatch.
+
+        The other methods check the CRCs of the chunks they read and no others: the ground
+        truth's (``export``, ``metric``) lives in chunks of its own, apart from the scans'.
+        ``adaptune info`` reads the file through this (docs/design.md, "Inputs": which command
+        checks which chunks, and why: bench/bench_crc.py)."""
+        with mcap_errors(self.path):
+            for _, channel, msg in self._reader.iter_messages():
+                yield channel.topic, msg
+
     def iter_topic_json(self, topic: str) -> Iterator[tuple[int, dict[str, Any]]]:
         """(stamp_ns, message) of a JSON channel such as ``/adaptune/params``."""
         for _, _, msg in self._messages([topic]):

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from stages.common import FILE, file_option
+from stages.common import FILE, file_option, out_option
 
 FRAMES = ["lidar", "kitti-camera"]
 
@@ -20,7 +20,7 @@ FRAMES = ["lidar", "kitti-camera"]
 @click.command()
 @click.argument("source", type=FILE)
 @click.option("--format", "fmt", type=click.Choice(["kitti", "tum"]), required=True)
-@file_option("--out", help="The pose text file to write.")
+@out_option(help="The pose text file to write")
 @click.option("--ground-truth", is_flag=True,
               help="SOURCE is a sequence MCAP: export its ground truth.")
 @file_option("--sequence", required=False,

@@ -11,7 +11,12 @@ from pathlib import Path
 
 import click
 
-from stages.common import model_run_options, params_option, report_selection
+from stages.common import (
+    model_run_options,
+    params_option,
+    refuse_json_on_stdout,
+    report_selection,
+)
 
 
 @click.command()
@@ -35,14 +40,17 @@ def live(params_path: Path | None, model_dir: Path, sequence: Path, out: Path,
     settings: params ``select``)."""
     from pipeline.config import SelectSection, load_section
     from pipeline.io_utils import refuse_input_as_output
+    from pipeline.odometry.registry import declared_space
     from pipeline.runtime import Selector, load_model
     from pipeline.tuning.smbo import TrialsSection
 
+    refuse_json_on_stdout(out, as_json)
     refuse_input_as_output(out, [sequence, params_path, *sorted(model_dir.glob("*"))])
     # the adapter's untuned settings as in the trials (without a params file, its defaults)
     options = load_section(params_path, "trials", TrialsSection).adapter_options
     selection = load_section(params_path, "select", SelectSection).settings()
-    model = load_model(model_dir, expected_algorithm=algorithm)
+    model = load_model(model_dir, expected_algorithm=algorithm,
+                       declared_space=declared_space)
     selector = Selector(model, selection)
     if serve:
         from pipeline.live_view import serve_live

@@ -13,7 +13,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from pipeline.config import Section
+from pipeline.config import IterationCount, Section
 from pipeline.generalization.suite import labels_rule, range_rule, seed_roots_rule
 from pipeline.sequence import Compression
 from pipeline.sim.route import LABELS
@@ -121,7 +121,7 @@ class VerdictSection(Section):
     borrow_model: SensorName | None = "hdl64"
     baseline: dict[str, float] = Field(
         default_factory=lambda: {"resolution": 4.0, "keyframe_interval": 4.0})
-    fixed_trials: int = Field(64, ge=1)
+    fixed_trials: IterationCount = 64
     fixed_warm_start: int = Field(4, ge=0)
     failure_pct: float = Field(10.0, gt=0)
     oracle: dict[str, list[float]] = Field(default_factory=lambda: {
