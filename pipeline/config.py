@@ -123,8 +123,8 @@ SECTIONS: dict[str, str] = {
     "surrogate": "pipeline.surrogates.section:SurrogateSection",
     "select": "pipeline.config:SelectSection",
     "evaluate": "pipeline.evaluate.section:EvaluateSection",
-    "generalize": "pipeline.generalization.suite:GeneralizeSection",
-    "verdict": "pipeline.verdict.section:VerdictSection",
+    "generalize": "studies.generalization.suite:GeneralizeSection",
+    "verdict": "studies.verdict.section:VerdictSection",
 }
 """Every params.yaml section: name -> ``module:Model``, in the order of params.yaml."""
 
