@@ -267,7 +267,7 @@ def halving_settings(length_m: float, halving: HalvingSection | None = None,
                      workers: int = WORKERS) -> object:
     """The measured study's TrialsSection: NDT, the paper's budget, the told lag of ``workers``
     workers, the params' halving (or ``halving``), no time limit (in the process)."""
-    from pipeline.tuning.smbo import TrialsSection
+    from pipeline.tuning.section import TrialsSection
 
     trials = int(os.environ.get("ADAPTUNE_BENCH_HALVING_TRIALS", size(str(ITERATIONS), "4")))
     rungs = {} if halving is None else {"halving": halving}

@@ -72,7 +72,8 @@ def bare_odometry_fps(seqs: list[Path]) -> list[float]:
 def stages(seqs: list[Path], out: Path, savings: bool, pool: object) -> dict[str, Any]:
     """Run the trials and the joint study; their wall time, trials, frames run and quality."""
     from pipeline.config import load_section
-    from pipeline.tuning.smbo import FixedSection, TrialsSection, run_trials, study_adapter
+    from pipeline.tuning.section import FixedSection, TrialsSection, joint_settings
+    from pipeline.tuning.smbo import run_trials, study_adapter
     from pipeline.tuning.warm_start import warm_start_params
 
     defaults = Path(__file__).resolve().parents[1] / "params.yaml"
@@ -82,8 +83,9 @@ def stages(seqs: list[Path], out: Path, savings: bool, pool: object) -> dict[str
                              length_m=LENGTH_M, time_limit_s=size(600.0, None),
                              pruning=trials.pruning if savings else {"percentile": None})
     joint_iterations = JOINT_ITERATIONS
-    if savings and fixed.iterations is not None:  # the defaults' share of the trials'
-        joint_iterations = round(JOINT_ITERATIONS * fixed.iterations / trials.iterations)
+    if savings:  # the defaults' share of the trials'
+        joint_iterations = round(JOINT_ITERATIONS * joint_settings(trials, fixed).iterations
+                                 / trials.iterations)
     got: dict[str, Any] = {}
     for stage, joint, iterations in (("trials", False, ITERATIONS),
                                      ("fixed", True, joint_iterations)):

@@ -39,7 +39,8 @@ def selections(model, descs: np.ndarray, pca: tuple | None = None,
         order = np.random.default_rng(shuffle).permutation(len(sel.candidates))
         sel.candidates = sel.candidates[order]
         sel.search = model.surrogate.search(sel.candidates, model.x_scale,
-                                            {"subset_rows": sel.subset_rows, "grouped": True})
+                                            {"subset_rows": sel.settings.subset_rows,
+                                             "grouped": True})
     mean, scale, comp = pca or (model.pca_mean, model.pca_scale, model.pca_components)
     out = []
     for d in descs:

@@ -37,7 +37,8 @@ def run() -> list[Row]:
     from pipeline.sequence import SequenceReader
     from pipeline.sim.simulate import SimSpec, simulate_sequence
     from pipeline.tuning.job import TrialJob
-    from pipeline.tuning.smbo import TrialsSection, run_trials
+    from pipeline.tuning.section import TrialsSection
+    from pipeline.tuning.smbo import run_trials
     from pipeline.tuning.worker import run_trial
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -133,7 +134,8 @@ def studies_side_by_side(tmp: Path, seq: Path) -> tuple[float, float]:
     import pyarrow.parquet as pq
 
     from pipeline.executor import open_executor
-    from pipeline.tuning.smbo import TrialsSection, run_trials
+    from pipeline.tuning.section import TrialsSection
+    from pipeline.tuning.smbo import run_trials
     from pipeline.tuning.table import trials_path
 
     paths = []

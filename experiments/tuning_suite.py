@@ -83,9 +83,9 @@ def dev(project: Path, family: str, n_worlds: int | None, ks: list[int],
     print and write."""
     from verdict_dev import summary_row
 
-    from pipeline.report.outputs import write_json
-    from studies.verdict.report import load_settings, suite_inputs
+    from pipeline.outputs import write_json
     from studies.suites.runner import AdaptiveSetting, run_suite
+    from studies.verdict.report import load_settings, suite_inputs
     from studies.verdict.summary import suite_metrics
     from studies.verdict.worlds import suite_worlds
 

@@ -44,7 +44,7 @@ def main() -> None:
 def compare(reference: Path, candidate: Path, out: Path | None) -> None:
     """Print the comparison of the two suite metrics files (module docstring); write it as
     JSON to ``out`` when given."""
-    from pipeline.report.outputs import write_json
+    from pipeline.outputs import write_json
     from studies.verdict.arms import compare_arms
 
     result = compare_arms(json.loads(reference.read_text()), json.loads(candidate.read_text()))

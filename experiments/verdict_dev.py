@@ -72,9 +72,9 @@ def variant_model(project: Path, name: str, changes: dict[str, Any]) -> Path:
 
 
 def main() -> None:
-    from pipeline.report.outputs import write_json
-    from studies.verdict.report import load_settings, suite_inputs
+    from pipeline.outputs import write_json
     from studies.suites.runner import AdaptiveSetting, run_suite
+    from studies.verdict.report import load_settings, suite_inputs
     from studies.verdict.summary import suite_metrics
     from studies.verdict.worlds import suite_worlds
 

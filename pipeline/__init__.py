@@ -3,7 +3,7 @@
 Importing it points numba's on-disk cache of compiled kernels (``@numba.njit(cache=True)``) at a
 user cache folder, ``$XDG_CACHE_HOME/adaptune/numba`` (``~/.cache/adaptune/numba``), unless
 ``NUMBA_CACHE_DIR`` is set: by default numba writes beside the module, into the installed
-package, which fails on a read-only install (issue 14, item 8). numba reads the variable when
+package, which fails on a read-only install. numba reads the variable when
 it is first imported, and every module of this package that uses numba imports it after this.
 """
 

@@ -20,7 +20,7 @@ import json
 import logging
 import os
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -58,15 +58,14 @@ class AdaptiveRun:
 
 
 def run_adaptive(model_dir: str | Path, sequence_paths: Sequence[str | Path], out_dir: str | Path,
-                 adapter_options: Mapping[str, Any] | None = None,
                  time_limit_s: float | None = None, workers: int = 1,
                  selection: SelectionSettings | None = None) -> list[AdaptiveRun]:
     """Schedule and run every sequence with the model of ``model_dir``; see the module docstring.
 
-    adapter_options: untuned settings of the model's adapter (as in the trials); selection: the
-    selector's runtime settings (params ``select``; None: their defaults); workers:
-    sequences run at a time, in spawned processes (each sequence's run depends on the model and
-    the sequence alone, so the outputs are the same for any number).
+    The model's odometry runs with the adapter options the trials ran with (the artifact
+    records them); selection: the selector's runtime settings (params ``select``; None: their
+    defaults); workers: sequences run at a time, in spawned processes (each sequence's run
+    depends on the model and the sequence alone, so the outputs are the same for any number).
     Raises ArtifactError for a bad model, InputError for bad sequences, OdometryError when the
     odometry fails (an adaptive run has no penalty to fall back on).
     """
@@ -76,17 +75,15 @@ def run_adaptive(model_dir: str | Path, sequence_paths: Sequence[str | Path], ou
 
     # a bad artifact fails here, once, before any worker starts
     load_model(model_dir, declared_space=declared_space)
-    jobs = [(Path(model_dir), Path(p), Path(out_dir) / Path(p).stem, adapter_options,
-             time_limit_s, selection) for p in sequence_paths]
+    jobs = [(Path(model_dir), Path(p), Path(out_dir) / Path(p).stem, time_limit_s, selection)
+            for p in sequence_paths]
     return map_in_processes(_run_loaded, jobs, workers)
 
 
 def _run_loaded(model_dir: Path, sequence_path: Path, out_dir: Path,
-                adapter_options: Mapping[str, Any] | None, time_limit_s: float | None,
-                selection: SelectionSettings | None) -> AdaptiveRun:
+                time_limit_s: float | None, selection: SelectionSettings | None) -> AdaptiveRun:
     """``run_one`` with the artifact at ``model_dir``, loaded once per process."""
-    return run_one(loaded_model(model_dir), sequence_path, out_dir, adapter_options, time_limit_s,
-                   selection)
+    return run_one(loaded_model(model_dir), sequence_path, out_dir, time_limit_s, selection)
 
 
 @functools.lru_cache(maxsize=2)
@@ -99,7 +96,6 @@ def loaded_model(model_dir: Path) -> Any:
 
 
 def run_one(model: Any, sequence_path: Path, out_dir: Path,
-            adapter_options: Mapping[str, Any] | None = None,
             time_limit_s: float | None = None,
             selection: SelectionSettings | None = None) -> AdaptiveRun:
     """One sequence: schedule, run, write (module docstring)."""
@@ -115,7 +111,7 @@ def run_one(model: Any, sequence_path: Path, out_dir: Path,
         schedule = selector.schedule(reader)
         frames = len(reader)
     select_s = time.perf_counter() - t0
-    adapter = build_adapter(model.algorithm, adapter_options, model.space)  # as trained
+    adapter = build_adapter(model.algorithm, model.adapter_options, model.space)  # as trained
     t0 = time.perf_counter()
     traj = run_sequence(adapter, sequence_path, schedule, time_limit_s=time_limit_s)
     odometry_s = time.perf_counter() - t0

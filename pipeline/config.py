@@ -21,6 +21,7 @@ from pydantic import (
     BeforeValidator,
     ConfigDict,
     Field,
+    PrivateAttr,
     ValidationError,
     model_validator,
 )
@@ -93,21 +94,27 @@ SHARED: dict[str, tuple[str, ...]] = {
 class SelectSection(Section):
     """params.yaml ``select``: the selector's runtime settings. Their fields, defaults and
     bounds are ``pipeline.selection.SelectionSettings`` (the runtime's own, pydantic-free
-    definition); this model checks a mapping against it."""
+    definition and the one validator); this model hands a mapping to it once and keeps the
+    result, which the stages give the ``Selector`` whole."""
 
     model_config = ConfigDict(extra="allow", frozen=True)
+    _settings: SelectionSettings = PrivateAttr(default_factory=SelectionSettings)
 
     @model_validator(mode="before")
     @classmethod
-    def _settings(cls, data: Any) -> Any:
+    def _mapping(cls, data: Any) -> Any:
         if not isinstance(data, Mapping):
             raise ValueError(f"select must be a mapping of settings, got {data!r}")
-        SelectionSettings.from_mapping(data)
         return data
+
+    @model_validator(mode="after")
+    def _checked(self) -> SelectSection:
+        self._settings = SelectionSettings.from_mapping(self.model_dump())
+        return self
 
     def settings(self) -> SelectionSettings:
         """The checked runtime settings."""
-        return SelectionSettings.from_mapping(self.model_dump())
+        return self._settings
 
 
 SECTIONS: dict[str, str] = {
@@ -116,8 +123,8 @@ SECTIONS: dict[str, str] = {
     "data": "pipeline.sources.dataset:DataSection",
     "simulate_kitti": "pipeline.sim.kitti_dataset:SimulateKittiSection",
     "descriptors": "pipeline.descriptors.dataset:DescriptorsSection",
-    "trials": "pipeline.tuning.smbo:TrialsSection",
-    "fixed": "pipeline.tuning.smbo:FixedSection",
+    "trials": "pipeline.tuning.section:TrialsSection",
+    "fixed": "pipeline.tuning.section:FixedSection",
     "portfolio": "pipeline.portfolio:PortfolioSection",
     "devkit": "pipeline.metrics.section:DevkitSection",
     "surrogate": "pipeline.surrogates.section:SurrogateSection",

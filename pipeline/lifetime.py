@@ -287,7 +287,9 @@ def _guard(lifeline_fd: int, workdir: str, argv: list[str]) -> int:
                                 stdout=subprocess.DEVNULL,
                                 preexec_fn=set_parent_death_signal)  # single-threaded here
     except OSError as exc:
-        print(f"adaptune guard: cannot run {argv[0]!r} ({exc.strerror})", file=sys.stderr)
+        # the guard process: stderr is its only voice
+        print(f"adaptune guard: cannot run {argv[0]!r} ({exc.strerror})",  # noqa: T201
+              file=sys.stderr)
         return GUARD_CANNOT_RUN
     _report(f"pid {tool.pid}")  # the group the parent kills should this guard die
     try:
@@ -328,7 +330,8 @@ def _report(line: str) -> None:
 def main(argv: list[str]) -> int:
     """``python -I lifetime.py LIFELINE_FD WORKDIR -- ARGV...``."""
     if len(argv) < 4 or argv[2] != "--":
-        print("usage: python -I lifetime.py LIFELINE_FD WORKDIR -- ARGV...", file=sys.stderr)
+        print("usage: python -I lifetime.py LIFELINE_FD WORKDIR -- ARGV...",  # noqa: T201
+              file=sys.stderr)
         return 2
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)  # the parent decides, through the lifeline

@@ -27,7 +27,6 @@ needs the odometry adapters and the MCAP writer.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -74,16 +73,15 @@ class FrameSink(Protocol):
 
 def run_live(
     model: Model, sequence: str | Path, out: str | Path, selector: Selector | None = None,
-    adapter_options: Mapping[str, Any] | None = None, *, scans: bool = False,
-    sink: FrameSink | None = None,
+    *, scans: bool = False, sink: FrameSink | None = None,
 ) -> dict[str, int]:
     """Stream ``sequence`` through the model's odometry, selecting parameters online; write
     ``out`` (module docstring), with the scans when ``scans``; ``sink`` is shown every frame.
     Returns frames, selections and parameter changes (the ``set_params`` calls, counted as
     ``Schedule.n_changes`` counts them).
 
-    ``adapter_options``: the adapter's untuned settings, as in the trials (params
-    ``trials.adapter_options``). ConfigError for an adapter that cannot stream (``command``).
+    The adapter is built as the trials ran it (the model's adapter options and space).
+    ConfigError for an adapter that cannot stream (``command``).
     """
     from pipeline.odometry.base import StreamingAdapter
     from pipeline.odometry.registry import build_adapter
@@ -92,7 +90,7 @@ def run_live(
     from pipeline.sequence import WORLD_FRAME, SequenceReader, SequenceWriter
 
     selector = selector or Selector(model)
-    adapter = build_adapter(model.algorithm, adapter_options, model.space)
+    adapter = build_adapter(model.algorithm, model.adapter_options, model.space)
     if not isinstance(adapter, StreamingAdapter):
         raise ConfigError(f"{model.algorithm}: adaptune live needs an adapter that streams "
                           "scan by scan (start); this one runs whole sequences (use adaptive)")

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -186,8 +185,8 @@ def _channel(foxglove: Any, context: Any, topic: str, msgtype: str) -> Any:
 
 
 def serve_live(model: Model, sequence: str | Path, out: str | Path, selector: Selector,
-               adapter_options: Mapping[str, Any] | None = None, *, scans: bool = False,
-               host: str = "127.0.0.1", port: int = 8765) -> dict[str, Any]:
+               *, scans: bool = False, host: str = "127.0.0.1", port: int = 8765
+               ) -> dict[str, Any]:
     """``pipeline.live.run_live`` shown by a LiveView on ``host``:``port`` (module docstring:
     it waits for a client, runs, then serves until the clients leave). Returns run_live's
     summary and the server's ``url``."""
@@ -195,7 +194,6 @@ def serve_live(model: Model, sequence: str | Path, out: str | Path, selector: Se
 
     with LiveView(host, port) as view:
         view.wait_for_client()
-        summary = run_live(model, sequence, out, selector, adapter_options, scans=scans,
-                           sink=view)
+        summary = run_live(model, sequence, out, selector, scans=scans, sink=view)
         view.hold()
     return {**summary, "url": view.url}

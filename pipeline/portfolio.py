@@ -28,7 +28,8 @@ from pydantic import Field
 from pipeline.config import Section, validate_section
 from pipeline.errors import ConfigError
 from pipeline.odometry.base import ParameterSpace, Params, grid_sets
-from pipeline.tuning.smbo import StudySummary, TrialsSection, run_trials, study_adapter
+from pipeline.tuning.section import TrialsSection
+from pipeline.tuning.smbo import StudySummary, run_trials, study_adapter
 
 log = logging.getLogger(__name__)
 

@@ -3,7 +3,7 @@
 The codecs are the library's, built from the ROS 2 ``.msg`` texts in ``schemas/ros2/`` (the
 same texts the MCAP stores as its schemas), so every ROS 2 tool decodes what adaptune writes.
 ``make bench`` (bench/bench_cdr.py) compares them with the hand-written struct codec they
-replaced: equal speed, byte-identical output (issue 18, item 6).
+replaced: equal speed, byte-identical output.
 
 Here too: the PointCloud2 layout -> (N, 4) float32 x, y, z, intensity (any field layout), and
 poses <-> PoseStamped / TFMessage.

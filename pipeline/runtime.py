@@ -107,6 +107,12 @@ class Model:
         return str(self.manifest["algorithm"])
 
     @property
+    def adapter_options(self) -> dict[str, Any]:
+        """The adapter's untuned options the trials ran with ({} in an older artifact): what
+        every run of the model's odometry is built with."""
+        return dict(self.manifest.get("adapter_options") or {})
+
+    @property
     def names(self) -> list[str]:
         return [str(s["name"]) for s in self.space]
 
@@ -246,16 +252,8 @@ class Selector:
 
         self.settings = settings = settings or SelectionSettings()
         self.model = model
-        self.period_s = settings.period_s
-        self.hysteresis = settings.hysteresis
-        self.min_scan_points = settings.min_scan_points
-        self.subset_rows = settings.subset_rows
-        self.refine_iters = settings.refine_iters
-        self.window = settings.window
-        self.anchor_margin = settings.anchor_margin
-        self.risk = settings.risk
         try:
-            check_risk(model.surrogate.type, self.risk)
+            check_risk(model.surrogate.type, settings.risk)
         except ValueError as exc:
             raise ConfigError(f"select.{exc}") from None
         novelty = model.novelty_distance
@@ -270,15 +268,15 @@ class Selector:
         self.candidates = np.unique(candidates, axis=0)
         self.search = model.surrogate.search(
             self.candidates, model.x_scale,
-            {"subset_rows": self.subset_rows, "grouped": grouped, "risk": self.risk})
+            {"subset_rows": settings.subset_rows, "grouped": grouped, "risk": settings.risk})
         # per_scan fallback: the two sets an unfamiliar scan chooses between (step 3)
         self.fallback_u = (np.stack([self._unit(model.defaults()), self.anchor_u])
                            if model.per_scan_fallback else self.anchor_u[None])
         self.current_u: NDArray[np.float64] | None = None
         self.recent: collections.deque[tuple[Query, NDArray[np.float64]]] = collections.deque(
-            maxlen=max(1, self.window))
+            maxlen=max(1, self.settings.window))
         self.recent_novel: collections.deque[NDArray[np.float64]] = collections.deque(
-            maxlen=max(1, self.window))  # S at fallback_u of the last unfamiliar scans
+            maxlen=max(1, self.settings.window))  # S at fallback_u of the last unfamiliar scans
         self.last_stamp_ns: int | None = None
         self.last: dict[str, Any] = {}
         self.selections = 0
@@ -293,9 +291,8 @@ class Selector:
 
     def due(self, stamp_ns: int) -> bool:
         """True when a selection is due at ``stamp_ns`` (first scan, or period_s elapsed)."""
-        return (
-            self.last_stamp_ns is None or stamp_ns - self.last_stamp_ns >= self.period_s * 1e9 - 1e6
-        )
+        period_ns = self.settings.period_s * 1e9
+        return self.last_stamp_ns is None or stamp_ns - self.last_stamp_ns >= period_ns - 1e6
 
     def update(self, points_lidar: NDArray[np.floating], stamp_ns: int) -> Params:
         """Streaming use: select when due, else keep the parameters in force."""
@@ -307,7 +304,7 @@ class Selector:
             self.last_stamp_ns = int(stamp_ns)
         self.selections += 1
         pts = np.asarray(points_lidar)
-        if pts.ndim != 2 or len(pts) < self.min_scan_points:
+        if pts.ndim != 2 or len(pts) < self.settings.min_scan_points:
             self.last = {"kept": "too_few_points", "points": len(pts)}
             return self.current
         return self.select_environment(self.model.environment(pts))
@@ -328,13 +325,13 @@ class Selector:
         self.recent.append((nb, nb.candidate_values(self.candidates)))
         u_best, t_best, exact_frac = self._search()
         kept = ""
-        if self.anchor_margin is not None and not np.array_equal(u_best, self.anchor_u):
+        if self.settings.anchor_margin is not None and not np.array_equal(u_best, self.anchor_u):
             t_anchor = float(self._predict(self.anchor_u[None])[0])
-            if not t_best < t_anchor - self.anchor_margin:
+            if not t_best < t_anchor - self.settings.anchor_margin:
                 u_best, t_best, kept = self.anchor_u.copy(), t_anchor, "anchor"
         if self.current_u is not None and not np.array_equal(u_best, self.current_u):
             t_cur = float(self._predict(self.current_u[None])[0])
-            if not t_best < t_cur - self.hysteresis:
+            if not t_best < t_cur - self.settings.hysteresis:
                 u_best, t_best, kept = self.current_u, t_cur, "hysteresis"
         self.current_u = u_best
         self.last = {
@@ -362,7 +359,7 @@ class Selector:
         held = [i for i, u in enumerate(self.fallback_u)
                 if self.current_u is not None and np.array_equal(u, self.current_u)]
         best = 1 if t[1] < t[0] - TIE_TOL else 0
-        if held and best != held[0] and not t[best] < t[held[0]] - self.hysteresis:
+        if held and best != held[0] and not t[best] < t[held[0]] - self.settings.hysteresis:
             best = held[0]
         return self.fallback_u[best].copy()
 
@@ -434,7 +431,7 @@ class Selector:
         probes = np.empty((n, 2 * p, p))
         pt = np.empty((n, 2 * p))
         ask = np.ones(n, bool)  # the starts whose probes' values are not known
-        for _ in range(self.refine_iters):
+        for _ in range(self.settings.refine_iters):
             around = (best_u[ask][:, None, :] + step * eye[None]).reshape(-1, p)
             probes[ask] = self.model.snap(np.clip(around, *self.box)).reshape(-1, 2 * p, p)
             pt[ask] = self._certified(probes[ask].reshape(-1, p)).reshape(-1, 2 * p)

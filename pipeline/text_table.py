@@ -1,6 +1,6 @@
 """The one text table renderer of the command line (``query``, ``params``, ``info``).
 
-Why not a library's (issue 18.6, measured with ``make bench``, bench/bench_table.py):
+Why not a library's (measured with ``make bench``, bench/bench_table.py):
 DuckDB's relation renderer (``show()`` / ``str()``) reads at most 10,000 rows of a relation,
 whatever its ``max_rows``, and ends larger results with "? rows", while ``adaptune query``
 promises every row; rich's ``Table`` shows every row but took 13.9 s for 10,000 rows of five

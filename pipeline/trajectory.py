@@ -12,7 +12,8 @@ from numpy.typing import NDArray
 
 from pipeline.errors import InputError
 from pipeline.io_utils import atomic_path, input_file
-from schemas.arrow import POSE_COLUMNS, TRAJECTORY, check_schema_version
+from pipeline.schema_version import check_schema_version
+from schemas.arrow import POSE_COLUMNS, TRAJECTORY
 
 
 @dataclass

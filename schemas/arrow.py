@@ -63,16 +63,6 @@ def schedule_schema(param_names: list[str]) -> pa.Schema:
     return s.with_metadata(SCHEDULE_BASE.metadata)
 
 
-def check_schema_version(schema: pa.Schema, what: str) -> None:
-    """Raise SchemaError when a Parquet file was written with another major schema version."""
-    from pipeline.errors import SchemaError
-
-    meta = schema.metadata or {}
-    got = meta.get(b"adaptune.schema_version", b"").decode()
-    if got.split(".")[0] != SCHEMA_VERSION.split(".")[0]:
-        raise SchemaError(f"{what}: schema version {got or 'missing'}, "
-                          f"this adaptune reads {SCHEMA_VERSION}")
-
 
 TRIALS_BASE = pa.schema(
     [pa.field("trial", pa.int32(), nullable=False),

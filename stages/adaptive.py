@@ -32,16 +32,14 @@ def adaptive(params_path: Path | None, model_dir: Path, sequence_dir: Path, spli
     from pipeline.config import SelectSection, load_section
     from pipeline.evaluate.section import EvaluateSection
     from pipeline.sequence_index import read_index
-    from pipeline.tuning.smbo import TrialsSection
 
-    trials = load_section(params_path, "trials", TrialsSection)
     section = load_section(params_path, "evaluate", EvaluateSection)
     selection = load_section(params_path, "select", SelectSection).settings()
     paths = list(read_index(sequence_dir).split_paths(list(splits) or section.splits))
-    runs = run_adaptive(model_dir, paths, out_dir, trials.adapter_options,
-                        workers=section.workers, selection=selection)
+    runs = run_adaptive(model_dir, paths, out_dir, workers=section.workers,
+                        selection=selection)
     if record_path is not None:
-        from pipeline.report.outputs import write_json
+        from pipeline.outputs import write_json
 
         write_json(record_path, {"runs": [run.record() for run in runs]})
     for run in runs:

@@ -33,13 +33,11 @@ def evaluate(params_path: Path | None, sequence_dir: Path, trials_dir: Path, fix
     from pipeline.config import load_section
     from pipeline.evaluate.section import EvaluateSection
     from pipeline.report.report import EvaluationPaths, run_evaluation
-    from pipeline.tuning.smbo import TrialsSection
 
     settings = load_section(params_path, "evaluate", EvaluateSection)
-    trials = load_section(params_path, "trials", TrialsSection)
     paths = EvaluationPaths(sequence_dir, trials_dir, fixed_dir, adaptive_dir, runs_dir,
                             metrics_path, record_path, plots_dir, report_dir)
-    m = run_evaluation(paths, settings, trials.adapter_options)
+    m = run_evaluation(paths, settings)
     rte, ratio = m["rte_pct"], m["ratio"]
     click.echo(f"{m['algorithm']}: RTE baseline {rte['baseline']:.3f} %, fixed "
                f"{rte['fixed']:.3f} %, adaptive {rte['adaptive']:.3f} % "

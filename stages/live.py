@@ -42,12 +42,9 @@ def live(params_path: Path | None, model_dir: Path, sequence: Path, out: Path,
     from pipeline.io_utils import refuse_input_as_output
     from pipeline.odometry.registry import declared_space
     from pipeline.runtime import Selector, load_model
-    from pipeline.tuning.smbo import TrialsSection
 
     refuse_json_on_stdout(out, as_json)
     refuse_input_as_output(out, [sequence, params_path, *sorted(model_dir.glob("*"))])
-    # the adapter's untuned settings as in the trials (without a params file, its defaults)
-    options = load_section(params_path, "trials", TrialsSection).adapter_options
     selection = load_section(params_path, "select", SelectSection).settings()
     model = load_model(model_dir, expected_algorithm=algorithm,
                        declared_space=declared_space)
@@ -55,11 +52,10 @@ def live(params_path: Path | None, model_dir: Path, sequence: Path, out: Path,
     if serve:
         from pipeline.live_view import serve_live
 
-        summary = serve_live(model, sequence, out, selector, options, scans=scans, host=host,
+        summary = serve_live(model, sequence, out, selector, scans=scans, host=host,
                              port=port)
     else:
         from pipeline.live import run_live
 
-        summary = run_live(model, sequence, out, selector, adapter_options=options,
-                           scans=scans)
+        summary = run_live(model, sequence, out, selector, scans=scans)
     report_selection({"algorithm": model.algorithm, **summary, "out": str(out)}, as_json)

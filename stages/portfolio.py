@@ -30,7 +30,7 @@ def portfolio(params_path: Path | None, sequence_dir: Path, out_dir: Path,
     from pipeline.evaluate.runs import best_fixed_params
     from pipeline.portfolio import PortfolioSection, run_portfolio
     from pipeline.sequence_index import read_index
-    from pipeline.tuning.smbo import TrialsSection
+    from pipeline.tuning.section import TrialsSection
 
     settings = load_section(params_path, "trials", TrialsSection)
     section = load_section(params_path, "portfolio", PortfolioSection)
@@ -40,7 +40,7 @@ def portfolio(params_path: Path | None, sequence_dir: Path, out_dir: Path,
     paths = read_index(sequence_dir).paths(split or settings.split)
     studies = run_portfolio(paths, out_dir, settings, section, seed, fixed)
     if record_path is not None:
-        from pipeline.report.outputs import write_json
+        from pipeline.outputs import write_json
 
         write_json(record_path, {"studies": [s.record() for s in studies]})
     for s in studies:

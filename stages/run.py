@@ -70,7 +70,8 @@ def configured_adapter(params_path: Path | None, algorithm: str | None,
     ``options`` over them, and trials.space when the algorithm is trials.algorithm."""
     from pipeline.config import load_section, validate_section
     from pipeline.odometry.registry import build_adapter
-    from pipeline.tuning.smbo import TrialsSection, study_adapter
+    from pipeline.tuning.section import TrialsSection
+    from pipeline.tuning.smbo import study_adapter
 
     trials = load_section(params_path, "trials", TrialsSection)
     name = algorithm or trials.algorithm

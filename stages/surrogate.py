@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -37,24 +38,35 @@ def surrogate(
     from pipeline.descriptors.dataset import DescriptorsSection
     from pipeline.errors import ConfigError
     from pipeline.odometry.registry import get_adapter
-    from pipeline.report.outputs import write_metrics
+    from pipeline.outputs import write_metrics
     from pipeline.surrogates.cross_validation import RECORD_KEYS
     from pipeline.surrogates.fit import ModelInputs, build_model
     from pipeline.surrogates.section import SurrogateSection
-    from pipeline.tuning.smbo import TrialsSection
-    from pipeline.tuning.table import read_space
+    from pipeline.tuning.section import TrialsSection
+    from pipeline.tuning.table import read_adapter_options, read_space
 
     if (metrics_path is None) != (record_path is None):
         raise ConfigError("--metrics and --record go together (the CV figures and the rest)")
     section = load_section(params_path, "surrogate", SurrogateSection)
     descriptors = load_section(params_path, "descriptors", DescriptorsSection)
-    options = load_section(params_path, "trials", TrialsSection).adapter_options
-    # the space the studies searched, stored with the trials (else the adapter's built-in one,
-    # the adapter built with its configured options as in the trials)
-    space_of = ((lambda name: read_space(trials_dir, name)) if trials_dir is not None
-                else (lambda name: get_adapter(name, **options).space))
+    # the space the studies searched and the options they ran with, stored with the trials
+    # (without them: the adapter's built-in space, built with params trials.adapter_options)
+    if trials_dir is not None:
+        def space_of(name: str) -> Any:
+            return read_space(trials_dir, name)
+
+        def options_of(name: str) -> dict[str, Any]:
+            return read_adapter_options(trials_dir, name)
+    else:
+        options = load_section(params_path, "trials", TrialsSection).adapter_options
+
+        def space_of(name: str) -> Any:
+            return get_adapter(name, **options).space
+
+        def options_of(name: str) -> dict[str, Any]:
+            return dict(options)
     manifest = build_model(ModelInputs(db_path, pca_dir), out, section, descriptors, space_of,
-                           algorithm)
+                           algorithm, options_of)
     algo, cv, training = manifest["algorithm"], manifest["cross_validation"], manifest["training"]
     if metrics_path is not None and record_path is not None:
         from pipeline.provenance import revision

@@ -75,7 +75,8 @@ def trials(
     from pipeline.config import BaseSection, load_section, validate_section
     from pipeline.errors import ConfigError
     from pipeline.sequence_index import read_index
-    from pipeline.tuning.smbo import FixedSection, TrialsSection, run_trials, study_adapter
+    from pipeline.tuning.section import FixedSection, TrialsSection, joint_settings
+    from pipeline.tuning.smbo import run_trials, study_adapter
     from pipeline.tuning.warm_start import warm_start_params
 
     section = load_section(params_path, "trials", TrialsSection)
@@ -83,9 +84,7 @@ def trials(
     if joint:  # the `fixed` section overrides `trials` for the joint study
         fixed = load_section(params_path, "fixed", FixedSection)
         warm = fixed.warm_start
-        section = validate_section(TrialsSection, "trials", {
-            **section.model_dump(), **fixed.model_dump(exclude_none=True,
-                                                       exclude={"warm_start"})})
+        section = joint_settings(section, fixed)
     elif warm_start_dir is not None:
         raise ConfigError("--warm-start goes with --joint (a joint study starts from the "
                           "per-sequence ones)")
@@ -129,7 +128,7 @@ def trials(
                        f"best objective {s.best_objective:.4g} % (trial {s.best_trial})",
                        err=True)
     if record_path is not None:
-        from pipeline.report.outputs import write_json
+        from pipeline.outputs import write_json
 
         write_json(record_path, {"studies": [s.record() for s in studies]})
     if as_json:

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 from pipeline.config import load_section
 from pipeline.errors import ConfigError
 from pipeline.tuning.job import TrialResult
-from pipeline.tuning.smbo import FixedSection
+from pipeline.tuning.section import FixedSection
 from stages.cli import main
 
 REPO = Path(__file__).resolve().parents[1]

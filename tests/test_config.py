@@ -117,7 +117,7 @@ def test_length_is_set_once_in_base(tmp_path: Path) -> None:
     """trials and evaluate take L from base.length_m, evaluate the devkit section; a copy in a
     section is refused."""
     from pipeline.evaluate.section import EvaluateSection
-    from pipeline.tuning.smbo import TrialsSection
+    from pipeline.tuning.section import TrialsSection
 
     p = tmp_path / "params.yaml"
     p.write_text("base:\n  length_m: 100.0\ndevkit:\n  lengths_m: [20, 10]\n")

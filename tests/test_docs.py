@@ -182,7 +182,7 @@ def test_every_quick_start_command_is_valid() -> None:
     section for the command adapter."""
     from pipeline.config import validate_section
     from pipeline.odometry.command import CommandOptions
-    from pipeline.tuning.smbo import TrialsSection
+    from pipeline.tuning.section import TrialsSection
 
     lines = [ln for b in _blocks(_quick_start(), "sh")
              for ln in b.replace("\\\n", " ").splitlines()]

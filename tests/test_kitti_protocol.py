@@ -38,7 +38,7 @@ from test_pipeline_dvc import (
     tiny_params,
 )
 
-from pipeline.report.outputs import read_summary
+from pipeline.outputs import read_summary
 from stages.cli import main
 
 pytestmark = pytest.mark.slow
@@ -217,8 +217,8 @@ def test_the_protocol_carries_no_stale_suite(protocol: Protocol) -> None:
 def _write_summary(folder: Path, summary: dict[str, Any]) -> Path:
     """``summary`` as folder/metrics/NAME.json and folder/records/NAME.json (kitti-table's
     input, as `make kitti` copies it); the metrics path."""
+    from pipeline.outputs import write_metrics
     from pipeline.report.metrics import RECORD_KEYS
-    from pipeline.report.outputs import write_metrics
 
     path = folder / "metrics" / "other.json"
     write_metrics(path, folder / "records" / "other.json", summary, RECORD_KEYS)

@@ -302,7 +302,7 @@ def test_metrics_hold_the_figures_and_the_record_the_rest(tmp_path: Path) -> Non
     metrics; read_summary puts back exactly the summary."""
     import json
 
-    from pipeline.report.outputs import read_summary, record_beside, split_leaves, write_metrics
+    from pipeline.outputs import read_summary, record_beside, split_leaves, write_metrics
 
     summary = {"algorithm": "ndt", "length_m": 25.0, "rte_pct": {"baseline": 2.0, "fixed": None},
                "splits": {"validation": {"sequences": ["a", "b"], "ratio": 0.5,

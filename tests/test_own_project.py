@@ -89,7 +89,7 @@ def tiny(params: dict) -> dict:
 
 
 def test_recordings_to_a_model_with_init_and_dvc_repro(kitti_root: Path, tmp_path: Path) -> None:
-    from pipeline.report.outputs import read_summary
+    from pipeline.outputs import read_summary
     from pipeline.runtime import load_model
     from pipeline.sequence import SequenceReader
 

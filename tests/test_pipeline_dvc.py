@@ -132,10 +132,11 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
     from pipeline.odometry.base import Schedule
     from pipeline.pca import Pca
     from pipeline.runtime import load_model
+    from pipeline.schema_version import check_schema_version
     from pipeline.sequence import SequenceReader
     from pipeline.trajectory import read_trajectory
     from pipeline.tuning.layout import read_trials_tables
-    from schemas.arrow import check_schema_version, descriptors_schema
+    from schemas.arrow import descriptors_schema
 
     root, _ = repro
     index = json.loads((root / "data/sequences/index.json").read_text())
@@ -199,7 +200,7 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
 def test_generalize_scores_every_world_of_the_suite(repro: tuple[Path, str]) -> None:
     """The generalize stage: two unseen worlds (one per unseen sensor), three settings each."""
     from pipeline.odometry.base import Schedule
-    from pipeline.report.outputs import read_summary
+    from pipeline.outputs import read_summary
     from pipeline.trajectory import read_trajectory
     from studies.generalization.summary import RATIOS
 

@@ -44,7 +44,8 @@ def with_candidates(sel: Selector, order: np.ndarray) -> Selector:
     """The same selector with its candidate set in another order."""
     sel.candidates = sel.candidates[order]
     sel.search = sel.model.surrogate.search(sel.candidates, sel.model.x_scale,
-                                            {"subset_rows": sel.subset_rows, "grouped": True})
+                                            {"subset_rows": sel.settings.subset_rows,
+                                             "grouped": True})
     return sel
 
 
@@ -102,7 +103,7 @@ def test_risk_zero_is_the_plain_mean_to_the_last_bit(model: Model, kitti_root: P
     envs = drive(model, kitti_root)
     plain = Selector(model, SEL.replace(refine_iters=2))
     zero = Selector(model, SEL.replace(refine_iters=2, risk=0.0))
-    assert zero.risk == plain.risk == 0.0
+    assert zero.settings.risk == plain.settings.risk == 0.0
     assert schedule(zero, envs) == schedule(plain, envs)
     U = zero.candidates[:40]
     for e_s in envs[:3]:

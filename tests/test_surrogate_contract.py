@@ -106,7 +106,7 @@ def test_risk_is_weighed_or_refused(fitted: FittedSurrogate, model_dir: Path) ->
         rule = re.escape(f"risk > 0 needs model knn, got (model={name}, risk=0.5)")
         with pytest.raises(ConfigError, match=f"^select.{rule}$"):
             Selector(model, SEL.replace(risk=0.5))
-        assert Selector(model, SEL.replace(risk=0.0)).risk == 0.0
+        assert Selector(model, SEL.replace(risk=0.0)).settings.risk == 0.0
         return
     plain, wary = Selector(model, SEL.replace(risk=0.0)), Selector(model, SEL.replace(risk=0.5))
     for g in (0, 7, len(model.env) - 1):

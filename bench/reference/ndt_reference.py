@@ -20,8 +20,6 @@ from numpy.typing import NDArray
 from pipeline.odometry.base import ParameterSpace, Params
 from pipeline.odometry.common import (
     F64,
-    KEY_MAX,
-    KEY_OFFSET,
     DownsampleCache,
     constant_velocity_guess,
     orthonormalize,
@@ -30,6 +28,7 @@ from pipeline.odometry.common import (
     voxel_keys,
 )
 from pipeline.odometry.ndt import SPACE, NdtOptions
+from pipeline.odometry.voxel_key import KEY_MAX, KEY_OFFSET
 
 log = logging.getLogger(__name__)
 

@@ -63,13 +63,12 @@ def best_fixed_params(trials_dir: Path,
 
 def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, float],
              adaptive_dir: Path, out_dir: Path, settings: EvaluateSection,
-             adapter_options: Mapping[str, object] | None = None,
              fixed_dir: Path | None = None,
              split_of: Mapping[str, str] | None = None) -> Evaluation:
     """Run baseline and fixed, load adaptive, score all three on every sequence.
 
     ``fixed_dir``: the joint study's output, whose stored parameter space (its defaults: the
-    baseline) is used; None: the adapter's built-in space.
+    baseline) and adapter options are used; None: the adapter's built-in space and options.
     split_of: sequence name -> split (default: every sequence in ``settings.splits[0]``).
     The baseline and fixed trajectories go to ``out_dir/<sequence>/<setting>.parquet``.
     ``settings.workers`` sequences are scored at a time (spawned processes; every figure is the
@@ -79,11 +78,11 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
 
     for path in sequences:  # one too short would drop out of its split's figures unseen
         check_scorable(_ground_truth(path)[0], settings.length_m, str(path))
-    adapter = evaluated_adapter(algorithm, adapter_options, fixed_dir)
+    adapter = evaluated_adapter(algorithm, fixed_dir)
     result = Evaluation(algorithm, settings.length_m, adapter.space.validate(fixed_params),
                         adapter.space.defaults(), settings.devkit.lengths_m,
                         settings.devkit.step_frames)
-    jobs = [(path, algorithm, adapter_options, fixed_dir, result.baseline_params,
+    jobs = [(path, algorithm, fixed_dir, result.baseline_params,
              result.fixed_params, adaptive_dir, out_dir, settings) for path in sequences]
     scored = map_in_processes(_score_sequence, jobs, settings.workers)
     for path, seq in zip(sequences, scored, strict=True):
@@ -97,15 +96,17 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
     return result
 
 
-def evaluated_adapter(algorithm: str, adapter_options: Mapping[str, object] | None,
-                      fixed_dir: Path | None) -> Any:
-    """The adapter with the space the studies searched (its defaults are the baseline), read
-    from the joint study's output; the built-in space without one."""
+def evaluated_adapter(algorithm: str, fixed_dir: Path | None) -> Any:
+    """The adapter as the studies ran it: the space they searched (its defaults are the
+    baseline) and their adapter options, read from the joint study's output; the built-in
+    space and options without one."""
     from pipeline.odometry.registry import build_adapter
-    from pipeline.tuning.table import read_space
+    from pipeline.tuning.table import read_adapter_options, read_space
 
-    space = None if fixed_dir is None else read_space(fixed_dir, algorithm)
-    return build_adapter(algorithm, adapter_options, space)
+    if fixed_dir is None:
+        return build_adapter(algorithm)
+    return build_adapter(algorithm, read_adapter_options(fixed_dir, algorithm),
+                         read_space(fixed_dir, algorithm))
 
 
 @dataclass
@@ -119,12 +120,12 @@ class _SequenceResult:
     kitti_segments: dict[str, KittiSegments]
 
 
-def _score_sequence(path: Path, algorithm: str, adapter_options: Mapping[str, object] | None,
+def _score_sequence(path: Path, algorithm: str,
                     fixed_dir: Path | None, baseline_params: dict[str, float],
                     fixed_params: dict[str, float], adaptive_dir: Path, out_dir: Path,
                     settings: EvaluateSection) -> _SequenceResult:
     """Baseline and fixed run on ``path``, the adaptive run read back, all three scored."""
-    adapter = evaluated_adapter(algorithm, adapter_options, fixed_dir)
+    adapter = evaluated_adapter(algorithm, fixed_dir)
     name = path.stem
     gt, info = _ground_truth(path)
     labels = [info.label_of(i) for i in range(len(gt))]

@@ -299,7 +299,7 @@ class Schedule:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
-        from schemas.arrow import check_schema_version
+        from pipeline.schema_version import check_schema_version
 
         path = Path(path)
         try:

@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from pipeline.config import Section, validate_section
 from pipeline.odometry.base import Odometry, ParameterSpace, Params, Schedule, run_streaming
+from pipeline.odometry.voxel_key import KEY_MAX, KEY_OFFSET
 from pipeline.trajectory import Trajectory
 
 if TYPE_CHECKING:
@@ -20,10 +21,6 @@ if TYPE_CHECKING:
 F64 = NDArray[np.float64]
 OptionsT = TypeVar("OptionsT", bound=Section)
 
-KEY_OFFSET = 1 << 20
-"""Voxel coordinates are packed as 21-bit unsigned fields: |index| < 2**20 voxels per axis."""
-KEY_MAX = (1 << 21) - 1
-"""Largest field value of a packed voxel coordinate (indices are clipped to [0, KEY_MAX])."""
 
 
 def parse_options(model: type[OptionsT], adapter: str, options: dict[str, Any]) -> OptionsT:

@@ -16,24 +16,11 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.odometry.common import F64, KEY_MAX, KEY_OFFSET
+from pipeline.odometry.common import F64
+from pipeline.odometry.voxel_key import packed_voxel_key
 
 _JACOBI_SWEEPS = 32
 """Cyclic Jacobi sweeps of a 3x3 eigendecomposition at most (it converges in 4-6)."""
-
-
-@numba.njit(cache=True, nogil=True)
-def _voxel_key(x: float, y: float, z: float, inv_res: float, offsets: NDArray[np.int64],
-               o: int) -> np.int64:  # pragma: no cover - compiled
-    """Packed key of the voxel holding (x, y, z) [m], shifted by ``offsets[o]`` voxels
-    (offsets (O, 3); ``common.voxel_keys`` for one point when the offset is zero)."""
-    key = np.int64(0)
-    for idx in (np.int64(np.floor(x * inv_res)) + offsets[o, 0],
-                np.int64(np.floor(y * inv_res)) + offsets[o, 1],
-                np.int64(np.floor(z * inv_res)) + offsets[o, 2]):
-        idx = min(max(idx + KEY_OFFSET, np.int64(0)), np.int64(KEY_MAX))
-        key = (key << np.int64(21)) | idx
-    return key
 
 
 @numba.njit(cache=True, nogil=True)
@@ -138,7 +125,7 @@ def build_voxels(points_world: F64, resolution: float,
     last_key, v = _EMPTY, np.int64(0)
     for i in range(n):
         x, y, z = points_world[i, 0], points_world[i, 1], points_world[i, 2]
-        key = _voxel_key(x, y, z, inv_res, no_offset, 0)
+        key = packed_voxel_key(x, y, z, inv_res, no_offset, 0)
         if key != last_key:  # a scan's consecutive points often share a voxel
             h = _probe(table_key, key)
             if table_key[h] == _EMPTY:
@@ -287,7 +274,7 @@ def ndt_moments(source: F64, T: F64, slot_key: NDArray[np.int64], slot_index: ND
         qy = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1]
         qz = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2]
         for o in range(offsets.shape[0]):
-            v = find_voxel(slot_key, slot_index, _voxel_key(qx, qy, qz, inv_res, offsets, o))
+            v = find_voxel(slot_key, slot_index, packed_voxel_key(qx, qy, qz, inv_res, offsets, o))
             if v < 0:
                 continue
             k = slot[v]

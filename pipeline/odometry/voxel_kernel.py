@@ -17,7 +17,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.odometry.ndt_kernel import _voxel_key
+from pipeline.odometry.voxel_key import packed_voxel_key
 
 _PAIRWISE_BLOCK = 128
 """numpy's PW_BLOCKSIZE: above it the pairwise sum splits in two."""
@@ -31,7 +31,7 @@ def voxel_keys_of(points: NDArray[np.floating], inv_voxel: float
     no_offset = np.zeros((1, 3), np.int64)
     keys = np.empty(points.shape[0], np.int64)
     for i in range(points.shape[0]):  # the voxel map's own key of a point (ndt_kernel)
-        keys[i] = _voxel_key(np.float64(points[i, 0]), np.float64(points[i, 1]),
+        keys[i] = packed_voxel_key(np.float64(points[i, 0]), np.float64(points[i, 1]),
                              np.float64(points[i, 2]), inv_voxel, no_offset, 0)
     return keys
 

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.evaluate.result import SETTINGS, Evaluation
-from pipeline.report.outputs import SETTING_COLOURS, figure
+from pipeline.outputs import SETTING_COLOURS, figure
 from pipeline.sequence import EnvLabel
 from pipeline.sim.plot import LABEL_COLOURS
 

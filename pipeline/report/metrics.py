@@ -1,6 +1,6 @@
 """The ``evaluate`` stage's summary: RTE per setting, split, label and sequence, the ratios, the
 devkit metric, replica runs, trial counts. ``metrics/evaluation.json`` holds its figures,
-``records/evaluation.json`` the rest (``RECORD_KEYS``; ``pipeline.report.outputs``)."""
+``records/evaluation.json`` the rest (``RECORD_KEYS``; ``pipeline.outputs``)."""
 
 from __future__ import annotations
 

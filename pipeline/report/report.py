@@ -17,9 +17,9 @@ from pipeline.evaluate.result import SETTINGS, Evaluation
 from pipeline.evaluate.runs import best_fixed_params, evaluate
 from pipeline.evaluate.section import EvaluateSection
 from pipeline.io_utils import atomic_write_text
+from pipeline.outputs import csv_text, write_metrics
 from pipeline.report import figures
 from pipeline.report.metrics import RECORD_KEYS, metrics, trials_summary
-from pipeline.report.outputs import csv_text, write_metrics
 from pipeline.report.table2 import table2_json, table2_markdown
 
 
@@ -38,8 +38,7 @@ class EvaluationPaths:
     report: Path  # report/ (report.md + PNG)
 
 
-def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection,
-                   adapter_options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection) -> dict[str, Any]:
     """Evaluate baseline, fixed and adaptive on the sequences of ``settings.splits``; write
     everything; return the summary (metrics and record together)."""
     from pipeline.sequence_index import read_index
@@ -48,7 +47,7 @@ def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection,
     algorithm, fixed = best_fixed_params(paths.fixed)
     split_of = read_index(paths.sequences).split_paths(settings.splits)
     ev = evaluate(list(split_of), algorithm, fixed, paths.adaptive, paths.runs, settings,
-                  adapter_options, paths.fixed, {p.stem: split for p, split in split_of.items()})
+                  paths.fixed, {p.stem: split for p, split in split_of.items()})
     result = metrics(ev, trials_summary({"trials": paths.trials, "fixed": paths.fixed}))
     write_metrics(paths.metrics, paths.record, result, RECORD_KEYS)
     write_plot_data(ev, paths.plots)

@@ -138,10 +138,10 @@ KITTI_SPLIT_TITLES = {"train": "training", "validation": "test"}
 def write_table2(metrics_paths: Sequence[Path], out_dir: Path,
                  split_titles: Mapping[str, str] | None = None) -> dict[str, Any]:
     """Read the ``evaluate`` summary of every algorithm (each metrics JSON with the record
-    ``pipeline.report.outputs.record_beside`` it), write ``out_dir``/table.json and table.md
+    ``pipeline.outputs.record_beside`` it), write ``out_dir``/table.json and table.md
     (atomically); return the table. InputError for a file that is not one."""
     from pipeline.io_utils import atomic_write_text
-    from pipeline.report.outputs import read_summary, write_json
+    from pipeline.outputs import read_summary, write_json
 
     blocks = [read_summary(path) for path in metrics_paths]
     if not blocks:

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 METHOD = "leave-one-sequence-out"
 RECORD_KEYS = ("folds", "rows")
 """The bookkeeping of the summary (besides its text): folds and rows scored per fold; the rest
-are the figures of ``metrics/surrogate.json`` (``pipeline.report.outputs.write_metrics``)."""
+are the figures of ``metrics/surrogate.json`` (``pipeline.outputs.write_metrics``)."""
 
 
 def _empty(note: str | None = None) -> dict[str, Any]:

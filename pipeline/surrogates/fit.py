@@ -21,7 +21,7 @@ Scalings (every choice the paper leaves open):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -116,11 +116,13 @@ def build_model(
     descriptors: DescriptorsSection,
     space_of: Callable[[str], Any],
     algorithm: str | None = None,
+    options_of: Callable[[str], Mapping[str, Any]] = lambda _: {},
 ) -> dict[str, Any]:
     """The ``surrogate`` stage: read the training rows of ``algorithm`` (None: the only one),
     fit, choose the novelty fallback, write the artifact ``out``; returns its manifest.
 
-    ``space_of(algorithm)`` -> the adapter's ParameterSpace (configured as in the trials).
+    ``space_of(algorithm)`` -> the adapter's ParameterSpace (configured as in the trials);
+    ``options_of(algorithm)`` -> the adapter options the trials ran with (in the artifact).
     The descriptor settings the PCA was fitted with win (pca.json); ``descriptors`` only
     stands in for a PCA folder that does not record them.
     """
@@ -139,7 +141,7 @@ def build_model(
         descriptor_from_json(pca.descriptor) if pca.descriptor else descriptors.descriptor()
     )
     info = ArtifactInfo(algo, space, descriptor, record, fallback,
-                        {"db": str(inputs.db), "pca": str(inputs.pca)})
+                        {"db": str(inputs.db), "pca": str(inputs.pca)}, options_of(algo))
     return write_artifact(out, fitted, pca, info)
 
 

@@ -7,14 +7,15 @@ kd-trees, which give the same values (tests/test_knn_kernel.py compares both, ti
 tests/test_runtime.py compares them with scikit-learn's kNN over every row).
 
 The k nearest rows of a query point are the k smallest pairs (trial a of group g, frame j of
-group g) by squared distance d = trial_d2 + frame_d2, ties ordered by (g, a, j): the order in
-which the merge before issue 33 met them, and the order of ``knn_mean_numpy``'s stable sort.
+group g) by squared distance d = trial_d2 + frame_d2, ties ordered by (g, a, j): the order
+in which a plain merge of the sorted lists meets them, and the order of ``knn_mean_numpy``'s
+stable sort.
 ``knn_mean`` merges the pairs in that order into a sorted best list, each after the entries
 of its distance, within a bound tau >= the k-th distance read off a few corners of the sorted
 lists (until the list holds k pairs; then within its k-th). The bound leaves about 1.3 k pairs
 to merge, and the list grows from empty, so an insertion shifts only the pairs already in
-(faster than ranking the pairs within the bound, issue 33: docs/performance.md, "The online
-selection (issue 33)").
+(faster than ranking the pairs within the bound: docs/performance.md, "The online
+selection").
 """
 
 from __future__ import annotations

@@ -35,7 +35,9 @@ if TYPE_CHECKING:
 class ArtifactInfo:
     """What the manifest says besides the fitted model: the algorithm, its parameter space, the
     descriptor, the novelty fallback (``pipeline.surrogates.novelty``: its record and, when it
-    chose them, the parameters) and the inputs it came from."""
+    chose them, the parameters), the inputs it came from and the adapter's untuned options
+    the trials ran with (params ``trials.adapter_options``: every stage that runs the model's
+    odometry builds the adapter with them, from the model)."""
 
     algorithm: str
     space: list[dict[str, Any]]
@@ -43,6 +45,7 @@ class ArtifactInfo:
     fallback: Mapping[str, Any]
     fallback_params: Mapping[str, float] | None = None
     inputs: Mapping[str, str] = field(default_factory=dict)
+    adapter_options: Mapping[str, Any] = field(default_factory=dict)
 
 
 def write_artifact(
@@ -89,6 +92,7 @@ def manifest_of(fitted: FittedSurrogate, pca: Pca, info: ArtifactInfo,
         "schema_version": ARTIFACT_SCHEMA_VERSION,
         "kind": ARTIFACT_KIND,
         "algorithm": info.algorithm,
+        "adapter_options": dict(info.adapter_options),
         "parameter_space": info.space,
         "descriptor": info.descriptor.to_json(),
         "pca": pca.to_json(),

@@ -20,7 +20,8 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
-from schemas.arrow import TRIAL_STATUSES, TRIALS_BASE, check_schema_version
+from pipeline.schema_version import check_schema_version
+from schemas.arrow import TRIAL_STATUSES, TRIALS_BASE
 
 JOINT_SEQUENCE = "__joint__"
 """The ``sequence`` of the joint SMBO's trials table (one x for all training sequences)."""

@@ -23,13 +23,14 @@ import pyarrow.parquet as pq
 from pipeline.errors import InputError, SchemaError
 from pipeline.io_utils import atomic_path
 from pipeline.odometry.base import ParameterSpace
+from pipeline.schema_version import check_schema_version
 from pipeline.tuning.job import TrialResult
 from pipeline.tuning.layout import JOINT_SEQUENCE as JOINT
 from pipeline.tuning.layout import trials_table_path as trials_path
-from schemas.arrow import LEGACY_TRIALS_COLUMNS, check_schema_version, trials_schema
+from schemas.arrow import LEGACY_TRIALS_COLUMNS, trials_schema
 
-__all__ = ["JOINT", "STUDY_KEY", "read_space", "read_study", "read_trials", "trials_path",
-           "write_trials"]
+__all__ = ["JOINT", "STUDY_KEY", "read_adapter_options", "read_space", "read_study", "read_trials",
+           "trials_path", "write_trials"]
 
 
 STUDY_KEY = b"adaptune.study"
@@ -81,23 +82,40 @@ def read_study(path: str | Path) -> dict[str, Any] | None:
 def read_space(out_dir: str | Path, algorithm: str) -> ParameterSpace:
     """The parameter space the studies of ``algorithm`` in the trials folder ``out_dir``
     searched (from their fingerprints); InputError when there is none, or they disagree."""
+    space, table = _study_setting(out_dir, algorithm, "space", list, "parameter space")
+    return ParameterSpace.from_json(space, str(table))
+
+
+def read_adapter_options(out_dir: str | Path, algorithm: str) -> dict[str, Any]:
+    """The untuned adapter options (params ``trials.adapter_options``) the studies of
+    ``algorithm`` in the trials folder ``out_dir`` ran with (from their fingerprints: the one
+    home of the options every later stage builds the adapter with); InputError when there is
+    none, or they disagree."""
+    options, _ = _study_setting(out_dir, algorithm, "adapter_options", dict, "adapter options")
+    return dict(options)
+
+
+def _study_setting(out_dir: str | Path, algorithm: str, key: str, kind: type,
+                   what: str) -> tuple[Any, Path]:
+    """``key`` of the fingerprint of every study of ``algorithm`` under ``out_dir``, which
+    must agree, and the first table's path."""
     out_dir = Path(out_dir)
     tables = sorted(trials_path(out_dir, algorithm, "*").parent.parent.glob(
         "sequence=*/trials.parquet"))
-    spaces = {}
+    values = {}
     for table in tables:
         study = read_study(table)
-        if study is None or not isinstance(study.get("space"), list):
-            raise InputError(f"{table}: no parameter space stored with it (written by an older "
+        if study is None or not isinstance(study.get(key), kind):
+            raise InputError(f"{table}: no {what} stored with it (written by an older "
                              "adaptune); run the trials again")
-        spaces[table] = study["space"]
-    if not spaces:
-        raise InputError(f"{out_dir}: no trials of {algorithm!r} to read the parameter space of")
-    first, *rest = spaces.items()
-    for table, space in rest:
-        if space != first[1]:
-            raise InputError(f"{table}: searched another parameter space than {first[0]}")
-    return ParameterSpace.from_json(first[1], str(first[0]))
+        values[table] = study[key]
+    if not values:
+        raise InputError(f"{out_dir}: no trials of {algorithm!r} to read the {what} of")
+    (first, value), *rest = values.items()
+    for table, other in rest:
+        if other != value:
+            raise InputError(f"{table}: ran with other {what} than {first}")
+    return value, first
 
 
 def read_trials(path: str | Path, space: ParameterSpace) -> list[TrialResult]:

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import click
 
+from stages.groups import LazyGroup
+
 STUDY_COMMANDS: dict[str, tuple[str, str]] = {
     "generalize": (
         "stages.study.generalize:generalize",
@@ -50,14 +52,6 @@ STUDY_COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
-def _group() -> click.Group:
-    from stages.cli import LazyGroup
-
-    @click.group(cls=LazyGroup, listed=STUDY_COMMANDS, unlisted=dict)
-    def study() -> None:
-        """The project's own studies of the method (docs/results/)."""
-
-    return study
-
-
-study = _group()
+@click.group(cls=LazyGroup, listed=STUDY_COMMANDS)
+def study() -> None:
+    """The project's own studies of the method (docs/results/)."""

@@ -31,16 +31,14 @@ def generalize(params_path: Path, model_dir: Path, fixed_dir: Path, runs_dir: Pa
                ) -> None:
     """Score baseline, fixed and adaptive on a suite of worlds the model never saw."""
     from pipeline.config import SelectSection, load_section
-    from pipeline.tuning.smbo import TrialsSection
     from studies.generalization.report import GeneralizationPaths, run_generalization
     from studies.generalization.suite import GeneralizeSection
 
     section = load_section(params_path, "generalize", GeneralizeSection)
-    trials = load_section(params_path, "trials", TrialsSection)
     selection = load_section(params_path, "select", SelectSection).settings()
     paths = GeneralizationPaths(model_dir, fixed_dir, runs_dir, metrics_path, record_path,
                                 plots_path, figure_path)
-    m = run_generalization(paths, section, trials.adapter_options, selection)
+    m = run_generalization(paths, section, selection)
     if not m["worlds"]:
         click.echo(f"{m['suite']} suite: {m['not_run']} -> {metrics_path} holds no figure",
                    err=True)

@@ -3,7 +3,7 @@
 A page that quotes figures of a run is generated, never typed, so it cannot drift from what the
 pipeline measured: docs/results/toy.md from the summaries of the evaluate, surrogate and
 generalize stages (each its metrics/NAME.json and records/NAME.json,
-``pipeline.report.outputs.write_metrics``), the README's result between its two markers, and,
+``pipeline.outputs.write_metrics``), the README's result between its two markers, and,
 once a run of the coverage pipeline is recorded, docs/results/verdict.md from
 verdict/metrics/*.json (``studies.docs.verdict_page``). Provenance comes from two files:
 dvc.lock (the md5 of every output file and the params of every stage that led to them) and
@@ -26,7 +26,7 @@ from pydantic import Field
 
 from pipeline.config import Section, validate_section
 from pipeline.errors import InputError
-from pipeline.report.outputs import merge_leaves, record_beside
+from pipeline.outputs import merge_leaves, record_beside
 from pipeline.report.table2 import table2_json, table2_markdown
 from studies.docs.markdown import fill as _fill
 from studies.docs.markdown import number as _f

@@ -1,10 +1,10 @@
 """The ``generalize`` stage's outputs: ``run_generalization`` reads like its table of contents.
 
 Take the fixed parameters from the joint SMBO, score baseline, fixed and adaptive on every
-world of the suite (``studies.suites.runner``: ``studies.generalization.score``), then write the metrics JSON (the figures)
-and the record (the rest), the plot data (one row per world) and the figure (RTE of every
-setting per world above, the ratio adaptive / min(baseline, fixed) per world below, with the
-issue's targets).
+world of the suite (``studies.suites.runner``, seen as ``studies.generalization.score``), then
+write the metrics JSON (the figures) and the record (the rest), the plot data (one row per
+world) and the figure (RTE of every setting per world above, the ratio adaptive / min(baseline,
+fixed) per world below, with the targets).
 
 ``generalize.worlds: 0`` runs no world: the stage then writes empty metrics, a record that says
 so, plot data without rows and a figure that says so. An experiment that skips the suite (the
@@ -49,14 +49,13 @@ class GeneralizationPaths:
 
 
 def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
-                       adapter_options: Mapping[str, Any] | None = None,
                        selection: SelectionSettings | None = None) -> dict[str, Any]:
     """Score the suite ``section.suite`` with the selector's runtime ``selection`` (params
     ``select``; None: the defaults); write metrics, record, plot data and figure; return the
     summary (metrics and record together)."""
     from pipeline.evaluate.runs import best_fixed_params
-    from pipeline.report.outputs import csv_text, write_metrics
-    from pipeline.tuning.table import read_space
+    from pipeline.outputs import csv_text, write_metrics
+    from pipeline.tuning.table import read_adapter_options, read_space
     from studies.suites.runner import AdaptiveSetting, SuiteInputs, run_suite
 
     if section.worlds == 0:
@@ -66,7 +65,8 @@ def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
     space = read_space(paths.fixed, algorithm)
     adaptive = AdaptiveSetting(paths.model, selection or SelectionSettings())
     adaptive.check()
-    inputs = SuiteInputs(algorithm, space, space.defaults(), fixed, dict(adapter_options or {}),
+    options = read_adapter_options(paths.fixed, algorithm)  # as the studies ran
+    inputs = SuiteInputs(algorithm, space, space.defaults(), fixed, options,
                          section.length_m, section.replicas, section.replica_scale,
                          penalty_pct=None, adaptive={"adaptive": adaptive})
     results = run_suite(suite_worlds(section), inputs, paths.runs, section.workers)
@@ -82,7 +82,7 @@ def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
 def no_suite(paths: GeneralizationPaths, section: GeneralizeSection) -> dict[str, Any]:
     """The outputs of a suite of no world (module docstring); returns its summary."""
     from pipeline.io_utils import atomic_dir
-    from pipeline.report.outputs import csv_text, figure, write_metrics
+    from pipeline.outputs import csv_text, figure, write_metrics
 
     note = "generalize.worlds is 0: no world was run"
     summary: dict[str, Any] = {"suite": section.suite, "worlds": 0, "not_run": note}
@@ -102,7 +102,7 @@ def suite_figure(scores: Sequence[WorldScore], metrics: Mapping[str, Any], out_p
     its runs) and adaptive / min(baseline, fixed) per world (bottom, log scale; with replicas
     the ratio of the settings' medians as a diamond) with the median and the targets."""
     from pipeline.evaluate.result import SETTINGS
-    from pipeline.report.outputs import SETTING_COLOURS, figure
+    from pipeline.outputs import SETTING_COLOURS, figure
 
     x = np.arange(len(scores))
     names = [f"{s.name}\n{'-'.join(lab[0] for lab in s.segments)} {s.sensor}" for s in scores]

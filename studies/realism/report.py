@@ -19,7 +19,7 @@ from studies.realism.statistics import RANGE_EDGES_M, ScanStatistics
 def write_realism(result: RealismResult, out_dir: str | Path) -> list[Path]:
     """Write the three outputs into ``out_dir`` (created when missing; each file atomically);
     their paths."""
-    from pipeline.report.outputs import write_json
+    from pipeline.outputs import write_json
 
     out = output_folder(out_dir)
     paths = [out / "realism.json", out / "realism.md", out / "realism.png"]
@@ -177,7 +177,7 @@ def figure(result: RealismResult, out_png: Path) -> None:
     simulated with the ground-truth error added (bars: the replicas' range) and against the
     exact ground truth (open squares). Bottom row: range histogram, returns per ring and
     points a scan, real against simulated (all slices)."""
-    from pipeline.report.outputs import figure as report_figure
+    from pipeline.outputs import figure as report_figure
 
     algos = result.algorithms
     with report_figure(out_png, 2, 2 * len(algos), (4.2 * 2 * len(algos), 8)) as (_, axes):

@@ -4,7 +4,7 @@ environment can do, and which share of that gap adaptive closes.
 
 - **SBS**, the single best set: the joint study's fixed parameters (its runs are the suite's).
 - **Cross-fitted oracle**: on every world, for every environment label, the best set of the
-  frozen candidate set (``verdict.oracle``'s grid, the baseline and the fixed set), chosen by
+  frozen candidate set (``portfolio.grid``, the baseline and the fixed set), chosen by
   the mean RTE of that label's sub-trajectories on a replica the suite never runs (replica
   R + 1), then scored by really running the stitched schedule on the suite's replicas 0..R (the
   label at each selection holds for ``select.period_s``, as the selector's choice does; the
@@ -56,7 +56,7 @@ def candidate_set(grid: Mapping[str, Sequence[float]], baseline: Params, fixed: 
     studies' space; duplicates once, in that order)."""
     names = list(space.names)
     if set(grid) != set(names):
-        raise InputError(f"verdict.oracle: the grid's parameters {sorted(grid)} are not the "
+        raise InputError(f"portfolio.grid: the grid's parameters {sorted(grid)} are not the "
                          f"studies' {sorted(names)}")
     return space.distinct([*grid_sets({n: grid[n] for n in names}), baseline, fixed])
 

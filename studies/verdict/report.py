@@ -40,13 +40,14 @@ class VerdictPaths:
 
 @dataclass(frozen=True)
 class RunSettings:
-    """What the stage takes from the other params sections: the adapter's untuned options and
-    the failure penalty [%] (``trials``), the joint study's budget (``fixed``), the selector
-    (``select``) and the sensor settings of the training data (``simulate``: a template
-    spec)."""
+    """What the stage takes from the other params sections: the failure penalty [%]
+    (``trials``), the candidate grid of the portfolio and the oracles (``portfolio``), the
+    joint study's budget (``fixed``), the selector (``select``) and the sensor settings of
+    the training data (``simulate``: a template spec). The adapter's
+    untuned options are the joint study's (its fingerprint)."""
 
-    adapter_options: dict[str, Any]
     penalty_pct: float
+    grid: dict[str, list[float]]
     fixed_iterations: int
     fixed_warm_start: int
     selection: SelectionSettings
@@ -56,8 +57,9 @@ class RunSettings:
 def load_settings(params_path: Path | None) -> tuple[VerdictSection, RunSettings]:
     """The ``verdict`` section of the params file and what the stages take from the others."""
     from pipeline.config import BaseSection, SelectSection, load_section
+    from pipeline.portfolio import PortfolioSection
     from pipeline.sim.dataset import SimulateSection
-    from pipeline.tuning.smbo import FixedSection, TrialsSection
+    from pipeline.tuning.section import FixedSection, TrialsSection, joint_settings
     from studies.verdict.worlds import sensor_template
 
     section = load_section(params_path, "verdict", VerdictSection)
@@ -66,8 +68,9 @@ def load_settings(params_path: Path | None) -> tuple[VerdictSection, RunSettings
     base = load_section(params_path, "base", BaseSection)
     simulate = load_section(params_path, "simulate", SimulateSection)
     selection = load_section(params_path, "select", SelectSection).settings()
-    iterations = trials.iterations if fixed.iterations is None else fixed.iterations
-    return section, RunSettings(dict(trials.adapter_options), trials.penalty_pct, iterations,
+    iterations = joint_settings(trials, fixed).iterations
+    grid = load_section(params_path, "portfolio", PortfolioSection).grid
+    return section, RunSettings(trials.penalty_pct, grid, iterations,
                                 fixed.warm_start, selection, sensor_template(simulate, base.seed))
 
 
@@ -75,7 +78,7 @@ def run_verdict(paths: VerdictPaths, family: str, section: VerdictSection,
                 settings: RunSettings) -> dict[str, Any]:
     """Score ``family``'s suite ``section.suite`` (module docstring); return the metrics."""
     from pipeline.io_utils import atomic_write_text
-    from pipeline.report.outputs import csv_text, write_json
+    from pipeline.outputs import csv_text, write_json
     from studies.suites.runner import run_suite
     from studies.verdict.summary import plot_rows, suite_metrics
     from studies.verdict.worlds import suite_worlds
@@ -108,7 +111,7 @@ def run_oracles(fixed_dir: Path, runs_dir: Path, section: VerdictSection,
 
     worlds = suite_worlds(section, "id", settings.template)
     inputs, _ = suite_inputs(None, fixed_dir, section, settings)
-    candidates = candidate_set(section.oracle, inputs.baseline, inputs.fixed, inputs.space)
+    candidates = candidate_set(settings.grid, inputs.baseline, inputs.fixed, inputs.space)
     return run_headroom(worlds, inputs, candidates, settings.selection.period_s, runs_dir,
                         section.workers)[1]
 
@@ -129,13 +132,13 @@ def score_headroom(paths: HeadroomPaths, section: VerdictSection,
     """The oracles against SBS and the closed gap of the suite's adaptive, from the oracles'
     runs (``run_oracles``) and the suite's; write the metrics and the figure, return the
     metrics."""
-    from pipeline.report.outputs import write_json
+    from pipeline.outputs import write_json
     from studies.suites.runner import read_results
     from studies.verdict.headroom import candidate_set, headroom_metrics
     from studies.verdict.worlds import suite_worlds
 
     inputs, study = suite_inputs(None, paths.fixed, section, settings)
-    candidates = candidate_set(section.oracle, inputs.baseline, inputs.fixed, inputs.space)
+    candidates = candidate_set(settings.grid, inputs.baseline, inputs.fixed, inputs.space)
     by_name = {r.name: r for r in read_results(paths.oracles)}
     names = [w.name for w in suite_worlds(section, "id", settings.template)]
     missing = [n for n in names if n not in by_name]
@@ -160,7 +163,7 @@ def headroom_figure(suite: Sequence[WorldResult], oracles: Sequence[WorldResult]
                     metrics: Mapping[str, Any], out_png: Path) -> Path:
     """A dot per world of adaptive, the cross-fitted and the class oracle against SBS (log
     scale), each with its geometric mean and interval."""
-    from pipeline.report.outputs import figure
+    from pipeline.outputs import figure
 
     by_name = {r.name: r for r in suite}
     x = np.arange(len(oracles))
@@ -198,7 +201,7 @@ def suite_inputs(model: Path | None, fixed_dir: Path, section: VerdictSection,
     """The suite's inputs after checking what was frozen: the baseline (the joint study's
     stored defaults) and the fixed study's budget; with the joint study's trial counts."""
     from pipeline.evaluate.runs import best_fixed_params
-    from pipeline.tuning.table import read_space
+    from pipeline.tuning.table import read_adapter_options, read_space
 
     algorithm, fixed = best_fixed_params(fixed_dir)
     space = read_space(fixed_dir, algorithm)
@@ -220,7 +223,8 @@ def suite_inputs(model: Path | None, fixed_dir: Path, section: VerdictSection,
         "adaptive": AdaptiveSetting(model, settings.selection, section.borrow_model)}
     for setting in adaptive.values():
         setting.check()
-    inputs = SuiteInputs(algorithm, space, baseline, fixed, settings.adapter_options,
+    inputs = SuiteInputs(algorithm, space, baseline, fixed,
+                         read_adapter_options(fixed_dir, algorithm),
                          section.length_m, section.replicas, section.replica_scale,
                          settings.penalty_pct, adaptive)
     return inputs, study
@@ -242,7 +246,7 @@ def suite_figure(results: Sequence[WorldResult], metrics: Mapping[str, Any],
                  out_png: Path) -> Path:
     """One panel per ratio: a dot per world (log scale, by sensor), the geometric mean, its
     interval (band) and the family's targets."""
-    from pipeline.report.outputs import figure
+    from pipeline.outputs import figure
 
     markers = {"hdl32": "o", "hdl64": "s", "vlp16": "^"}
     x = np.arange(len(results))

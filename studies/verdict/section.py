@@ -2,7 +2,8 @@
 with them before any result was looked at (docs/results/verdict.md, "Protocol").
 
 Frozen: every suite's seed roots, the baseline parameters, the fixed study's least budget, the
-oracle's candidate set, the failure threshold and the world generator's version. The defaults
+oracle's candidate set (the portfolio's grid), the failure threshold and the world generator's
+version. The defaults
 below are those values (verdict/params.yaml repeats them, as every params file does its code's
 defaults).
 """
@@ -103,9 +104,9 @@ class VerdictSection(Section):
     run on another generator is refused); baseline: the baseline parameters (the joint study's
     stored defaults must equal them); fixed_trials / fixed_warm_start: the joint study's least
     budget (``fixed.iterations`` / ``fixed.warm_start`` below them are refused); failure_pct:
-    a sub-trajectory with a larger RTE [%] fails; oracle: the candidate grid of the headroom
-    study (parameter -> values, their product; the baseline and the fixed set are added);
-    tuning: the tuning suite the coverage model's portfolio runs on (``TuningDraw``);
+    a sub-trajectory with a larger RTE [%] fails (the headroom study's candidate grid is the
+    portfolio's, params ``portfolio.grid``: one grid for both); tuning: the tuning suite the
+    coverage model's portfolio runs on (``TuningDraw``);
     borrow_model: with one model per sensor, the sensor whose model a sensor without one runs
     (None: such a world runs the fixed set; hdl64 chosen on the out-of-distribution dev suite,
     docs/results/selector-dev.md);
@@ -124,23 +125,12 @@ class VerdictSection(Section):
     fixed_trials: IterationCount = 64
     fixed_warm_start: int = Field(4, ge=0)
     failure_pct: float = Field(10.0, gt=0)
-    oracle: dict[str, list[float]] = Field(default_factory=lambda: {
-        "resolution": [1.0, 1.5, 2.0, 3.0, 4.5, 7.0],
-        "keyframe_interval": [0.0, 2.0, 4.0, 7.0, 10.0]})
     replicas: int = Field(2, ge=0)
     replica_scale: float = Field(0.005, gt=0, le=0.1)
     confidence: float = Field(0.95, gt=0, lt=1)
     resamples: int = Field(10000, ge=100)
     workers: int = Field(2, ge=1)
     length_m: float = Field(25.0, gt=0)
-
-    @field_validator("oracle")
-    @classmethod
-    def _grid(cls, v: dict[str, list[float]]) -> dict[str, list[float]]:
-        empty = [k for k, values in v.items() if not values]
-        if not v or empty:
-            raise ValueError(f"must give every parameter at least one value, got {v}")
-        return v
 
     @model_validator(mode="after")
     def _borrowed(self) -> VerdictSection:

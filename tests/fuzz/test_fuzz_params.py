@@ -24,7 +24,7 @@ from pipeline.odometry.base import Schedule
 from pipeline.sim.dataset import SimulateSection
 from pipeline.sources.dataset import DataSection
 from pipeline.surrogates.section import SurrogateSection
-from pipeline.tuning.smbo import FixedSection, TrialsSection
+from pipeline.tuning.section import FixedSection, TrialsSection
 from stages.run import parse_params
 
 SECTIONS: dict[str, type[Section]] = {

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from pipeline.tuning.smbo import TrialsSection
+from pipeline.tuning.section import TrialsSection
 
 HALVING: dict[str, object] = {"fidelity": "halving", "halving": {"eta": 2, "rungs": 3}}
 """Successive halving for ``settings(**HALVING)``: eta 2, 3 rungs."""

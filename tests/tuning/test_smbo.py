@@ -14,7 +14,8 @@ from pipeline.metrics.rte import mean_rte_pct
 from pipeline.sequence import SequenceReader
 from pipeline.trajectory import read_trajectory
 from pipeline.tuning.job import trajectory_path
-from pipeline.tuning.smbo import TrialsSection, run_trials
+from pipeline.tuning.section import TrialsSection
+from pipeline.tuning.smbo import run_trials
 from pipeline.tuning.table import trials_path
 from schemas.arrow import trials_schema
 

@@ -24,7 +24,7 @@ pytestmark = pytest.mark.slow
 def tiny_params() -> dict[str, Any]:
     """verdict/params.yaml with three short training sequences, a few trials, two tiny
     tuning worlds, two tiny in-distribution worlds, one out-of-distribution world and a 2 x 1
-    oracle and portfolio grid; the VLP-16 everywhere (the fastest sensor to simulate: the
+    portfolio grid (the oracle's too); the VLP-16 everywhere (the fastest sensor to simulate: the
     suites' sensors are params like the rest)."""
     p = yaml.safe_load((REPO / "verdict" / "params.yaml").read_text())
     p["base"]["length_m"] = 4.0
@@ -40,8 +40,7 @@ def tiny_params() -> dict[str, Any]:
     v["suites"]["ood"].update(worlds=1, segments=[2, 2], frames=[60, 60])
     v.update(fixed_trials=2, fixed_warm_start=1, replicas=1, resamples=200, workers=2,
              borrow_model=None,  # the only trained sensor here is the VLP-16
-             tuning={"seed_root": v["tuning"]["seed_root"], "worlds": 2},
-             oracle={"resolution": [2.0, 6.0], "keyframe_interval": [4.0]})
+             tuning={"seed_root": v["tuning"]["seed_root"], "worlds": 2})
     return p
 
 
