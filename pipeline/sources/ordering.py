@@ -1,9 +1,9 @@
 """The order of scan files in a folder: by the numbers in their names, never as plain strings.
 
-Plain string order puts ``full10`` before ``full2`` (a 177-scan run got 175 scans paired
-with another scan's pose that way, without a word). Here the names must follow one pattern
-whose only varying parts are numbers (``full0 .. full176``, ``000000 .. 004540``, ``1317000000.123456``): they are
-sorted by those numbers. Names that differ in anything else, or two names with the same
+Plain string order puts ``full10`` before ``full2`` (a 177-scan run got 175 scans paired with
+another scan's pose that way, without a word). Here the names must follow one pattern whose only
+varying parts are numbers (``full0 .. full176``, ``000000 .. 004540``, ``1317000000.123456``):
+they are sorted by those numbers. Names that differ in anything else, or two names with the same
 numbers (``scan1`` and ``scan01``), are refused, since no order can be trusted.
 
 Names that are stamps (a decimal number with a fraction, seconds; or an integer of 18 or more
