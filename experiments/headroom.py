@@ -90,12 +90,12 @@ def simulate_worlds(cache: Path) -> dict[str, tuple[Path, np.ndarray]]:
     """The dev worlds' MCAPs (simulated once into ``cache``) and their frame labels."""
     from pipeline.sequence import SequenceReader
     from pipeline.sim.simulate import simulate_sequence
-    from studies.generalization.suite import GeneralizeSection, world_of
+    from studies.generalization.suite import GeneralizeSection, generalization_world
 
     section = GeneralizeSection(suite="dev")
     out = {}
     for i in range(WORLDS):
-        world = world_of(section, "dev", i)
+        world = generalization_world(section, "dev", i)
         path = cache / "worlds" / f"{world.name}.mcap"
         if not path.is_file():
             path.parent.mkdir(parents=True, exist_ok=True)

@@ -75,14 +75,14 @@ def chance_above(runs: list[list[float]]) -> float:
 def run() -> list[Row]:
     from pipeline.sequence import SequenceReader
     from pipeline.sim.simulate import simulate_sequence
-    from studies.generalization.suite import GeneralizeSection, world_of
+    from studies.generalization.suite import GeneralizeSection, generalization_world
 
     replicas = int(os.environ.get("NOISE_REPLICAS", size("4", "1")))
     section = GeneralizeSection(suite="dev")
     runs: dict[str, list[list[float]]] = {a: [] for a in _algorithms()}
     with tempfile.TemporaryDirectory() as tmp:
         for i in _worlds():
-            world = world_of(section, "dev", i)
+            world = generalization_world(section, "dev", i)
             path = Path(tmp) / f"{world.name}.mcap"
             spec = size(world.spec, replace(world.spec, frames=10, segments=("street",)))
             simulate_sequence(spec, path, name=world.name)
