@@ -4,10 +4,13 @@ data set").
 ``init_project`` writes ``DIR/params.yaml`` and ``DIR/dvc.yaml``, as ``dvc init`` and
 ``kiss_icp_pipeline`` start a user off:
 
+- a KITTI root stands for its sequences that have ground truth, each a recording
+  (``pipeline.sources.detect.recordings_of``);
 - every recording is described by ``pipeline.sources.detect.recording_entry`` (its kind,
-  point-cloud topic and ground truth, found where unambiguous, checked by opening it) and
-  becomes a source of the ``data`` section, its path relative to DIR when it lies inside DIR,
-  else absolute;
+  point-cloud topic and ground truth, found where unambiguous, checked by opening it; its
+  ground truth must run longer than ``length_m``, written as base.length_m) and becomes a
+  source of the ``data`` section, its path relative to DIR when it lies inside DIR, else
+  absolute; the sequences of one KITTI root in one split are one source;
 - splits: a recording's own ``split`` option, else ``validation`` / ``test`` (the recordings
   named there), else, when no recording is in the validation split and there are two or more,
   the last one is validation; the rest train. Recordings in the test split are evaluated too
@@ -69,10 +72,22 @@ class Project:
     sources: list[dict[str, Any]]
     evaluate_splits: list[str]
 
-    def splits(self) -> dict[str, list[str]]:
-        """Split -> the paths of its recordings."""
-        out: dict[str, list[str]] = {}
+    def recordings(self) -> list[dict[str, Any]]:
+        """One source a recording (a KITTI source: one a sequence, its path
+        ``ROOT/sequences/NN``), in order."""
+        out = []
         for s in self.sources:
+            if s["kind"] != "kitti":
+                out.append(s)
+                continue
+            out += [{**s, "path": f"{s['path']}/sequences/{seq}", "sequences": [seq],
+                     "poses": f"{s['path']}/poses/{seq}.txt"} for seq in s["sequences"]]
+        return out
+
+    def splits(self) -> dict[str, list[str]]:
+        """Split -> the paths of its recordings (``recordings``)."""
+        out: dict[str, list[str]] = {}
+        for s in self.recordings():
             out.setdefault(s["split"], []).append(s["path"])
         return out
 
@@ -109,13 +124,15 @@ def read_recording_list(path: str | Path) -> list[Recording]:
 
 def init_project(directory: str | Path, recordings: Sequence[Recording],
                  validation: Sequence[str | Path] = (), test: Sequence[str | Path] = (),
-                 force: bool = False) -> Project:
+                 force: bool = False, length_m: float | None = None) -> Project:
     """Write ``directory``/params.yaml and dvc.yaml for ``recordings`` (module docstring).
 
-    ``validation`` / ``test``: paths of recordings for those splits. ConfigError when a file
-    exists (unless ``force``), when a recording is ambiguous or has no ground truth, or when
-    a split names a path that is not a recording."""
-    from pipeline.sources.detect import recording_entry
+    ``validation`` / ``test``: paths of recordings for those splits (a KITTI root's: its
+    sequence folders). ``length_m``: base.length_m (None: the code's default). ConfigError
+    when a file exists (unless ``force``), when a recording is ambiguous or has no ground
+    truth, or when a split names a path that is not a recording; InputError naming a
+    recording whose ground truth runs no longer than ``length_m``."""
+    from pipeline.sources.detect import recording_entry, recordings_of
 
     directory = Path(directory).resolve()
     params_path, dvc_path = directory / "params.yaml", directory / "dvc.yaml"
@@ -124,13 +141,20 @@ def init_project(directory: str | Path, recordings: Sequence[Recording],
         raise ConfigError(f"{existing[0]}: exists; give --force to overwrite it")
     if not recordings:
         raise ConfigError("no recordings: give at least one (--recording PATH or --list FILE)")
+    recordings = [Recording(path, rec.options) for rec in recordings
+                  for path in recordings_of(rec.path.resolve())]
+    length = float(section_defaults("base")["length_m"]) if length_m is None else length_m
     splits = assign_splits(recordings, validation, test)
-    sources = []
+    sources: list[dict[str, Any]] = []
     for rec, split in zip(recordings, splits, strict=True):
-        entry = recording_entry(rec.path.resolve(), {**rec.options, "split": split})
-        sources.append(_relative(entry, directory))
+        entry = _relative(recording_entry(rec.path, {**rec.options, "split": split}, length),
+                          directory)
+        if sources and _same_kitti_root(sources[-1], entry):
+            sources[-1]["sequences"] = [*sources[-1]["sequences"], *entry["sequences"]]
+        else:
+            sources.append(entry)
     evaluate_splits: list[str] = [s for s in ("validation", "test") if s in splits] or ["train"]
-    params = project_params(sources, evaluate_splits)
+    params = project_params(sources, evaluate_splits, length)
     deps = list(dict.fromkeys(d for s in sources for d in _deps(s)))
     stages, plots = project_stages(deps)
     directory.mkdir(parents=True, exist_ok=True)
@@ -157,11 +181,21 @@ def assign_splits(recordings: Sequence[Recording], validation: Sequence[str | Pa
     return splits
 
 
-def project_params(sources: list[dict[str, Any]], evaluate_splits: list[str]) -> dict[str, Any]:
-    """The new project's params: PARAMS_SECTIONS at their defaults, the data and where it
-    goes, checked against every section's rules."""
+def _same_kitti_root(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
+    """Whether the KITTI sources ``a`` and ``b`` differ in their sequences only."""
+    return a["kind"] == b["kind"] == "kitti" and all(
+        a.get(k) == b.get(k) for k in {*a, *b} - {"sequences"})
+
+
+def project_params(sources: list[dict[str, Any]], evaluate_splits: list[str],
+                   length_m: float | None = None) -> dict[str, Any]:
+    """The new project's params: PARAMS_SECTIONS at their defaults (base.length_m
+    ``length_m`` when given), the data and where it goes, checked against every section's
+    rules."""
     params = {name: section_defaults(name) for name in PARAMS_SECTIONS}
     params["base"]["sequences"] = SEQUENCE_FOLDERS["ingest"]
+    if length_m is not None:
+        params["base"]["length_m"] = length_m
     params["data"] = {"sources": sources}
     params["evaluate"]["splits"] = evaluate_splits
     check_params(params, "the new params.yaml")
