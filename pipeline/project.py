@@ -47,9 +47,15 @@ LEFT_OUT = ("simulate", "simulate_kitti", "generalize")
 """Stages of DVC_YAML a project of recordings has no use for."""
 CODE_PACKAGES = ("pipeline", "stages", "schemas")
 """Dependencies of DVC_YAML's stages in these folders are adaptune's code."""
-PARAMS_SECTIONS = ("base", "data", "descriptors", "trials", "fixed", "devkit", "surrogate",
-                   "select", "evaluate")
-"""The sections the new project's params.yaml spells out (the others keep their defaults)."""
+PARAMS_KEYS: dict[str, tuple[str, ...]] = {
+    "base": ("seed", "length_m", "sequences"), "data": ("sources",), "descriptors": (),
+    "trials": ("algorithm", "iterations", "workers"), "fixed": ("iterations",),
+    "devkit": ("lengths_m",), "surrogate": ("k",), "select": ("period_s",),
+    "evaluate": ("splits", "workers")}
+"""The sections the new project's stages read, and the keys its params.yaml spells out: the
+ones a first run edits. Every other key takes the code's default, so that `dvc exp show` has a
+column for these (DVC shows every key of params.yaml) and not for 60 more; `dvc exp run -S
+++section.key=value` adds one (docs/usage.md, "DVC experiments on a project")."""
 PATH_OPTIONS = ("poses", "times", "extrinsic")
 """Options of a recording that are paths (relative: to the list file that gives them)."""
 
@@ -160,7 +166,44 @@ def init_project(directory: str | Path, recordings: Sequence[Recording],
     directory.mkdir(parents=True, exist_ok=True)
     _write(params_path, PARAMS_HEADER, params)
     _write(dvc_path, DVC_HEADER, {"stages": stages, "plots": plots})
+    ignore_outputs(directory, stages)
     return Project(params_path, dvc_path, sources, evaluate_splits)
+
+
+def cached_outputs(stages: Mapping[str, Any]) -> list[str]:
+    """The outputs of ``stages`` that DVC caches (and git must not track): every ``outs`` entry
+    but those with ``cache: false`` (metrics, records, plot data: committed to git)."""
+    out = []
+    for stage in stages.values():
+        for item in stage.get("outs", []):
+            path = _path_of(item)
+            options = item[path] if isinstance(item, Mapping) else None
+            if not (isinstance(options, Mapping) and options.get("cache") is False):
+                out.append(path)
+    return out
+
+
+def ignore_outputs(directory: Path, stages: Mapping[str, Any]) -> list[Path]:
+    """Write the ``.gitignore`` entries DVC writes for the cached outputs when their stage runs
+    (``/name`` in the ``.gitignore`` of the output's folder), before any stage runs: a first
+    ``dvc repro`` that fails leaves no output for ``git add -A`` to commit. Entries already
+    there are kept; returns the files written."""
+    from pipeline.io_utils import atomic_write_text
+
+    wanted: dict[Path, list[str]] = {}
+    for out in cached_outputs(stages):
+        path = Path(out)
+        wanted.setdefault(directory / path.parent / ".gitignore", []).append(f"/{path.name}")
+    written = []
+    for gitignore, entries in wanted.items():
+        text = gitignore.read_text(encoding="utf-8") if gitignore.is_file() else ""
+        missing = [e for e in dict.fromkeys(entries) if e not in text.splitlines()]
+        if missing:
+            body = text if not text or text.endswith("\n") else text + "\n"
+            gitignore.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(gitignore, body + "".join(f"{e}\n" for e in missing))
+            written.append(gitignore)
+    return written
 
 
 def assign_splits(recordings: Sequence[Recording], validation: Sequence[str | Path],
@@ -189,10 +232,11 @@ def _same_kitti_root(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
 
 def project_params(sources: list[dict[str, Any]], evaluate_splits: list[str],
                    length_m: float | None = None) -> dict[str, Any]:
-    """The new project's params: PARAMS_SECTIONS at their defaults (base.length_m
+    """The new project's params: the keys of PARAMS_KEYS at their defaults (base.length_m
     ``length_m`` when given), the data and where it goes, checked against every section's
     rules."""
-    params = {name: section_defaults(name) for name in PARAMS_SECTIONS}
+    params = {name: {k: v for k, v in section_defaults(name).items() if k in keys}
+              for name, keys in PARAMS_KEYS.items()}
     params["base"]["sequences"] = SEQUENCE_FOLDERS["ingest"]
     if length_m is not None:
         params["base"]["length_m"] = length_m
@@ -257,24 +301,25 @@ def _relative(entry: dict[str, Any], directory: Path) -> dict[str, Any]:
 def _deps(entry: Mapping[str, Any]) -> list[str]:
     """What the ingest stage reads of a source (paths as params.yaml gives them): the
     recording and its pose, times and extrinsic files outside it; of a KITTI root, the
-    sequences' folders and pose files."""
+    sequences' folders and its poses folder (one dependency, one `dvc exp show` column, for
+    every sequence's ground truth)."""
     from pipeline.sources.poses import is_numbers
 
     root = str(entry["path"])
     if entry["kind"] == "kitti":
-        return [f"{root}/{part}" for seq in entry["sequences"]
-                for part in (f"sequences/{seq}", f"poses/{seq}.txt")]
+        return [*(f"{root}/sequences/{seq}" for seq in entry["sequences"]), f"{root}/poses"]
     files = [str(entry[k]) for k in PATH_OPTIONS
              if entry.get(k) is not None and not (k == "extrinsic" and is_numbers(entry[k]))]
     return [root, *(f for f in files if not Path(f).is_relative_to(root))]
 
 
 PARAMS_HEADER = """\
-# adaptune params.yaml, written by `adaptune init` from a list of recordings: every number of
-# the pipeline, one section per stage (docs/design.md, "Stages"), at the code's defaults.
-# data.sources are your recordings (paths relative to this file): edit their options or splits
-# here (docs/usage.md, "Your own data set"). A first run: fewer trials.iterations, a
-# base.length_m your recordings are longer than, then `dvc repro`.
+# adaptune params.yaml, written by `adaptune init` from a list of recordings: one section per
+# stage (docs/design.md, "Stages") with the keys a first run edits; every other key takes the
+# code's default (adaptune's own params.yaml lists them all): add one here or with
+# `dvc exp run -S ++section.key=value`. data.sources are your recordings (paths relative to
+# this file): edit their options or splits here (docs/usage.md, "Your own data set"). A first
+# run: fewer trials.iterations, then `dvc repro`.
 """
 DVC_HEADER = """\
 # adaptune dvc.yaml, written by `adaptune init`: adaptune's own stages from your recordings

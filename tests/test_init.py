@@ -93,7 +93,7 @@ def test_a_list_of_recordings_makes_a_project(frames: KittiFrames, kitti_root: P
                        for d in stage.get("deps", []))
     assert new["stages"]["ingest"]["deps"] == [
         "recordings/a.bag", "recordings/b", "recordings/scans",
-        f"{kitti_root}/sequences/06", f"{kitti_root}/poses/06.txt"]
+        f"{kitti_root}/sequences/06", f"{kitti_root}/poses"]
     assert "plots/generalization.csv" not in str(new["plots"])
     assert len(new["plots"]) == len(ours["plots"]) - 2
     code, out = init(project, "--recording", rec / "b")
@@ -152,8 +152,8 @@ def test_a_kitti_root_is_its_sequences(kitti_root: Path, tmp_path: Path) -> None
         (["01"], "train"), (["04"], "validation"), (["06", "10"], "train")]
     new = yaml.safe_load((tmp_path / "q" / "dvc.yaml").read_text())
     assert new["stages"]["ingest"]["deps"] == [
-        f"{kitti_root}/{part}" for seq in ("01", "04", "06", "10")
-        for part in (f"sequences/{seq}", f"poses/{seq}.txt")]
+        f"{kitti_root}/sequences/01", f"{kitti_root}/poses",
+        *(f"{kitti_root}/sequences/{seq}" for seq in ("04", "06", "10"))]
 
 
 def test_a_recording_shorter_than_the_rte_length_is_refused_by_name(
