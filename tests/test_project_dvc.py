@@ -100,9 +100,8 @@ def test_the_documented_set_param_forms(project: Path) -> None:
     were committed; without ~ the options left are refused in one line naming them."""
     if not (project / ".dvc").is_dir():
         pytest.skip("needs test_outputs_are_ignored_before_any_stage_runs's repository")
-    lines = documented_lines("set-param forms")
-    runs = [ln for ln in lines if ln[:3] == ["dvc", "exp", "run"]]
-    assert len(runs) == 4 and lines[-1][:3] == ["dvc", "exp", "show"]
+    runs = documented_lines("set-param forms")
+    assert len(runs) == 4 and all(ln[:3] == ["dvc", "exp", "run"] for ln in runs)
 
     def params() -> dict:
         return yaml.safe_load((project / "params.yaml").read_text())
@@ -130,5 +129,4 @@ def test_the_documented_set_param_forms(project: Path) -> None:
     run(project, "git", "checkout", "-q", "--", "params.yaml")
     run(project, *runs[3], "--force", "ingest")
     assert params()["trials"] == {"algorithm": "kiss_icp", "iterations": 256, "workers": 2}
-    run(project, *lines[-1])
     assert len(columns(project)) <= MAX_COLUMNS
