@@ -4,31 +4,41 @@ PY := $(VENV)/bin/python
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test fuzz lint deps bench repro verdict verdict-headroom docs kitti clean
+.PHONY: constraints setup test fuzz lint deps bench repro verdict verdict-headroom docs kitti clean
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	python3 -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
-	@$(PY) -c "import open3d" >/dev/null 2>&1 || bash .ci/install-system-deps
+	$(BIN)/pip install --quiet -c constraints.txt -e '.[dev]'
+	@{ $(PY) -c "import open3d" && command -v qemu-x86_64; } >/dev/null 2>&1 || bash .ci/install-system-deps
 	@$(PY) -c "import open3d" >/dev/null
 	touch $(STAMP)
+
+# constraints.txt: the exact versions of every package the venv holds (pip freeze), which
+# `make setup` installs: numpy, OpenBLAS, numba, open3d or DuckDB of another version give other
+# numbers; after a dependency change in pyproject.toml: make constraints, then commit both
+constraints: setup
+	$(BIN)/pip install --quiet -e '.[dev]'
+	{ sed -n '1,3p' constraints.txt; $(BIN)/pip freeze --exclude-editable; } > constraints.txt.new
+	mv constraints.txt.new constraints.txt
 
 # the suite in TEST_WORKERS processes (pytest-xdist), a test file per process so that a file's
 # module fixtures (the DVC projects of tests/test_pipeline_dvc.py) are built once; 2 on 2 cores
 # (3 were no faster than 2 in three idle runs on 2 cores, and used more CPU); the slow modules
 # go out first (tests/conftest.py's order, --no-loadscope-reorder)
 TEST_WORKERS ?= 2
+# every command below runs through `adaptune exec`: the pinned CPU dispatch of the stages
+# (pipeline/dispatch.py), so that in-process code gives the numbers the stages give
 test: setup
-	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
+	$(BIN)/adaptune exec -- $(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
 # the fuzz suite of tests/fuzz at length: FUZZ_EXAMPLES examples a target, random seeds
 # (make test runs it small and seeded); a failure prints the blob that replays it
 FUZZ_EXAMPLES ?= 2000
 fuzz: setup
-	ADAPTUNE_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) nice -n 10 $(BIN)/pytest -q tests/fuzz \
+	ADAPTUNE_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) nice -n 10 $(BIN)/adaptune exec -- $(BIN)/pytest -q tests/fuzz \
 		--hypothesis-show-statistics --durations=0
 
 lint: setup
@@ -42,7 +52,7 @@ deps: setup
 	$(PY) tests/helpers/dvc_deps.py
 
 bench: setup
-	$(PY) bench/run.py
+	$(BIN)/adaptune exec -- $(PY) bench/run.py
 
 # DVC hashes every output it caches on min(4, cores / 2) threads by default, one on 2 cores;
 # DVC_HASH_JOBS threads instead (this clone's .dvc/config.local): the verdict's tuning suite,

@@ -8,7 +8,9 @@ For every sequence, ``run_adaptive``
    live odometry would choose, since x_t depends only on the scans up to t;
 3. runs the model's odometry with that schedule (``run_sequence``: parameters change mid-run);
 4. writes ``<out>/<sequence>/schedule.parquet``, ``trajectory.parquet`` and ``run.json``
-   (wall times of selection and odometry [s], number of parameter changes).
+   (frames, selections, number of parameter changes; the wall times of selection and odometry
+   go to the stage's record: an output holds nothing a run's speed does, docs/design.md,
+   "Same numbers on every machine").
 """
 
 from __future__ import annotations
@@ -47,6 +49,11 @@ class AdaptiveRun:
         return self.select_s + self.odometry_s
 
     def to_json(self) -> dict[str, Any]:
+        """``run.json``: what the run did (no wall times)."""
+        return {k: v for k, v in asdict(self).items() if k not in ("select_s", "odometry_s")}
+
+    def record(self) -> dict[str, Any]:
+        """The run in the stage's record: ``to_json`` and the wall times [s]."""
         return {**asdict(self), "wall_time_s": self.wall_time_s}
 
 

@@ -1,4 +1,10 @@
-"""Where an artifact came from: the git revision of the code and the DVC state of its inputs."""
+"""Where an artifact came from: what its inputs held, and the git and DVC state it was made in.
+
+Two kinds, kept apart (docs/design.md, "Same numbers on every machine"): ``content`` is a pure
+function of the inputs (their SHA-256), so it goes into the artifact, a cached output whose
+bytes the code, params and data alone decide; ``revision`` (git commit, dirty flag, the md5 of
+dvc.lock at the time) changes with every commit and run, so it goes into the stage's record.
+"""
 
 from __future__ import annotations
 
@@ -9,7 +15,15 @@ from pathlib import Path
 from typing import Any
 
 
-def provenance(repo: str | Path | None, inputs: Mapping[str, str]) -> dict[str, Any]:
+def content(inputs: Mapping[str, str]) -> dict[str, Any]:
+    """``inputs`` (name -> path) and the SHA-256 of each (a folder: of its files)."""
+    from pipeline.file_digest import sha256_tree
+
+    return {"inputs": dict(inputs),
+            "inputs_sha256": {name: sha256_tree(path) for name, path in inputs.items()}}
+
+
+def revision(repo: str | Path | None, inputs: Mapping[str, str]) -> dict[str, Any]:
     """git revision (``git rev-parse HEAD``, dirty flag) and DVC info (md5 of the inputs from
     dvc.lock where present) of the repository ``repo`` (default: the working directory);
     ``inputs``: name -> path of what the artifact was made from."""
@@ -24,7 +38,6 @@ def provenance(repo: str | Path | None, inputs: Mapping[str, str]) -> dict[str, 
         "git_revision": git_rev,
         "git_dirty": dirty,
         "dvc": dvc_lock_info(repo, inputs),
-        "inputs": dict(inputs),
     }
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-SCHEMA_VERSION = "1.0"
+SCHEMA_VERSION = "1.1"
 """Version of every on-disk format adaptune writes (MCAP metadata, Parquet, DuckDB, artifact)."""
 
 SCHEMA_DIR = Path(__file__).resolve().parent

@@ -79,13 +79,14 @@ TRIALS_BASE = pa.schema(
      pa.field("status", pa.string(), nullable=False),
      pa.field("error", pa.string(), nullable=False),
      pa.field("objective", pa.float64(), nullable=False),
-     pa.field("wall_time_s", pa.float64(), nullable=False),
      pa.field("seed", pa.int64(), nullable=False),
      pa.field("params_json", pa.string(), nullable=False)],
     metadata={**_META, b"adaptune.table": b"trials"},
 )
 """One SMBO study's trials (docs/design.md, "Formats"): these columns plus ``p_<name>`` float64
 each."""
+LEGACY_TRIALS_COLUMNS = ("wall_time_s",)
+"""Columns of trials tables written before schema version 1.1 that are read and dropped."""
 
 TRIAL_STATUSES = ("ok", "failed", "pruned", "lost")
 """Values of the trials table's ``status`` column: ok (scored), failed (the odometry failed:
@@ -98,8 +99,10 @@ def trials_schema(param_names: list[str]) -> pa.Schema:
     """Schema of ``<OUT>/trials/algorithm=<A>/sequence=<S>/trials.parquet`` for these parameters.
 
     Columns: trial int32, status (``TRIAL_STATUSES``), error ('' when ok), objective float64,
-    wall_time_s float64, seed int64, params_json (JSON object name -> value), then one float64
-    column ``p_<name>`` per parameter in the given order.
+    seed int64, params_json (JSON object name -> value), then one float64 column ``p_<name>``
+    per parameter in the given order. No wall time: a cached output holds what the code,
+    params and data determine, and nothing a run's speed does (the trials stage's record
+    has the times; docs/design.md, "Same numbers on every machine").
     """
     s = TRIALS_BASE
     for name in param_names:

@@ -7,7 +7,7 @@ CREATE TABLE schema_info (
     name VARCHAR PRIMARY KEY,       -- 'schema_version' or the .sql file that was applied
     version VARCHAR NOT NULL
 );
-INSERT INTO schema_info VALUES ('schema_version', '1.0'), ('tables.sql', '1.0');
+INSERT INTO schema_info VALUES ('schema_version', '1.1'), ('tables.sql', '1.1');
 
 CREATE TABLE sequences (
     sequence VARCHAR PRIMARY KEY,   -- file stem of data/sequences/<sequence>.mcap
@@ -47,7 +47,6 @@ CREATE TABLE trials (
     status VARCHAR NOT NULL,        -- 'ok' | 'failed' | 'pruned' | 'lost'
     error VARCHAR NOT NULL,         -- '' when ok
     objective DOUBLE,               -- the SMBO objective: mean RTE [%] or the failure penalty
-    wall_time_s DOUBLE,
     seed BIGINT,
     params_json VARCHAR,            -- JSON object name -> value
     PRIMARY KEY (study, algorithm, sequence, trial)

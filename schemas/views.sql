@@ -1,5 +1,5 @@
 -- adaptune results database: views. Applied after the tables are filled (tables.sql).
-INSERT INTO schema_info VALUES ('views.sql', '1.0');
+INSERT INTO schema_info VALUES ('views.sql', '1.1');
 
 -- Training rows of the surrogate: one row per (algorithm, sequence, trial, frame) of the ok
 -- and pruned trials of the per-sequence SMBO, with the frame's environment (e0..e9), the

@@ -111,6 +111,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+HIDDEN = {
+    "exec": ("stages.exec_command:exec_command",
+             "Run a command with adaptune's pinned CPU dispatch (make test, make bench)."),
+}
+"""Commands that run but are not listed by ``adaptune --help``."""
+
+
 class LazyGroup(click.Group):
     """A group that imports a sub-command only when it is run or asked for help."""
 
@@ -118,9 +125,10 @@ class LazyGroup(click.Group):
         return sorted(n for n, (target, _) in COMMANDS.items() if _module_exists(target))
 
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
-        if name not in COMMANDS or not _module_exists(COMMANDS[name][0]):
+        known = {**COMMANDS, **HIDDEN}
+        if name not in known or not _module_exists(known[name][0]):
             return None
-        target, short = COMMANDS[name]
+        target, short = known[name]
         module, attr = target.split(":")
         cmd = getattr(importlib.import_module(module), attr)
         cmd.short_help = cmd.short_help or short
@@ -170,5 +178,23 @@ def main(verbose: int) -> None:
     logging.getLogger("pipeline.progress").setLevel(logging.INFO)
 
 
-if __name__ == "__main__":
+def entry() -> None:
+    """The ``adaptune`` executable: re-executes itself once in the pinned CPU dispatch
+    environment (``pipeline.dispatch``: the same numbers on every machine), then runs ``main``.
+    Tests that invoke ``main`` in-process (click's runner) do not re-execute."""
+    import os
+
+    from pipeline.dispatch import pinned_environment
+
+    try:
+        env = pinned_environment(os.environ)
+    except Exception as exc:  # an AdaptuneError: the one line, as main would print it
+        click.echo(f"adaptune: error: {exc}", err=True)
+        sys.exit(1)
+    if env is not None:
+        os.execve(sys.executable, [sys.executable, *sys.orig_argv[1:]], env)
     main()
+
+
+if __name__ == "__main__":
+    entry()

@@ -57,7 +57,12 @@ def surrogate(
                            algorithm)
     algo, cv, training = manifest["algorithm"], manifest["cross_validation"], manifest["training"]
     if metrics_path is not None and record_path is not None:
-        write_metrics(metrics_path, record_path, {"algorithm": algo, **cv}, RECORD_KEYS)
+        from pipeline.provenance import revision
+
+        write_metrics(metrics_path, record_path,
+                      {"algorithm": algo, **cv,
+                       "provenance": revision(None, manifest["provenance"]["inputs"])},
+                      (*RECORD_KEYS, "provenance"))
     click.echo(
         f"{algo}: {training['rows']} rows, {training['environments']} frames "
         f"-> {out}; LOSO CV MAE {cv['mae']}, RMSE {cv['rmse']}, regret {cv['regret_mean']}, "

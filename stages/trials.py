@@ -20,6 +20,7 @@ from stages.common import (
     algorithm_option,
     dir_option,
     echo_output,
+    file_option,
     json_option,
     params_option,
 )
@@ -47,6 +48,9 @@ from stages.common import (
 @dir_option("--warm-start", "warm_start_dir", required=False,
             help="With --joint and fixed.warm_start: the per-sequence trials output to start "
                  "from (the parameters it predicts best for all sequences first).")
+@file_option("--record", "record_path", required=False,
+             help="Write the studies' counts and wall times here (records/<stage>.json: the "
+                  "trials tables keep no time).")
 @params_option
 @json_option
 def trials(
@@ -63,6 +67,7 @@ def trials(
     time_limit_s: float | None,
     joint: bool,
     warm_start_dir: Path | None,
+    record_path: Path | None,
     params_path: Path | None,
     as_json: bool,
 ) -> None:
@@ -123,5 +128,9 @@ def trials(
                        f"{s.failed} failed, {s.pruned} pruned, "
                        f"best objective {s.best_objective:.4g} % (trial {s.best_trial})",
                        err=True)
+    if record_path is not None:
+        from pipeline.report.outputs import write_json
+
+        write_json(record_path, {"studies": [s.record() for s in studies]})
     if as_json:
         echo_output(json.dumps([asdict(s) for s in studies], indent=1, default=str))

@@ -15,6 +15,7 @@ evaluate stage, to keep the suite short.
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import shlex
@@ -309,9 +310,8 @@ tests/test_project_dvc.py runs on one (not experiments of this pipeline)."""
 def documented_variations() -> dict[str, list[str]]:
     """The `dvc exp run` lines (in every ``sh`` block but the one marked ELSEWHERE) of the
     DOCUMENTED pages, keyed by what they set."""
-    parts = [(page, (REPO / page).read_text().split("```sh")) for page in DOCUMENTED]
-    blocks = [b.split("```", 1)[0] for _, split in parts
-              for before, b in zip(split, split[1:], strict=False)
+    blocks = [b.split("```", 1)[0] for page in DOCUMENTED
+              for before, b in itertools.pairwise((REPO / page).read_text().split("```sh"))
               if not before.endswith(ELSEWHERE)]
     lines = {}
     for line in "\n".join(blocks).replace("\\\n", " ").splitlines():

@@ -64,7 +64,6 @@ def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapp
     (pipeline.tuning.layout);
     descriptors / environment: the descriptor Parquet files, or None for empty tables.
     """
-    import duckdb
 
     unknown = sorted(set(studies) - set(STUDIES))
     if unknown:
@@ -75,7 +74,7 @@ def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapp
     summary = DatabaseSummary()
     with atomic_path(db_path) as tmp:
         tmp.unlink()
-        con = duckdb.connect(str(tmp))
+        con = _connect_for_build(tmp)
         try:
             steps = [
                 ("tables", lambda: apply_sql(con, "tables.sql")),
@@ -99,6 +98,28 @@ def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapp
             con.close()
             Path(f"{tmp}.wal").unlink(missing_ok=True)
     return summary
+
+
+CATALOG = "results"
+"""The name the database is built under (a fixed one: DuckDB stores it in the file, and the
+temporary file's name is random)."""
+STORAGE_VERSION = "v1.3.0"
+"""DuckDB's storage format the database is written in: the newest that stores no random bytes
+(from v1.4 on the file header holds a random database identifier)."""
+
+
+def _connect_for_build(path: Path) -> duckdb.DuckDBPyConnection:
+    """A connection that builds the database file ``path`` byte for byte the same from the same
+    inputs (docs/design.md, "Same numbers on every machine"): one thread (a parallel aggregate
+    or insert orders its sums and rows by which thread came first), a fixed catalog name and a
+    storage format without random bytes."""
+    import duckdb
+
+    con = duckdb.connect(config={"threads": 1})
+    con.execute(f"ATTACH {sql_literal(str(path))} AS {CATALOG} "
+                f"(STORAGE_VERSION {sql_literal(STORAGE_VERSION)})")
+    con.execute(f"USE {CATALOG}")
+    return con
 
 
 def apply_sql(con: duckdb.DuckDBPyConnection, name: str) -> None:

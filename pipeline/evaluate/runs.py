@@ -189,7 +189,8 @@ def _run_fixed(adapter: Any, path: Path, params: Mapping[str, float], out_dir: P
 
 
 def _read_adaptive(folder: Path, algorithm: str) -> tuple[Trajectory, float]:
-    """The adaptive stage's trajectory and wall time; InputError when it was another algorithm."""
+    """The adaptive stage's trajectory and wall time (NaN: ``run.json`` keeps none, the adaptive
+    stage's record does); InputError when it was another algorithm."""
     meta_path = folder / "run.json"
     if not meta_path.is_file():
         raise InputError(f"{meta_path}: no adaptive run (run the `adaptive` stage)")
@@ -197,7 +198,7 @@ def _read_adaptive(folder: Path, algorithm: str) -> tuple[Trajectory, float]:
     if meta.get("algorithm") != algorithm:
         raise InputError(f"{meta_path}: adaptive run of {meta.get('algorithm')!r}, "
                          f"the fixed parameters are for {algorithm!r}")
-    return read_trajectory(folder / "trajectory.parquet"), float(meta["wall_time_s"])
+    return read_trajectory(folder / "trajectory.parquet"), float(meta.get("wall_time_s", "nan"))
 
 
 def _kitti_segments(gt: NDArray[np.float64], trajectories: Mapping[str, Trajectory],

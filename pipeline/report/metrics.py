@@ -19,7 +19,8 @@ warnings' sentences (their flags, ``warnings``, are metrics: ``pipeline.report.c
 
 def trials_summary(studies: Mapping[str, Path]) -> dict[str, dict[str, float]]:
     """Trial counts by status (failed: the odometry failed; pruned: stopped early as hopeless;
-    lost: to the machinery) and total wall time [s] of every SMBO output folder."""
+    lost: to the machinery) of every SMBO output folder (their wall times: the trials stages'
+    records)."""
     from pipeline.tuning.layout import read_trials_tables
 
     out = {}
@@ -28,8 +29,7 @@ def trials_summary(studies: Mapping[str, Path]) -> dict[str, dict[str, float]]:
         out[study] = {"studies": len({(r["algorithm"], r["sequence"]) for r in rows}),
                       "trials": len(rows),
                       **{status: sum(r["status"] == status for r in rows)
-                         for status in ("failed", "pruned", "lost")},
-                      "wall_time_s": float(sum(r["wall_time_s"] for r in rows))}
+                         for status in ("failed", "pruned", "lost")}}
     return out
 
 

@@ -186,21 +186,19 @@ def report_markdown(ev: Evaluation, m: Mapping[str, Any], pngs: Mapping[str, lis
         table2_markdown(table2_json([m])),
         "## Per sequence",
         "",
-        "| sequence | setting | RTE [%] | KITTI t_err [%] | KITTI r_err [deg/100 m] | segments "
-        "| wall time [s] |",
-        "|---|---|---|---|---|---|---|",
+        "| sequence | setting | RTE [%] | KITTI t_err [%] | KITTI r_err [deg/100 m] | segments |",
+        "|---|---|---|---|---|---|",
     ]
     for name, seq in m["sequences"].items():
         for s in SETTINGS:
             k = seq["kitti"][s]
             lines.append(f"| {name} | {s} | {_fmt(seq['rte_pct'][s])} | {_fmt(k['t_err_pct'])} "
-                         f"| {_fmt(k['r_err_deg_per_100m'])} | {k['segments']} "
-                         f"| {_fmt(seq['wall_time_s'][s], 1)} |")
-    lines += ["", "## Trials", "", "| study | studies | trials | failed | pruned | wall time [s] |",
-              "|---|---|---|---|---|---|"]
+                         f"| {_fmt(k['r_err_deg_per_100m'])} | {k['segments']} |")
+    lines += ["", "## Trials", "", "| study | studies | trials | failed | pruned |",
+              "|---|---|---|---|---|"]
     for study, t in m["trials"].items():
         lines.append(f"| {study} | {t['studies']} | {t['trials']} | {t['failed']} "
-                     f"| {t.get('pruned', 0)} | {t['wall_time_s']:.0f} |")
+                     f"| {t.get('pruned', 0)} |")
     captions = {"world": "The validation world from above: trajectory by environment, one scan",
                 "schedule": "Parameters chosen online (environment shaded; cf. paper Fig. 5)",
                 "rte": "Per-start-frame RTE", "trajectory": "Trajectories (top view)",

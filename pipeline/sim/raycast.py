@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from pipeline.errors import ConfigError
 from pipeline.executor import process_threads
 from pipeline.sim.effects import SensorEffects
+from pipeline.sim.hits_kernel import exact_hits
 from pipeline.sim.materials import Material, reflectance_table, relief_table
 from pipeline.sim.rays_kernel import turn_rays
 from pipeline.sim.relief_kernel import lay_relief, rough_hits, row_sums
@@ -77,10 +78,12 @@ class Raycaster:
 
         self.sensor = sensor
         self.origin = np.round(vertices.mean(axis=0)) if len(vertices) else np.zeros(3)
+        self._vertices = (vertices - self.origin).astype(np.float32)
+        self._triangles = np.ascontiguousarray(triangles, dtype=np.int64)
         self.scene = o3d.t.geometry.RaycastingScene()
         self.scene.add_triangles(
-            o3d.core.Tensor((vertices - self.origin).astype(np.float32)),  # type: ignore[call-overload]
-            o3d.core.Tensor(triangles.astype(np.uint32)),  # type: ignore[call-overload]
+            o3d.core.Tensor(self._vertices),  # type: ignore[call-overload]
+            o3d.core.Tensor(self._triangles.astype(np.uint32)),  # type: ignore[call-overload]
         )
         self._o3d = o3d
         self.materials = (np.full(len(triangles), Material.GROUND, np.uint8) if materials is None
@@ -193,13 +196,12 @@ class Raycaster:
 
     def _cast_rays(self, rays: F32) -> Hits:
         """Cast rays (M, 6) (origin, direction) against the world."""
-        hit = self.scene.cast_rays(self._o3d.core.Tensor.from_numpy(rays), nthreads=self.threads)
-        t = hit["t_hit"].numpy()
-        prim = hit["primitive_ids"].numpy()
+        t, normal, prim = _exact_cast(self.scene, self._vertices, self._triangles, rays,
+                                      self.threads)
         mat = np.zeros(len(t), np.uint8)
         ok = np.isfinite(t)
         mat[ok] = self.materials[prim[ok]]
-        return Hits(t, hit["primitive_normals"].numpy(), mat)
+        return Hits(t, normal, mat)
 
     def _foliage(self, t: F32, cos_set: F32, hits: Hits, orig_w: F32, dirs_w: F32,
                  rng: np.random.Generator) -> None:
@@ -348,14 +350,30 @@ def _cast_movers(o3d: object, vertices: F64, triangles: NDArray[np.int64], origi
 def _cast_mesh(o3d: object, vertices: F64, triangles: NDArray[np.int64], origins: F32,
                dirs: F32, material: Material, threads: int) -> Hits:
     """Cast rays against a small mesh of one material (the movers of a scan) on ``threads``."""
+    vertices_f32 = vertices.astype(np.float32)
+    triangles = np.ascontiguousarray(triangles, dtype=np.int64)
     scene = o3d.t.geometry.RaycastingScene()  # type: ignore[attr-defined]
-    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)),  # type: ignore[attr-defined]
+    scene.add_triangles(o3d.core.Tensor(vertices_f32),  # type: ignore[attr-defined]
                         o3d.core.Tensor(triangles.astype(np.uint32)))  # type: ignore[attr-defined]
     rays = np.concatenate([origins, dirs], axis=1).astype(np.float32)
-    hit = scene.cast_rays(o3d.core.Tensor.from_numpy(rays),  # type: ignore[attr-defined]
-                          nthreads=threads)
-    t = hit["t_hit"].numpy()
-    return Hits(t, hit["primitive_normals"].numpy(), np.full(len(t), material, np.uint8))
+    t, normal, _ = _exact_cast(scene, vertices_f32, triangles, rays, threads)
+    return Hits(t, normal, np.full(len(t), material, np.uint8))
+
+
+def _exact_cast(scene: Any, vertices: F32, triangles: NDArray[np.int64], rays: F32,
+                threads: int) -> tuple[F32, F32, NDArray[np.uint32]]:
+    """Cast ``rays`` (M, 6) against ``scene`` (built from ``vertices`` (V, 3) float32 and
+    ``triangles`` (T, 3)): each ray's range (inf: none), unit normal and triangle, the range and
+    normal recomputed from the triangle (``hits_kernel``: Embree's own differ between CPUs in
+    their last bits)."""
+    import open3d as o3d
+
+    hit = scene.cast_rays(o3d.core.Tensor.from_numpy(rays), nthreads=threads)
+    t = np.array(hit["t_hit"].numpy(), np.float32)
+    normal = np.array(hit["primitive_normals"].numpy(), np.float32)
+    prim = hit["primitive_ids"].numpy()
+    exact_hits(vertices, triangles, rays, prim, t, normal)
+    return t, normal, prim
 
 
 def _nearer(a: Hits, b: Hits) -> Hits:

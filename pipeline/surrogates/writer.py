@@ -50,7 +50,6 @@ def write_artifact(
     fitted: FittedSurrogate,
     pca: Pca,
     info: ArtifactInfo,
-    repo: str | Path | None = None,
 ) -> dict[str, Any]:
     """Write ``out``/ (manifest.json + .npy arrays) atomically; returns the manifest."""
     from pipeline.io_utils import atomic_dir
@@ -67,7 +66,7 @@ def write_artifact(
     with atomic_dir(out) as tmp:
         files = {name: save_npy(tmp / name, arr) for name, arr in arrays.items()}
         shapes = {name: npy_declaration(arr) for name, arr in arrays.items()}
-        manifest = manifest_of(fitted, pca, info, files, shapes, repo)
+        manifest = manifest_of(fitted, pca, info, files, shapes)
         validate_manifest(manifest)
         manifest[MANIFEST_HASH_KEY] = canonical_manifest_hash(manifest)
         (tmp / MANIFEST_NAME).write_text(json.dumps(manifest, indent=2), encoding="utf-8")
@@ -75,11 +74,12 @@ def write_artifact(
 
 
 def manifest_of(fitted: FittedSurrogate, pca: Pca, info: ArtifactInfo,
-                files: Mapping[str, str], shapes: Mapping[str, Any],
-                repo: str | Path | None) -> dict[str, Any]:
+                files: Mapping[str, str], shapes: Mapping[str, Any]) -> dict[str, Any]:
     """The manifest (without its own hash) of an artifact whose arrays hash to ``files`` and
-    have the shapes and dtypes ``shapes`` (``npy_declaration``)."""
-    from pipeline.provenance import provenance
+    have the shapes and dtypes ``shapes`` (``npy_declaration``); its provenance is what its
+    inputs held (``pipeline.provenance.content``: the git and DVC state go to the stage's
+    record)."""
+    from pipeline.provenance import content
 
     novelty: dict[str, Any] = {"distance": fitted.novelty_distance,
                                "fallback": dict(info.fallback)}
@@ -111,7 +111,7 @@ def manifest_of(fitted: FittedSurrogate, pca: Pca, info: ArtifactInfo,
         "cross_validation": fitted.cv,
         "files": dict(files),
         "arrays": dict(shapes),
-        "provenance": provenance(repo, info.inputs),
+        "provenance": content(info.inputs),
     }
 
 

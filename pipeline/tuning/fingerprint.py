@@ -10,13 +10,13 @@ silently mix two studies, so ``check_fingerprint`` refuses it in one line naming
 difference. What may change on a resume: ``iterations`` (a study can be extended),
 ``retries``, ``dask``.
 
-Sequences are identified by the SHA-256 of their file; ``sequence_digest`` skips the hashing
-when size and modification time equal the stored ones (a resume of an untouched sequence).
+Sequences are identified by the SHA-256 of their file (``pipeline.file_digest``: a resume of
+an untouched sequence takes it from the user cache instead of hashing again); the fingerprint
+keeps no modification time, so that the table's bytes follow from the sequences' alone.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from collections.abc import Mapping
@@ -40,16 +40,12 @@ def study_fingerprint(*, adapter: str, adapter_options: Mapping[str, Any],
                       startup_trials: int, told_lag: int, pruning: Mapping[str, Any],
                       sequences: list[tuple[str, str]],
                       fidelity: Mapping[str, Any] | None = None,
-                      warm_start: list[dict[str, float]] | None = None,
-                      stored: Mapping[str, Any] | None = None) -> dict[str, Any]:
+                      warm_start: list[dict[str, float]] | None = None) -> dict[str, Any]:
     """The fingerprint (plain JSON data) of a study over ``sequences`` ((name, MCAP path)).
 
     ``fidelity``: the rungs of successive halving (``trials.halving``), None for whole trials
     (a study stored before the rungs existed has none: whole).
-    ``stored``: the fingerprint found with the table, whose digests are reused for files whose
-    size and modification time did not change.
     """
-    known = {s["name"]: s for s in (stored or {}).get("sequences", []) if isinstance(s, dict)}
     return {
         "version": VERSION,
         "adapter": adapter,
@@ -66,21 +62,15 @@ def study_fingerprint(*, adapter: str, adapter_options: Mapping[str, Any],
         "pruning": dict(pruning),
         "fidelity": None if fidelity is None else dict(fidelity),
         "warm_start": list(warm_start or []),
-        "sequences": [sequence_digest(name, path, known.get(name)) for name, path in sequences],
+        "sequences": [sequence_digest(name, path) for name, path in sequences],
     }
 
 
-def sequence_digest(name: str, path: str | Path, known: Mapping[str, Any] | None = None
-                    ) -> dict[str, Any]:
-    """{"name", "sha256", "size", "mtime_ns"} of a sequence file; the digest is taken from
-    ``known`` when its size and modification time are those of the file now."""
-    st = os.stat(path)
-    if known and known.get("size") == st.st_size and known.get("mtime_ns") == st.st_mtime_ns:
-        digest = str(known.get("sha256"))
-    else:
-        with open(path, "rb") as fh:
-            digest = hashlib.file_digest(fh, "sha256").hexdigest()
-    return {"name": name, "sha256": digest, "size": st.st_size, "mtime_ns": st.st_mtime_ns}
+def sequence_digest(name: str, path: str | Path) -> dict[str, Any]:
+    """{"name", "sha256", "size"} of a sequence file."""
+    from pipeline.file_digest import sha256_file
+
+    return {"name": name, "sha256": sha256_file(path), "size": os.stat(path).st_size}
 
 
 def check_fingerprint(stored: Mapping[str, Any] | None, current: Mapping[str, Any],

@@ -18,8 +18,10 @@ Optuna trial per trial of the trials table, in trial order, with
 - user attributes ``trial`` (adaptune's trial id: Optuna numbers the trials it holds
   0, 1, ... so they differ once a lost trial is left out), ``frames`` (the frames its stored
   trajectories hold over the study's sequences: all of them for a complete trial, those it ran
-  for a pruned one, 0 for a failed one, whose trajectories are not kept), ``seed`` and
-  ``wall_time_s``; its start is its end minus its wall time, so the dashboard shows durations.
+  for a pruned one, 0 for a failed one, whose trajectories are not kept) and ``seed``. A trials
+  table keeps no time (the same numbers on every run; a study's wall time is in its stage's
+  record), so the trials start and end at the export; a table written before schema 1.1 gives
+  its trials' ``wall_time_s``, and their start is their end minus it.
 
 The storage is a new SQLite file written atomically (``pipeline.io_utils.atomic_path``): an
 existing one is replaced whole. optuna is imported inside the function.
@@ -152,7 +154,10 @@ def _trial(row: dict[str, Any], space: ParameterSpace, distributions: dict[str, 
     params = {s.name: round(row[f"p_{s.name}"]) if s.kind == "int"
               else float(row[f"p_{s.name}"]) for s in space.specs}
     attrs: dict[str, Any] = {"trial": int(row["trial"]), "frames": frames,
-                             "seed": int(row["seed"]), "wall_time_s": float(row["wall_time_s"])}
+                             "seed": int(row["seed"])}
+    wall_s = row.get("wall_time_s")  # a table of schema 1.0 (LEGACY_TRIALS_COLUMNS)
+    if wall_s is not None and math.isfinite(wall_s):
+        attrs["wall_time_s"] = float(wall_s)
     if row["error"]:
         attrs["error"] = row["error"]
     value, intermediate = None, None
@@ -166,8 +171,9 @@ def _trial(row: dict[str, Any], space: ParameterSpace, distributions: dict[str, 
     trial = optuna.trial.create_trial(state=state, value=value, params=params,
                                       distributions=distributions, user_attrs=attrs,
                                       intermediate_values=intermediate)
-    end = trial.datetime_complete or datetime.datetime.now()
-    trial.datetime_start = end - datetime.timedelta(seconds=max(float(row["wall_time_s"]), 0.0))
+    if "wall_time_s" in attrs:
+        end = trial.datetime_complete or datetime.datetime.now()
+        trial.datetime_start = end - datetime.timedelta(seconds=max(attrs["wall_time_s"], 0.0))
     return trial
 
 

@@ -192,6 +192,17 @@ class StudySummary:
     trials_path: Path | None = None
     pruned: int = 0
     lost: list[TrialResult] = field(default_factory=list)
+    wall_time_s: float = 0.0
+    """Wall time [s] of the trials run now, summed (a resumed study's earlier trials were timed
+    by the run that ran them: the trials table keeps no time)."""
+
+    def record(self) -> dict[str, Any]:
+        """The study in the trials stage's record (``records/<stage>.json``): counts, the best
+        trial, and the wall time of the trials run now."""
+        return {"algorithm": self.algorithm, "sequence": self.sequence, "trials": self.trials,
+                "ran": self.ran, "failed": self.failed, "pruned": self.pruned,
+                "lost": len(self.lost), "best_trial": self.best_trial,
+                "best_objective": self.best_objective, "wall_time_s": self.wall_time_s}
 
 
 @dataclass(frozen=True)
@@ -361,8 +372,7 @@ class StudyRun:
         self.table = trials_path(out_dir, adapter.name, study.name)
         self.first = [space.validate(p) for p in warm_start]
         stored_study = read_study(self.table)
-        self.fingerprint = study_of(study, adapter, settings, seed, stored=stored_study,
-                                    warm_start=self.first)
+        self.fingerprint = study_of(study, adapter, settings, seed, warm_start=self.first)
         if self.table.is_file():
             check_fingerprint(stored_study, self.fingerprint, str(self.table))
         stored = [r for r in read_trials(self.table, space) if r.trial < settings.iterations]
@@ -511,8 +521,7 @@ def study_board(pruner: StudyPruner, out_dir: Path, algorithm: str, study: str,
 
 
 def study_of(study: Study, adapter: Adapter, settings: TrialsSection, seed: int,
-             stored: dict[str, Any] | None = None, warm_start: Sequence[Params] = ()
-             ) -> dict[str, Any]:
+             warm_start: Sequence[Params] = ()) -> dict[str, Any]:
     """The fingerprint of ``study`` run with ``settings`` (``pipeline.tuning.fingerprint``)."""
     return study_fingerprint(
         adapter=settings.algorithm, adapter_options=settings.adapter_options,
@@ -522,8 +531,7 @@ def study_of(study: Study, adapter: Adapter, settings: TrialsSection, seed: int,
         told_lag=told_lag(settings.workers), pruning=settings.pruning.model_dump(),
         fidelity=(settings.halving.model_dump() | {"thresholds": RULE}
                   if settings.fidelity == "halving" else None),
-        warm_start=[dict(p) for p in warm_start], sequences=list(study.sequences),
-        stored=stored)
+        warm_start=[dict(p) for p in warm_start], sequences=list(study.sequences))
 
 
 def told_lag(workers: int) -> int:
@@ -570,7 +578,9 @@ def summarize(algorithm: str, sequence: str, done: dict[int, TrialResult], ran: 
     failed = sum(r.status == "failed" for r in done.values())
     return StudySummary(algorithm, sequence, len(done), failed, ran, best.trial,
                         best.objective if ok else math.nan, dict(best.params), table,
-                        pruned=sum(r.status == "pruned" for r in done.values()))
+                        pruned=sum(r.status == "pruned" for r in done.values()),
+                        wall_time_s=math.fsum(r.wall_time_s for r in done.values()
+                                              if math.isfinite(r.wall_time_s)))
 
 
 _NO_TRIAL = TrialResult(-1, "lost", "", math.nan, 0.0, 0, {})

@@ -12,6 +12,7 @@ one home of the parameter space a study searched, for every later stage. Where t
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ from pipeline.odometry.base import ParameterSpace
 from pipeline.tuning.job import TrialResult
 from pipeline.tuning.layout import JOINT_SEQUENCE as JOINT
 from pipeline.tuning.layout import trials_table_path as trials_path
-from schemas.arrow import check_schema_version, trials_schema
+from schemas.arrow import LEGACY_TRIALS_COLUMNS, check_schema_version, trials_schema
 
 __all__ = ["JOINT", "STUDY_KEY", "read_space", "read_study", "read_trials", "trials_path",
            "write_trials"]
@@ -46,7 +47,6 @@ def write_trials(path: str | Path, space: ParameterSpace, results: Iterable[Tria
         pa.array([r.status for r in rows], pa.string()),
         pa.array([r.error for r in rows], pa.string()),
         pa.array([r.objective for r in rows], pa.float64()),
-        pa.array([r.wall_time_s for r in rows], pa.float64()),
         pa.array([r.seed for r in rows], pa.int64()),
         pa.array([json.dumps({n: r.params[n] for n in names}) for r in rows], pa.string()),
     ]
@@ -101,7 +101,8 @@ def read_space(out_dir: str | Path, algorithm: str) -> ParameterSpace:
 
 
 def read_trials(path: str | Path, space: ParameterSpace) -> list[TrialResult]:
-    """Finished trials of an earlier run ([] when there is no table yet).
+    """Finished trials of an earlier run ([] when there is no table yet); their wall time is
+    NaN (the table does not keep it).
 
     SchemaError when the table was written for other parameters (another algorithm version).
     """
@@ -114,12 +115,13 @@ def read_trials(path: str | Path, space: ParameterSpace) -> list[TrialResult]:
         raise InputError(f"{path}: not a readable trials table ({exc}); "
                          "delete it to start over") from exc
     check_schema_version(table.schema, str(path))
+    table = table.drop_columns([c for c in LEGACY_TRIALS_COLUMNS if c in table.column_names])
     expected = trials_schema(space.names)
     if table.schema.names != expected.names:
         raise SchemaError(f"{path}: columns {table.schema.names} do not match the parameters "
                           f"{space.names}; delete it to start over")
     d = table.to_pydict()
     return [TrialResult(trial=d["trial"][i], status=d["status"][i], error=d["error"][i],
-                        objective=d["objective"][i], wall_time_s=d["wall_time_s"][i],
+                        objective=d["objective"][i], wall_time_s=math.nan,
                         seed=d["seed"][i], params={n: d[f"p_{n}"][i] for n in space.names})
             for i in range(table.num_rows)]

@@ -139,10 +139,11 @@ class WorldResult:
         return self.median(setting) / den if den > 0 else float("nan")
 
     def to_json(self) -> dict[str, Any]:
+        """``world.json``: what ran and what the selector did (no wall time: an output holds
+        nothing a run's speed does; docs/design.md, "Same numbers on every machine")."""
         return {"name": self.name, "family": self.family, "segments": list(self.segments),
                 "sensor": self.sensor, "frames": self.frames, "seed": self.seed,
-                "failed": self.failed, "selection": self.selection,
-                "wall_time_s": self.wall_time_s}
+                "failed": self.failed, "selection": self.selection}
 
 
 def run_suite(worlds: Sequence[VerdictWorld], inputs: SuiteInputs, out_dir: Path,
@@ -260,7 +261,7 @@ def read_results(out_dir: Path) -> list[WorldResult]:
         out.append(WorldResult(meta["name"], meta["family"], tuple(meta["segments"]),
                                meta["sensor"], int(meta["frames"]), int(meta["seed"]),
                                list(table["label"]), t_err, meta["failed"], meta["selection"],
-                               float(meta["wall_time_s"])))
+                               float(meta.get("wall_time_s", "nan"))))
     return out
 
 

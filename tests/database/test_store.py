@@ -146,10 +146,10 @@ def test_rte_kitti_equals_devkit_segments(world: World) -> None:
 def test_trials_table_and_summary(world: World) -> None:
     con = connect(world)
     cols = [r[0] for r in con.execute("DESCRIBE trials").fetchall()]
-    assert cols[:10] == ["study", "algorithm", "sequence", "trial", "status", "error", "objective",
-                         "wall_time_s", "seed", "params_json"]
+    assert cols[:9] == ["study", "algorithm", "sequence", "trial", "status", "error", "objective",
+                         "seed", "params_json"]
     assert cols[-2:] == ["mean_rte_pct", "rte_frames"]
-    assert set(cols[10:-2]) == {"p_max_corr_m", "p_kf_m", "p_resolution_m"}
+    assert set(cols[9:-2]) == {"p_max_corr_m", "p_kf_m", "p_resolution_m"}
     rows = con.execute("SELECT study, algorithm, sequence, trial, status, mean_rte_pct, "
                        "rte_frames, p_resolution_m FROM trials ORDER BY ALL").fetchall()
     assert len(rows) == 4 * 2 + 3 + 2 + 3 * 2  # trials, fixed, ndt trials, portfolio

@@ -105,11 +105,18 @@ def imports_of(name: str) -> tuple[frozenset[str], frozenset[str]]:
     return frozenset(project_modules(imported_names(path, package))), frozenset(schema_files)
 
 
+ENTRY_MODULES = ("pipeline.dispatch",)
+"""What every command's process runs under besides its own module: ``stages.cli.entry`` pins
+the CPU dispatch with it (its pins change the numbers), not the rest of the CLI (a new
+command re-runs no stage)."""
+
+
 def files_of_command(command_module: str) -> set[Path]:
-    """Every project file the command module imports, transitively, and the schema files."""
+    """Every project file the command module imports, transitively, the modules the
+    ``adaptune`` executable runs every command under (``ENTRY_MODULES``) and the schema files."""
     seen: set[str] = set()
     files: set[Path] = set()
-    todo = [command_module]
+    todo = [command_module, *ENTRY_MODULES]
     while todo:
         name = todo.pop()
         if name in seen:

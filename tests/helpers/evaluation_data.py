@@ -104,7 +104,7 @@ def write_study(out_dir: Path, algorithm: str, gts: dict[str, tuple[np.ndarray, 
             rows.append({"trial": trial, "status": "failed" if failed else "ok",
                          "error": "diverged" if failed else "",
                          "objective": 100.0 if failed else 1.0,
-                         "wall_time_s": 0.5, "seed": seed + trial,
+                         "seed": seed + trial,
                          "params_json": json.dumps(params),
                          **{f"p_{p}": v for p, v in params.items()}})
         if not joint:

@@ -11,6 +11,7 @@ from click.testing import CliRunner, Result
 from helpers.source_inputs import load_kitti
 
 from pipeline.sequence import SequenceReader
+from schemas import SCHEMA_VERSION
 from stages.cli import main
 
 
@@ -86,6 +87,6 @@ def test_info_json_and_table(kitti_root: Path, tmp_path: Path) -> None:
         "max": max(sizes),
     }
     assert info["sensor"] == "velodyne_hdl64e" and info["labels"] == []
-    assert info["schema_version"] == "1.0"
+    assert info["schema_version"] == SCHEMA_VERSION
     table = runner.invoke(main, ["info", str(out)])
     assert table.exit_code == 0 and "frames" in table.stdout and "velodyne_hdl64e" in table.stdout

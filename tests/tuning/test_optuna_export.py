@@ -80,6 +80,7 @@ def test_studies_match_the_trials_tables(folders: tuple[Path, Path], tmp_path: P
         assert study.direction == optuna.study.StudyDirection.MINIMIZE
         for row, trial in zip(kept, got, strict=True):
             assert trial.user_attrs["trial"] == row["trial"]
+            assert "wall_time_s" not in trial.user_attrs  # a trials table keeps no time
             assert trial.state.name == STATE[row["status"]]
             if row["status"] == "failed":
                 assert trial.value is None

@@ -93,11 +93,16 @@ def test_a_many_worker_study_ranks_its_first_trials_and_is_timing_free(
     assert trials(tmp_path / "pool") == serial
 
 
+WAIT_LIMIT_S = 4.0
+
+
 def test_waiting_at_a_rung_does_not_count_against_the_time_limit(
         sequences: list[Path], tmp_path: Path) -> None:
-    """A trial in a trial server (time limit 1 s) waits 1.6 s at its first rung for trial 0:
-    it is not killed, and then stops there or goes on."""
-    s = settings(iterations=2, time_limit_s=1.0, **HALVING)
+    """A trial in a trial server (time limit 4 s) waits 6 s at its first rung for trial 0:
+    it is not killed, and then stops there or goes on. (A wait longer than the limit and
+    shorter than twice it, after which a wait gives up; the trial's own work, 0.1 s idle, has
+    40 times the margin on a loaded machine.)"""
+    s = settings(iterations=2, time_limit_s=WAIT_LIMIT_S, **HALVING)
     (study,) = make_studies(sequences[:1], joint=False)
     board = RungBoard(str(tmp_path / "rungs"))
     job = make_job(study, study_adapter(s), 1, 7, {"bias": 0.9, "gain": 2.0, "window": 1},
@@ -106,13 +111,13 @@ def test_waiting_at_a_rung_does_not_count_against_the_time_limit(
     state = WorkerState()
     try:
         state.warm(job)
-        thread = later(1.6, lambda: board.post(0, [0.0, 0.0, 0.0], ended=True))
+        thread = later(1.5 * WAIT_LIMIT_S, lambda: board.post(0, [0.0, 0.0, 0.0], ended=True))
         result = state.run(job)
         thread.join()
     finally:
         state.close()
     assert result.status == "pruned", result.error  # behind trial 0's perfect values
-    assert result.wall_time_s > 1.6 and board.read(1).ended
+    assert result.wall_time_s > 1.5 * WAIT_LIMIT_S and board.read(1).ended
 
 
 def test_a_trial_with_no_value_at_a_rung_does_not_wait_there(
