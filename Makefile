@@ -8,12 +8,16 @@ STAMP := $(VENV)/.installed
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml constraints.txt
+# the Debian packages (.ci/install-system-deps: open3d's libusb, qemu-user for the emulated-CPU
+# test, ROS 1 for `adaptune node`) when one is missing, then Debian's ROS modules for the venv,
+# after its own (.ci/ros-python)
+$(STAMP): pyproject.toml constraints.txt .ci/install-system-deps .ci/ros-python
 	python3 -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -c constraints.txt -e '.[dev]'
-	@{ $(PY) -c "import open3d" && command -v qemu-x86_64; } >/dev/null 2>&1 || bash .ci/install-system-deps
+	@bash .ci/install-system-deps
 	@$(PY) -c "import open3d" >/dev/null
+	@$(PY) .ci/ros-python
 	touch $(STAMP)
 
 # constraints.txt: the exact versions of every package the venv holds (pip freeze), which

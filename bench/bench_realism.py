@@ -23,9 +23,9 @@ from common import Row, data_root, size, smoke
 
 def run() -> list[Row]:
     from pipeline.config import load_section
-    from pipeline.realism.compare import SLICES, TARGET_RATIO, run_realism
-    from pipeline.realism.report import write_realism
     from pipeline.sim.kitti_dataset import SimulateKittiSection
+    from studies.realism.compare import SLICES, TARGET_RATIO, run_realism
+    from studies.realism.report import write_realism
 
     root = data_root()
     params = Path(__file__).resolve().parents[1] / "params.yaml"

@@ -4,7 +4,7 @@
 Rows, per sensor of the in-distribution suites (HDL-32E, HDL-64E): milliseconds a frame to have
 a world's scans ready to run, for its first ADAPTUNE_BENCH_VERDICT_FRAMES frames (default 150)
 of the first world of that sensor in the id test suite. Ours: ``simulate_scans`` (the scans
-simulated straight into memory, ``pipeline.verdict.runs.load_world``); reference, in the same
+simulated straight into memory, ``studies.suites.runner.load_world``); reference, in the same
 run: ``simulate_sequence`` into an MCAP, then ``SequenceReader`` decoding it (what a suite world
 cost before, and what ``simulate-set`` and ``tuning-suite`` still do for worlds they keep).
 Both then warm the adapter and run the settings, which cost the same either way. Wall time,
@@ -29,8 +29,8 @@ if TYPE_CHECKING:
 
 def run() -> list[Row]:
     from pipeline.sim.dataset import SimulateSection
-    from pipeline.verdict.section import VerdictSection
-    from pipeline.verdict.worlds import sensor_template, suite_worlds
+    from studies.verdict.section import VerdictSection
+    from studies.verdict.worlds import sensor_template, suite_worlds
 
     frames = int(os.environ.get("ADAPTUNE_BENCH_VERDICT_FRAMES", size("150", "3")))
     worlds = suite_worlds(VerdictSection(), "id", sensor_template(SimulateSection(), 42))

@@ -88,9 +88,9 @@ def _frames(path: Path) -> int:
 
 def simulate_worlds(cache: Path) -> dict[str, tuple[Path, np.ndarray]]:
     """The dev worlds' MCAPs (simulated once into ``cache``) and their frame labels."""
-    from pipeline.generalization.suite import GeneralizeSection, world_of
     from pipeline.sequence import SequenceReader
     from pipeline.sim.simulate import simulate_sequence
+    from studies.generalization.suite import GeneralizeSection, world_of
 
     section = GeneralizeSection(suite="dev")
     out = {}

@@ -14,13 +14,13 @@ sub-trajectories per label (switching costs not paid: a proxy of the stitched ru
   by the class oracle's score (``least_log_ratio``: the mean log ratio to each world's median
   candidate): a single set chosen on 39 worlds instead of the joint study's 12 training sequences;
 - **class**: per label, the candidate best on the other worlds with that label (the class
-  oracle's choice, ``pipeline.verdict.headroom.class_choice``);
+  oracle's choice, ``studies.verdict.headroom.class_choice``);
 - **class and sensor**: the same from the other worlds of the world's sensor only;
 - **label oracle**: per label, the world's own best candidate on this replica (in-sample: an
   upper bound with the replica's luck in it).
 
 Printed: the geometric mean over worlds of each against SBS and class against constant, with
-the paired bootstrap 95 % interval over worlds (``pipeline.verdict.statistics.ratio_estimate``).
+the paired bootstrap 95 % interval over worlds (``studies.suites.statistics.ratio_estimate``).
 If class / constant holds 1, the headroom over SBS is a better fixed set, which more tuning data
 buys, not a choice per environment.
 """
@@ -75,7 +75,7 @@ def whole_world(world: dict) -> np.ndarray:
 
 def controls(worlds: list[dict], sbs: int) -> dict[str, np.ndarray]:
     """Per world, its RTE under each choice (module docstring): {choice: (W,)}."""
-    from pipeline.verdict.headroom import class_choice, least_log_ratio
+    from studies.verdict.headroom import class_choice, least_log_ratio
 
     whole = [whole_world(w) for w in worlds]
     out: dict[str, list[float]] = {"sbs": [], "constant": [], "class": [], "class_sensor": [],
@@ -94,7 +94,7 @@ def controls(worlds: list[dict], sbs: int) -> dict[str, np.ndarray]:
 
 
 def main() -> None:
-    from pipeline.verdict.statistics import ratio_estimate
+    from studies.suites.statistics import ratio_estimate
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--headroom", type=Path, default=Path("verdict/results/headroom"))

@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))  # common
 
 from common import TOY_FIXED_NDT, Row, size
 
-from pipeline.generalization.summary import TARGET_WORST, cv, pair_ratios
+from studies.generalization.summary import TARGET_WORST, cv, pair_ratios
 
 TOY_FIXED = {"ndt": TOY_FIXED_NDT}
 LENGTH_M = size(25.0, 2.0)
@@ -67,15 +67,15 @@ def runs_of(algorithm: str, params: dict[str, float], path: Path, gt: np.ndarray
 
 def chance_above(runs: list[list[float]]) -> float:
     """Fraction of ordered pairs of distinct runs of one setting with a ratio above the
-    worst-world target (``pipeline.generalization.summary.pair_ratios``)."""
+    worst-world target (``studies.generalization.summary.pair_ratios``)."""
     pairs = pair_ratios(runs)
     return float(np.mean(pairs > TARGET_WORST)) if len(pairs) else float("nan")
 
 
 def run() -> list[Row]:
-    from pipeline.generalization.suite import GeneralizeSection, world_of
     from pipeline.sequence import SequenceReader
     from pipeline.sim.simulate import simulate_sequence
+    from studies.generalization.suite import GeneralizeSection, world_of
 
     replicas = int(os.environ.get("NOISE_REPLICAS", size("4", "1")))
     section = GeneralizeSection(suite="dev")

@@ -139,9 +139,9 @@ def loso(E: np.ndarray, y: np.ndarray, seq: np.ndarray, label: np.ndarray,
 
 def _robust_best(y: np.ndarray, seq: np.ndarray, rows: np.ndarray) -> int:
     """The member best over the sequences of ``rows`` (F,) bool by the class oracle's score
-    (``pipeline.verdict.headroom.least_log_ratio`` of each sequence's mean y per member), which
+    (``studies.verdict.headroom.least_log_ratio`` of each sequence's mean y per member), which
     no single sequence's failures rule."""
-    from pipeline.verdict.headroom import least_log_ratio
+    from studies.verdict.headroom import least_log_ratio
 
     best = least_log_ratio([y[rows & (seq == s)].mean(axis=0) for s in np.unique(seq[rows])])
     if best is None:

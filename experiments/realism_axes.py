@@ -5,7 +5,7 @@ docs/results/realism.md, "Probes of GICP's miss on the highway 01").
 [--replicas 3]``: the real kitti_mini slice SEQ (frames 0-9, ``ADAPTUNE_TEST_DATA`` or
 ../shared/data) and its simulated replicas (the ``simulate_kitti`` section of ``--params``,
 world seed ``replica_seed(r, SEQ)`` for replica r, as the comparison seeds them), run by the
-algorithm at its defaults; per side the step errors E (``pipeline.realism.registration``) split into
+algorithm at its defaults; per side the step errors E (``studies.realism.registration``) split into
 the lidar frame's axes (x forward, y left, z up): the mean and the median |component| [cm],
 and the median ||t(E)|| [cm]. Exact ground truth on the simulated side (no ground-truth error
 added).
@@ -27,10 +27,10 @@ def main() -> None:
     from common import data_root
 
     from pipeline.config import load_section
-    from pipeline.realism.compare import SLICES
-    from pipeline.realism.registration import odometry_step_errors
-    from pipeline.realism.slices import real_slice, replica_seed, simulated_slice
     from pipeline.sim.kitti_dataset import SimulateKittiSection
+    from studies.realism.compare import SLICES
+    from studies.realism.registration import odometry_step_errors
+    from studies.realism.slices import real_slice, replica_seed, simulated_slice
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sequence", choices=[s for s, _, _ in SLICES])

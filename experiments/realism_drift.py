@@ -34,7 +34,7 @@ def drift_figures(T_gt: np.ndarray, T_est: np.ndarray) -> tuple[float, float, fl
     """(step, bias, drift) in % of the distance (module docstring) of an estimate T_est
     (N, 4, 4) against the ground truth T_gt (N, 4, 4), both T_world_lidar."""
     from pipeline.metrics.trajectory_error import rpe_error_poses
-    from pipeline.realism.registration import step_error_poses
+    from studies.realism.registration import step_error_poses
 
     steps_m = np.linalg.norm(np.diff(T_gt[:, :3, 3], axis=0), axis=1)
     t_m = step_error_poses(T_gt, T_est)[:, :3, 3]
@@ -49,10 +49,10 @@ def main() -> None:
     from common import data_root
 
     from pipeline.config import load_section
-    from pipeline.realism.compare import ALGORITHMS, SLICES
-    from pipeline.realism.registration import odometry_trajectory
-    from pipeline.realism.slices import real_slice, replica_seed, simulated_slice
     from pipeline.sim.kitti_dataset import SimulateKittiSection
+    from studies.realism.compare import ALGORITHMS, SLICES
+    from studies.realism.registration import odometry_trajectory
+    from studies.realism.slices import real_slice, replica_seed, simulated_slice
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--params", type=Path, default=Path("params.yaml"))

@@ -4,7 +4,7 @@ docs/results/selector-dev.md, "The portfolio on a tuning suite").
 Not a `make bench` module (an hour and more). The headroom split (experiments/headroom_controls.py)
 found the in-distribution headroom per environment *and sensor* among long mixed worlds, while
 the portfolio's 350-frame single-environment training sequences do not carry it over. This
-study tunes the portfolio on the tuning suite (``pipeline.verdict.tuning``: worlds drawn as the
+study tunes the portfolio on the tuning suite (``studies.verdict.tuning``: worlds drawn as the
 in-distribution suites draw theirs, from the frozen root ``verdict.tuning.seed_root``) and keys
 the choice on the sensor: a deployment knows its sensor, so each sensor gets its own model.
 
@@ -23,7 +23,7 @@ In a copy P of the coverage model's project (its params.yaml, results/fixed):
 
 The last steps fit per sensor and k the portfolio surrogate into P/dev/models/k<k>/<sensor>/
 and run the family's dev suite (baseline, fixed and every adaptive setting on every replica;
-``pipeline.verdict.runs.run_suite``): ``id``, each world with its sensor's model of every k;
+``studies.suites.runner.run_suite``): ``id``, each world with its sensor's model of every k;
 ``ood``, whose sensor has no model (so the suite's own rule runs the fixed set, the fixed
 column), with each trained sensor's model borrowed (``--lenders``). They write
 P/dev/tune_<family>/ and P/dev/tune_<family>.json and print one row per setting.
@@ -84,10 +84,10 @@ def dev(project: Path, family: str, n_worlds: int | None, ks: list[int],
     from verdict_dev import summary_row
 
     from pipeline.report.outputs import write_json
-    from pipeline.verdict.report import load_settings, suite_inputs
-    from pipeline.verdict.runs import AdaptiveSetting, run_suite
-    from pipeline.verdict.summary import suite_metrics
-    from pipeline.verdict.worlds import suite_worlds
+    from studies.verdict.report import load_settings, suite_inputs
+    from studies.suites.runner import AdaptiveSetting, run_suite
+    from studies.verdict.summary import suite_metrics
+    from studies.verdict.worlds import suite_worlds
 
     section, settings = load_settings(project / "params.yaml")
     draw = section.suites.draw(family)

@@ -6,7 +6,7 @@ suite's metrics (``verdict/metrics/<family>.json``) on the same worlds, e.g. the
 after whole trials (the reference) and after ``trials.fidelity: halving`` (the candidate).
 Prints, per ratio, both arms' geometric means with their 95 % intervals and whether the
 candidate is worse beyond the reference's interval; per setting, the paired ratio candidate /
-reference of the per-world medians with its interval (``pipeline.verdict.arms``).
+reference of the per-world medians with its interval (``studies.verdict.arms``).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def compare(reference: Path, candidate: Path, out: Path | None) -> None:
     """Print the comparison of the two suite metrics files (module docstring); write it as
     JSON to ``out`` when given."""
     from pipeline.report.outputs import write_json
-    from pipeline.verdict.arms import compare_arms
+    from studies.verdict.arms import compare_arms
 
     result = compare_arms(json.loads(reference.read_text()), json.loads(candidate.read_text()))
     print(f"{result['family']} {result['suite']} suite, {result['worlds']} worlds")

@@ -11,7 +11,7 @@ It reads the project's params.yaml (its ``verdict`` section with ``suite`` set t
 model/, results/fixed, results/adaptune.duckdb and data/pca; fits the surrogate variants a
 variant needs (``surrogate.k``, ``surrogate.novelty_fallback``) into ``<project>/dev/models/``;
 then runs every world of the family's dev suite once, baseline and fixed once and every
-variant's adaptive schedule on the same decoded world (``pipeline.verdict.runs.run_suite`` with
+variant's adaptive schedule on the same decoded world (``studies.suites.runner.run_suite`` with
 one adaptive setting per variant), each on every replica; writes ``<project>/dev/<family>/``
 (the worlds' runs) and ``<project>/dev/<family>.json`` (the suite's summary per variant), and
 prints one row per variant.
@@ -73,10 +73,10 @@ def variant_model(project: Path, name: str, changes: dict[str, Any]) -> Path:
 
 def main() -> None:
     from pipeline.report.outputs import write_json
-    from pipeline.verdict.report import load_settings, suite_inputs
-    from pipeline.verdict.runs import AdaptiveSetting, run_suite
-    from pipeline.verdict.summary import suite_metrics
-    from pipeline.verdict.worlds import suite_worlds
+    from studies.verdict.report import load_settings, suite_inputs
+    from studies.suites.runner import AdaptiveSetting, run_suite
+    from studies.verdict.summary import suite_metrics
+    from studies.verdict.worlds import suite_worlds
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--project", type=Path, default=Path("verdict"))
@@ -132,7 +132,7 @@ def summary_row(name: str, m: dict[str, Any]) -> str:
 
 
 def _g(s: dict[str, Any]) -> str:
-    from pipeline.report.markdown import number
+    from studies.docs.markdown import number
 
     return f"{number(s['geomean'], 2)} ({number(s['low'], 2)}-{number(s['high'], 2)})"
 

@@ -71,9 +71,11 @@ def run_adaptive(model_dir: str | Path, sequence_paths: Sequence[str | Path], ou
     odometry fails (an adaptive run has no penalty to fall back on).
     """
     from pipeline.executor import map_in_processes
+    from pipeline.odometry.registry import declared_space
     from pipeline.runtime import load_model
 
-    load_model(model_dir)  # a bad artifact fails here, once, before any worker starts
+    # a bad artifact fails here, once, before any worker starts
+    load_model(model_dir, declared_space=declared_space)
     jobs = [(Path(model_dir), Path(p), Path(out_dir) / Path(p).stem, adapter_options,
              time_limit_s, selection) for p in sequence_paths]
     return map_in_processes(_run_loaded, jobs, workers)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -78,11 +78,10 @@ def read_manifest(path: Path) -> dict[str, Any]:
     mpath = path / MANIFEST_NAME
     if not mpath.exists() and not mpath.is_symlink():
         raise ArtifactError(f"{path}: not a model artifact (no manifest.json)")
+    from pipeline.json_yaml import parse_json
+
     data = read_regular_file(mpath, MAX_MANIFEST_BYTES)
-    try:
-        manifest = json.loads(data.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
-        raise ArtifactError(f"{mpath}: damaged manifest ({exc})") from None
+    manifest = parse_json(data, f"{mpath}: damaged manifest", error=ArtifactError)
     if not isinstance(manifest, dict) or manifest.get("kind") != ARTIFACT_KIND:
         raise ArtifactError(f"{mpath}: not an adaptune surrogate manifest")
     if manifest.get(MANIFEST_HASH_KEY) != canonical_manifest_hash(manifest):
@@ -133,6 +132,27 @@ def read_arrays(path: Path, manifest: Mapping[str, Any],
         if spec.kind == "f" and not np.isfinite(arr).all():
             raise ArtifactError(f"{path / name}: holds values that are not finite")
     return arrays
+
+
+def check_algorithm_space(manifest: Mapping[str, Any],
+                          declared: Sequence[tuple[str, str]] | None) -> None:
+    """ValueError unless the manifest's ``parameter_space`` names the parameters its
+    ``algorithm`` tunes, in order and of their kinds (``declared``: the adapter's (name, kind)
+    pairs; None: an adapter whose options declare them, nothing to check). Its checksum only
+    says it was not altered: an algorithm relabelled and re-hashed was a schedule labelled gicp
+    with NDT's parameters."""
+    if declared is None:
+        return
+    space = manifest.get("parameter_space") or []
+    got = [(s.get("name"), s.get("kind")) for s in space]
+    if got != [tuple(d) for d in declared]:
+        raise ValueError(f"algorithm {manifest.get('algorithm')!r} tunes {_pairs(declared)}, "
+                         f"the parameter_space names {_pairs(got)}")
+
+
+def _pairs(specs: Sequence[tuple[Any, Any]]) -> str:
+    """``[name (kind), ...]`` as text."""
+    return "[" + ", ".join(f"{name} ({kind})" for name, kind in specs) + "]"
 
 
 def _number(value: Any, what: str, low: float | None = None, strict: bool = False) -> float:

@@ -14,10 +14,16 @@ from __future__ import annotations
 import importlib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
-import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    model_validator,
+)
 
 from pipeline.errors import ConfigError
 from pipeline.selection import SelectionSettings
@@ -30,6 +36,25 @@ class Section(BaseModel):
     numbers are finite (``.inf`` or ``.nan`` is no weight, period or threshold)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+MAX_ITERATIONS = 1_000_000
+"""The most trials a study may run (``trials.iterations``, ``fixed.iterations``,
+``--iterations``): a study's trial ids are listed up front, and a count of 22 digits grew
+memory for a minute without starting a trial."""
+
+
+def _iteration_count(value: Any) -> Any:
+    """``value`` when it is an integer in [1, MAX_ITERATIONS]; ValueError naming the rule
+    otherwise (a bool is no count, nor is 3.0: pydantic's lax mode took True as 1)."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_ITERATIONS:
+        raise ValueError(f"must be an integer in [1, {MAX_ITERATIONS}] (MAX_ITERATIONS), not a "
+                         "bool or a float")
+    return value
+
+
+IterationCount = Annotated[int, BeforeValidator(_iteration_count)]
+"""A number of trials: an int in [1, MAX_ITERATIONS], checked before any coercion."""
 
 
 class BaseSection(Section):
@@ -98,8 +123,8 @@ SECTIONS: dict[str, str] = {
     "surrogate": "pipeline.surrogates.section:SurrogateSection",
     "select": "pipeline.config:SelectSection",
     "evaluate": "pipeline.evaluate.section:EvaluateSection",
-    "generalize": "pipeline.generalization.suite:GeneralizeSection",
-    "verdict": "pipeline.verdict.section:VerdictSection",
+    "generalize": "studies.generalization.suite:GeneralizeSection",
+    "verdict": "studies.verdict.section:VerdictSection",
 }
 """Every params.yaml section: name -> ``module:Model``, in the order of params.yaml."""
 
@@ -162,14 +187,11 @@ def read_params(path: str | Path | None) -> dict[str, Any]:
     if path is None:
         return {}
     from pipeline.io_utils import read_input_text
+    from pipeline.json_yaml import parse_yaml
 
     path = Path(path)
     text = read_input_text(path, "params file", error=ConfigError, strict=True)
-    try:
-        loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: 10x faster
-        data = yaml.load(text, Loader=loader)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML ({exc})") from None
+    data = parse_yaml(text, str(path), error=ConfigError)
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: params file must be a mapping of sections")
     return data

@@ -65,7 +65,8 @@ def export_trajectory(traj_path: str | Path, fmt: str, out: str | Path, *,
     seq = _sequence_of(traj_path, sequence) if needs_sequence else None
     refuse_input_as_output(out, [traj_path, seq, calib])
     if anchor == "ground-truth":
-        T = anchor_at(T, _first_ground_truth(seq, traj.frames, traj.stamps_ns))  # type: ignore[arg-type]
+        T = anchor_at(T, _first_ground_truth(seq, traj.frames, traj.stamps_ns,  # type: ignore[arg-type]
+                                            traj_path))
     if frame == "kitti-camera":
         T = lidar_to_camera(T, calibration(seq, calib))
     _write(out, fmt, traj.stamps_ns, T)
@@ -129,18 +130,17 @@ def _sequence_of(traj_path: str | Path, sequence: str | Path | None) -> Path:
 
 
 def _first_ground_truth(sequence: Path, frames: NDArray[np.int32],
-                        stamps_ns: NDArray[np.int64]) -> F64:
-    """The ground-truth pose of the trajectory's first frame; InputError when they disagree."""
+                        stamps_ns: NDArray[np.int64], what: str | Path) -> F64:
+    """The ground-truth pose of the trajectory's (``what``) first frame; InputError unless
+    each of its frames is one of the sequence (``check_frames_of``)."""
     from pipeline.sequence import SequenceReader
+    from pipeline.trajectory import check_frames_of
 
     with SequenceReader(sequence) as reader:
         gt = reader.require_ground_truth("to anchor at; use --anchor identity")
         seq_stamps = np.asarray(reader.stamps_ns, dtype=np.int64)
-    k = int(frames[0])
-    if not 0 <= k < len(gt) or seq_stamps[k] != stamps_ns[0]:
-        raise InputError(f"{sequence}: the trajectory's first frame {k} (stamp {stamps_ns[0]} ns) "
-                         f"is not a frame of this sequence")
-    return gt[k]
+    check_frames_of(frames, stamps_ns, seq_stamps, what, sequence)
+    return gt[int(frames[0])]
 
 
 def _check_choices(fmt: str, anchor: str, frame: str) -> None:

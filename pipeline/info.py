@@ -11,7 +11,7 @@ import numpy as np
 from pipeline.errors import InputError
 from pipeline.geometry import path_distances
 from pipeline.ros2_cdr import decode_pointcloud2
-from pipeline.sequence import POINTS_TOPIC, SequenceReader, mcap_errors
+from pipeline.sequence import POINTS_TOPIC, SequenceReader
 
 
 @dataclass(frozen=True)
@@ -42,7 +42,7 @@ def summarize_sequence(path: str | Path) -> SequenceSummary:
     path = Path(path)
     with SequenceReader(path) as reader:
         gt = reader.ground_truth()
-        counts = _points_per_scan(path, len(reader))
+        counts = _points_per_scan(reader)
         stamps = reader.stamps_ns
         info = reader.info
         return SequenceSummary(
@@ -65,16 +65,14 @@ def summarize_sequence(path: str | Path) -> SequenceSummary:
         )
 
 
-def _points_per_scan(path: Path, frames: int) -> np.ndarray:
-    """(frames,) point counts from the PointCloud2 headers (width x height)."""
-    from mcap.reader import make_reader
-
+def _points_per_scan(reader: SequenceReader) -> np.ndarray:
+    """(frames,) point counts from the PointCloud2 headers (width x height), read through
+    every chunk of the file: `info` checks every chunk's CRC (``iter_every_chunk``)."""
     counts: list[int] = []
-    with open(path, "rb") as fh, mcap_errors(path):
-        for _, _, msg in make_reader(fh, validate_crcs=True).iter_messages(
-                topics=[POINTS_TOPIC]):
-            m = decode_pointcloud2(msg.data, f"{path} frame {len(counts)}")
+    for topic, msg in reader.iter_every_chunk():
+        if topic == POINTS_TOPIC:
+            m = decode_pointcloud2(msg.data, f"{reader.path} frame {len(counts)}")
             counts.append(m.width * m.height)
-    if len(counts) != frames or not counts:
-        raise InputError(f"{path}: {len(counts)} point clouds for {frames} frames")
+    if len(counts) != len(reader) or not counts:
+        raise InputError(f"{reader.path}: {len(counts)} point clouds for {len(reader)} frames")
     return np.array(counts, np.int64)

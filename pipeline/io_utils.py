@@ -4,6 +4,12 @@ Every output adaptune writes goes through ``atomic_path`` (a file) or ``atomic_d
 on any error the previous output stays byte-identical and no temporary remains; a killed
 writer's temporary (``.<name>.<pid>.<hex>.tmp``) is removed by the next write of the same
 output; files and folders get the umask's permissions.
+
+An output that is no regular file is written through, never replaced (docs/design.md,
+"Outputs"): a character device, FIFO or socket (named directly or through a symlink) gets the
+finished bytes, in order, once the writer succeeded; ``-`` (``STDOUT``) is standard output; a
+symlink keeps pointing where it did and its target is replaced. Names are bounded
+(``check_path_length``): a name past the file system's 255 bytes is one error naming the limit.
 """
 
 from __future__ import annotations
@@ -17,6 +23,9 @@ import queue
 import re
 import secrets
 import shutil
+import stat
+import sys
+import tempfile
 import threading
 from collections.abc import Generator, Iterable, Iterator
 from pathlib import Path
@@ -31,6 +40,51 @@ log = logging.getLogger(__name__)
 TEMP_SUFFIX = ".tmp"
 OLD_SUFFIX = ".old"  # atomic_dir: the previous folder, set aside during the swap
 _WRITE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM)
+STDOUT = "-"
+"""The output path that is standard output (``--out -``): written through, as a FIFO is."""
+SPOOL_NAME = "adaptune-out"
+"""What an output written through is spooled in first: ``.adaptune-out.<pid>.<hex>.tmp`` in
+the system's temporary folder (a device's folder, /dev, takes no files of ours)."""
+NAME_MAX = 255
+"""The longest name of a file or folder [bytes] (Linux file systems' NAME_MAX)."""
+PATH_MAX = 4095
+"""The longest path [bytes] the kernel takes (PATH_MAX, less its terminating NUL)."""
+TEMP_NAME_EXTRA = 32
+"""What a temporary's name adds to its output's: ``.``, ``.<pid>.<8 hex>.tmp`` and a
+library's own suffix (DuckDB's ``.wal``), with room to spare."""
+MAX_OUTPUT_NAME = NAME_MAX - TEMP_NAME_EXTRA
+"""The longest name of an output file or folder [bytes]: 223, so that its temporary's fits."""
+
+
+def check_path_length(path: str | os.PathLike[str], what: str, *, last_max: int = NAME_MAX,
+                      error: type[AdaptuneError] = ConfigError) -> Path:
+    """``path`` when the kernel can take it: at most ``PATH_MAX`` bytes, every name in it at
+    most ``NAME_MAX`` (its last ``last_max``: ``MAX_OUTPUT_NAME`` for an output). ``error``
+    naming ``what``, the name's length and the limit otherwise (the OSError "File name too
+    long" of a stat would be a traceback)."""
+    p = Path(path)
+    size = len(os.fsencode(p))
+    if size > PATH_MAX:
+        raise error(f"{_shortened(p)}: the {what} is {size} bytes long, more than the "
+                    f"{PATH_MAX} a path may have")
+    parts = p.parts
+    for k, part in enumerate(parts):
+        limit = last_max if k == len(parts) - 1 else NAME_MAX
+        size = len(os.fsencode(part))
+        if size > limit:
+            rule = (f"the {NAME_MAX} of a file name" if limit == NAME_MAX else
+                    f"the {limit} an output's name may have (a file name's {NAME_MAX}, less "
+                    f"{NAME_MAX - limit} for its temporary)")
+            raise error(f"{_shortened(p)}: the {what} has a name of {size} bytes "
+                        f"({_shortened(Path(part))}), more than {rule}")
+    return p
+
+
+def _shortened(path: Path, keep: int = 48) -> str:
+    """``path`` as text, its middle elided past ``keep`` characters (a name of 300 bytes is
+    named, not printed whole)."""
+    text = str(path)
+    return text if len(text) <= keep else f"{text[:keep // 2]}...{text[-keep // 2:]}"
 
 
 def output_path(final: str | os.PathLike[str]) -> Path:
@@ -40,7 +94,7 @@ def output_path(final: str | os.PathLike[str]) -> Path:
     """
     if not os.fspath(final).strip():
         raise OutputError("the output path is empty")
-    path = Path(final)
+    path = check_path_length(final, "output path", last_max=MAX_OUTPUT_NAME, error=OutputError)
     if path.is_dir():
         raise OutputError(f"{path}: is a folder; the output must be a file path")
     _make_parent(path)
@@ -53,7 +107,7 @@ def output_folder(folder: str | os.PathLike[str], *, of: Path | None = None) -> 
     permission); with ``of`` (a file to write there) the error names that file."""
     if not os.fspath(folder).strip():
         raise OutputError("the output folder path is empty")
-    path = Path(folder)
+    path = check_path_length(folder, "output folder", error=OutputError)
     what = f"{of}: cannot create its folder" if of is not None else (
         f"{path}: cannot create the output folder")
     try:
@@ -61,7 +115,8 @@ def output_folder(folder: str | os.PathLike[str], *, of: Path | None = None) -> 
     except (FileExistsError, NotADirectoryError):
         blocker = next((p for p in [path, *path.parents] if p.exists() and not p.is_dir()),
                        path)
-        raise OutputError(f"{what}, {blocker} is a file") from None
+        kind = _file_kind(blocker.stat().st_mode) if blocker.exists() else "a file"
+        raise OutputError(f"{what}, {blocker} is {kind}") from None
     except OSError as exc:
         raise OutputError(f"{what} ({exc.strerror})") from None
     return path
@@ -83,7 +138,7 @@ def open_input(path: str | os.PathLike[str], kind: str, *, hint: str = "",
                follow_links: bool = True) -> Iterator[tuple[Any, int]]:
     """``(binary file, size)`` of the regular file ``path`` (a ``kind``), open for the block:
     the checks of ``read_input`` done before any byte is read."""
-    p = Path(path)
+    p = check_path_length(path, kind, error=error)
     try:
         st = os.stat(p) if follow_links else os.lstat(p)
     except (FileNotFoundError, NotADirectoryError):
@@ -142,8 +197,6 @@ def read_input_text(path: str | os.PathLike[str], kind: str, *,
 
 def _check_regular(path: Path, st: os.stat_result, kind: str, limit: int,
                    error: type[AdaptuneError]) -> None:
-    import stat
-
     if not stat.S_ISREG(st.st_mode):
         raise error(f"{path}: is not a regular file (a {kind} must be one; this is "
                     f"{_file_kind(st.st_mode)})")
@@ -153,11 +206,10 @@ def _check_regular(path: Path, st: os.stat_result, kind: str, limit: int,
 
 
 def _file_kind(mode: int) -> str:
-    import stat
-
     for test, name in ((stat.S_ISLNK, "a symlink"), (stat.S_ISFIFO, "a FIFO"),
                        (stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a device"),
-                       (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket")):
+                       (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket"),
+                       (stat.S_ISREG, "a file")):
         if test(mode):
             return name
     return "not a file"
@@ -175,17 +227,24 @@ def input_file(path: str | os.PathLike[str], kind: str, hint: str = "") -> Path:
     """``path`` when it is a regular file (links followed); InputError naming it and ``kind``
     (with ``hint`` when it is missing) otherwise: a folder, FIFO or device is refused before a
     reader would block on it or misread it."""
-    p = Path(path)
-    if p.is_file():
-        return p
-    if p.exists():
+    p = check_path_length(path, kind, error=InputError)
+    try:
+        st = p.stat()
+    except (FileNotFoundError, NotADirectoryError):
+        raise InputError(f"{p}: no such {kind}{hint}") from None
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read the {kind} ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
         raise InputError(f"{p}: is not a regular file (a {kind} must be one; this is "
-                         f"{_file_kind(p.stat().st_mode)})")
-    raise InputError(f"{p}: no such {kind}{hint}")
+                         f"{_file_kind(st.st_mode)})")
+    return p
 
 
-PLAIN_NAME_RULE = ("a plain file name: not empty, no '/', '\\' or control characters, "
-                   "not starting with '.'")
+PLAIN_NAME_MAX = 200
+"""The longest name [bytes] that becomes files under an output folder: room for what is added
+to it (``.mcap``, ``sequence=``, a temporary's 32) within a file name's 255."""
+PLAIN_NAME_RULE = (f"a plain file name: not empty, at most {PLAIN_NAME_MAX} bytes, no '/', "
+                   "'\\' or control characters, not starting with '.'")
 """What a name that becomes a file in an output folder must be (``check_plain_name``)."""
 
 
@@ -195,6 +254,7 @@ def check_plain_name(name: object, what: str, error: type[Exception] = ConfigErr
     entries); ``error`` naming ``what`` and the rule otherwise (a name like ``../../x`` or
     ``a/b`` would write outside the folder, or record such a path)."""
     if (not isinstance(name, str) or not name or name.startswith(".")
+            or len(name.encode("utf-8", "surrogatepass")) > PLAIN_NAME_MAX
             or any(c in name for c in "/\\") or any(ord(c) < 32 or ord(c) == 127 for c in name)):
         raise error(f"{what} must be {PLAIN_NAME_RULE}, got {name!r}")
     return name
@@ -202,14 +262,21 @@ def check_plain_name(name: object, what: str, error: type[Exception] = ConfigErr
 
 def refuse_input_as_output(out: str | os.PathLike[str],
                            inputs: Iterable[str | os.PathLike[str] | None]) -> None:
-    """OutputError when ``out`` is one of ``inputs`` (the same file, by any path to it)."""
-    out_path = Path(out)
+    """OutputError when ``out`` is one of ``inputs`` (the same file, by any path to it), or
+    a name too long to write (``check_path_length``). Standard output (``-``) is no input."""
+    if os.fspath(out) == STDOUT:
+        return
+    out_path = check_path_length(out, "output path", last_max=MAX_OUTPUT_NAME,
+                                 error=OutputError)
     for item in inputs:
         if item is None:
             continue
         inp = Path(item)
-        same = (os.path.samefile(out_path, inp) if out_path.exists() and inp.exists()
-                else out_path.resolve() == inp.resolve())
+        try:
+            same = (os.path.samefile(out_path, inp) if out_path.exists() and inp.exists()
+                    else out_path.resolve() == inp.resolve())
+        except OSError:  # an input that cannot be looked at is no file written here
+            continue
         if same:
             raise OutputError(f"{out_path}: the output is also an input ({inp}); "
                               "write to another path")
@@ -286,22 +353,148 @@ def atomic_path(final: str | os.PathLike[str]) -> Iterator[Path]:
     The file is created with the umask's permissions (as ``open`` would). Temporaries that a
     killed writer of ``final`` left are removed first. OSErrors of the output (no permission,
     a folder or a file in the way, disk full) become one OutputError naming ``final``.
+
+    ``final`` a symlink: its target is replaced, the link stays. ``final`` a character device,
+    FIFO or socket (through symlinks too), or ``STDOUT``: the finished file's bytes are written
+    through to it, in order, and it is never replaced (``written_through``); a block device is
+    refused.
     """
+    if os.fspath(final) == STDOUT:
+        with written_through(STDOUT) as tmp:
+            yield tmp
+        return
     final = output_path(final)
-    remove_stale_temps(final)
-    tmp = _temp_beside(final)
+    if through_kind(final) is not None:  # stat follows every link (/dev/stdout's too)
+        with written_through(final) as tmp:
+            yield tmp
+        return
+    target = link_target(final)
+    remove_stale_temps(target)
+    tmp = _temp_beside(target)
     try:
         with _as_output_error(final, tmp):
             os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))  # umask applies
         with _as_output_error(final, tmp):
             yield tmp
         with _as_output_error(final, tmp):
-            os.replace(tmp, final)
+            os.replace(tmp, target)
     except BaseException:
-        for p in [tmp, *tmp.parent.glob(glob.escape(tmp.name) + ".*")]:  # + DuckDB's .wal
-            with contextlib.suppress(OSError):
-                p.unlink()
+        _remove_temp(tmp)
         raise
+
+
+def _remove_temp(tmp: Path) -> None:
+    """Remove the temporary file ``tmp`` and what a library put beside it (DuckDB's .wal)."""
+    for p in [tmp, *tmp.parent.glob(glob.escape(tmp.name) + ".*")]:
+        with contextlib.suppress(OSError):
+            p.unlink()
+
+
+def link_target(path: Path) -> Path:
+    """What the symlink ``path`` points to, its own links resolved (its folder made when
+    missing, as an output's is); ``path`` itself when it is no symlink. An output written
+    there replaces the target and leaves the link as it is."""
+    if not path.is_symlink():
+        return path
+    target = Path(os.path.realpath(path))
+    _make_parent(target)
+    return target
+
+
+def through_kind(path: Path) -> str | None:
+    """"a FIFO", "a device" or "a socket" when ``path`` (links followed) is an output to write
+    through rather than replace; None for a regular file, a folder or nothing. OutputError for
+    a block device (a disk is no output of adaptune's)."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    if stat.S_ISBLK(mode):
+        raise OutputError(f"{path}: is a block device; adaptune writes no disk (give a file "
+                          "path, a FIFO, a character device or -)")
+    if stat.S_ISCHR(mode) or stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode):
+        return _file_kind(mode)
+    return None
+
+
+COPY_CHUNK = 1 << 20
+"""The bytes an output written through is copied in at a time."""
+
+
+@contextlib.contextmanager
+def written_through(target: Path | str) -> Iterator[Path]:
+    """Yield a temporary file (``SPOOL_NAME``, private to the user); once the block succeeded,
+    write its bytes to ``target`` (a character device, FIFO or socket; ``STDOUT``), in order,
+    then remove it. On an exception nothing is written to ``target``. A FIFO with no reader is
+    waited on, as a shell's ``>`` waits (said once on the log). OutputError naming ``target``
+    when it takes no more (a closed pipe, a full device, a socket nobody listens on)."""
+    name = "stdout" if target == STDOUT else str(target)
+    spool = Path(tempfile.gettempdir()) / SPOOL_NAME
+    remove_stale_temps(spool)
+    tmp = _temp_beside(spool)
+    try:
+        with _as_output_error(Path(name), tmp):
+            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+            yield tmp
+        try:
+            with open(tmp, "rb") as src:
+                _copy_through(src, target)
+        except OSError as exc:
+            raise OutputError(f"{name}: cannot write the output "
+                              f"({exc.strerror or exc})") from None
+    finally:
+        _remove_temp(tmp)
+
+
+def _copy_through(src: Any, target: Path | str) -> None:
+    """Every byte of the open file ``src`` to ``target`` (``written_through``)."""
+    if target == STDOUT:
+        _copy_to_stdout(src)
+        return
+    if stat.S_ISSOCK(os.stat(target).st_mode):
+        import socket
+
+        with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+            sock.connect(os.fspath(target))
+            sock.sendfile(src)
+        return
+    flags = os.O_WRONLY | os.O_NOCTTY
+    try:
+        fd = os.open(target, flags | os.O_NONBLOCK)  # a FIFO with no reader: ENXIO, at once
+        os.set_blocking(fd, True)
+    except OSError as exc:
+        if exc.errno != errno.ENXIO:
+            raise
+        log.warning("%s: a FIFO no process reads yet; waiting for one", target)
+        fd = os.open(target, flags)
+    try:
+        _copy_to_fd(src, fd)
+    finally:
+        os.close(fd)
+
+
+def _copy_to_fd(src: Any, fd: int) -> None:
+    while chunk := src.read(COPY_CHUNK):
+        view = memoryview(chunk)
+        while view:
+            view = view[os.write(fd, view):]
+
+
+def _copy_to_stdout(src: Any) -> None:
+    """``src`` to standard output: straight to its file descriptor (nothing is left in
+    Python's buffer when the reader is gone), or to ``sys.stdout.buffer`` when it has none
+    (a test runner's)."""
+    import io
+
+    sys.stdout.flush()
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, ValueError, io.UnsupportedOperation):
+        while chunk := src.read(COPY_CHUNK):
+            sys.stdout.buffer.write(chunk)
+        sys.stdout.buffer.flush()
+        return
+    _copy_to_fd(src, fd)
 
 
 @contextlib.contextmanager
@@ -312,12 +505,15 @@ def atomic_dir(final: str | os.PathLike[str]) -> Iterator[Path]:
     swap is two renames (the old folder aside, the new one in; the old one back if the second
     fails), then the old one is deleted. Permissions and stale temporaries as ``atomic_path``.
     """
-    final = Path(final)
     if not os.fspath(final).strip():
         raise OutputError("the output path is empty")
+    final = check_path_length(final, "output folder", last_max=MAX_OUTPUT_NAME,
+                              error=OutputError)
     if final.exists() and not final.is_dir():
-        raise OutputError(f"{final}: is a file; the output must be a folder")
+        raise OutputError(f"{final}: is {_file_kind(final.stat().st_mode)}; the output must be "
+                          "a folder")
     _make_parent(final)
+    final = link_target(final)  # a symlink to a folder: the folder is replaced, the link stays
     remove_stale_temps(final)
     tmp = _temp_beside(final)
     try:

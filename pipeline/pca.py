@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError, InputError
+from pipeline.json_yaml import parse_json
 
 PCA_FILES = ("mean.npy", "components.npy", "scale.npy")
 
@@ -79,7 +80,8 @@ class Pca:
 
         folder = Path(folder)
         try:
-            meta = json.loads(read_input_text(folder / "pca.json", "PCA file", strict=True))
+            meta = parse_json(read_input_text(folder / "pca.json", "PCA file", strict=True),
+                              str(folder / "pca.json"))
             arr = {}
             for name in PCA_FILES:
                 data = read_regular_file(folder / name, MAX_ARRAY_BYTES)

@@ -25,7 +25,8 @@ POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 PARAMETER_EVENT = "rcl_interfaces/msg/ParameterEvent"
-MESSAGE_TYPES = (POINTCLOUD2, POSE_STAMPED, TF_MESSAGE, PARAMETER_EVENT)
+PATH = "nav_msgs/msg/Path"
+MESSAGE_TYPES = (POINTCLOUD2, POSE_STAMPED, TF_MESSAGE, PARAMETER_EVENT, PATH)
 
 # sensor_msgs/PointField datatype -> numpy dtype
 POINTFIELD_DTYPES: dict[int, np.dtype] = {
@@ -259,6 +260,15 @@ def encode_pose_stamped(
     """CDR bytes of a geometry_msgs/msg/PoseStamped from a (4, 4) pose."""
     return encode(POSE_STAMPED, {"header": header(stamp_ns, frame_id),
                                  "pose": pose_dict(T_world_x)})
+
+
+def encode_path(stamps_ns: NDArray[np.int64], T_world_x: NDArray[np.float64],
+                frame_id: str = "world") -> bytes:
+    """CDR bytes of a nav_msgs/msg/Path of the poses ``T_world_x`` (N, 4, 4) at ``stamps_ns``
+    (N,) [ns] (N >= 1), stamped with the last."""
+    poses = [{"header": header(int(t), frame_id), "pose": pose_dict(T)}
+             for t, T in zip(stamps_ns, T_world_x, strict=True)]
+    return encode(PATH, {"header": header(int(stamps_ns[-1]), frame_id), "poses": poses})
 
 
 def decode_pose_stamped(

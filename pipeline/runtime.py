@@ -57,6 +57,7 @@ from __future__ import annotations
 import collections
 import functools
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -66,6 +67,7 @@ from numpy.typing import NDArray
 
 from pipeline.artifact import (
     COMMON_FILES,
+    check_algorithm_space,
     read_arrays,
     read_manifest,
     validate_arrays,
@@ -175,10 +177,16 @@ class Model:
         return self.cube.params(self.from_unit(u)[0])
 
 
-def load_model(path: str | Path, expected_algorithm: str | None = None) -> Model:
+def load_model(path: str | Path, expected_algorithm: str | None = None,
+               declared_space: Callable[[str], Sequence[tuple[str, str]] | None] | None = None
+               ) -> Model:
     """Load and verify the artifact ``path``: regular files inside the folder only, every
     checksum, the schema version, the algorithm, then every value and shape
-    (``pipeline.artifact``). ArtifactError with one line otherwise. Never unpickles anything."""
+    (``pipeline.artifact``). ArtifactError with one line otherwise. Never unpickles anything.
+
+    ``declared_space``: algorithm name -> the (name, kind) pairs its adapter tunes
+    (``pipeline.odometry.registry.declared_space``, which the pipeline's commands pass; the
+    deployed runtime carries no adapters): the manifest's parameter space must match them."""
     from pipeline.surrogates import surrogate_class
 
     path = Path(path)
@@ -198,6 +206,8 @@ def load_model(path: str | Path, expected_algorithm: str | None = None) -> Model
     arrays = read_arrays(path, manifest, {**COMMON_FILES, **kind.files})
     try:
         validate_values(manifest)
+        if declared_space is not None:
+            check_algorithm_space(manifest, declared_space(str(algorithm)))
         descriptor = descriptor_from_json(manifest["descriptor"])
         validate_arrays(arrays, len(manifest["parameter_space"]), descriptor.size)
         surrogate = kind.from_artifact(model_json, arrays)

@@ -165,10 +165,12 @@ def finite_points(points: NDArray[np.float32], what: str) -> NDArray[np.bool_]:
 
 class SequenceWriter:
     """Write a sequence MCAP atomically: use as a context manager, ``add`` frames in order.
-    ``compression``: of its chunks (``Compression``); readers take either."""
+    ``compression``: of its chunks (``Compression``); readers take either. ``points`` False
+    leaves the scans out (``add`` checks them and writes the rest of the frame): a record of a
+    run, such as ``adaptune live``'s, not a sequence the reader gives scans of."""
 
     def __init__(self, path: str | Path, info: SequenceInfo, chunk_size: int = 4 << 20,
-                 compression: Compression = "zstd") -> None:
+                 compression: Compression = "zstd", points: bool = True) -> None:
         check_plain_name(info.name, "the sequence name")  # later stages name files after it
         if compression not in COMPRESSIONS:
             raise ConfigError(f"compression must be one of {', '.join(COMPRESSIONS)}, got "
@@ -177,6 +179,7 @@ class SequenceWriter:
         self.info = info
         self.chunk_size = chunk_size
         self.compression = compression
+        self.points = points
         self.stamps_ns: list[int] = []
         self.dropped_points = 0
         self._poses: dict[str, list[tuple[int, bytes]]] = {}
@@ -197,8 +200,9 @@ class SequenceWriter:
                 t: self._w.register_schema(t, "ros2msg", schema_text(t).encode())
                 for t in (POINTCLOUD2, POSE_STAMPED, TF_MESSAGE)
             }
-            self._points_ch = self._w.register_channel(POINTS_TOPIC, "cdr",
-                                                       self._schemas[POINTCLOUD2])
+            if self.points:
+                self._points_ch = self._w.register_channel(POINTS_TOPIC, "cdr",
+                                                           self._schemas[POINTCLOUD2])
             self._outputs = stack.pop_all()
         return self
 
@@ -232,9 +236,10 @@ class SequenceWriter:
             pts = pts[ok]
             time_s = None if time_s is None else time_s[ok]
         self.dropped_points += dropped
-        self._w.add_message(self._points_ch, log_time=stamp_ns, publish_time=stamp_ns,
-                            data=encode_pointcloud2(stamp_ns, pts, time_s=time_s),
-                            sequence=frame)
+        if self.points:
+            self._w.add_message(self._points_ch, log_time=stamp_ns, publish_time=stamp_ns,
+                                data=encode_pointcloud2(stamp_ns, pts, time_s=time_s),
+                                sequence=frame)
         if T_world_lidar is not None:
             T = np.asarray(T_world_lidar, dtype=np.float64)
             if T.shape != (4, 4) or not np.isfinite(T).all():
@@ -478,6 +483,18 @@ class SequenceReader:
             yield self._scan(frame, msg.log_time, msg.data, gt)
         if count != len(self):
             raise InputError(f"{self.path}: {count} point clouds for {len(self)} frames")
+
+    def iter_every_chunk(self) -> Iterator[tuple[str, Any]]:
+        """(topic, message) of every message of every chunk of the file, each chunk's CRC
+        checked; InputError naming the file on a mismatch.
+
+        The other methods check the CRCs of the chunks they read and no others: the ground
+        truth's (``export``, ``metric``) lives in chunks of its own, apart from the scans'.
+        ``adaptune info`` reads the file through this (docs/design.md, "Inputs": which command
+        checks which chunks, and why: bench/bench_crc.py)."""
+        with mcap_errors(self.path):
+            for _, channel, msg in self._reader.iter_messages():
+                yield channel.topic, msg
 
     def iter_topic_json(self, topic: str) -> Iterator[tuple[int, dict[str, Any]]]:
         """(stamp_ns, message) of a JSON channel such as ``/adaptune/params``."""

@@ -106,10 +106,9 @@ def read_index(folder: str | Path, missing_ok: bool = False) -> SequenceIndex:
         return SequenceIndex(folder)
     text = read_input_text(path, "sequence index", strict=True,
                            hint=" (written by the simulate or ingest stage)")
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON ({exc})") from None
+    from pipeline.json_yaml import parse_json
+
+    data = parse_json(text, str(path))
     if not isinstance(data, dict) or not all(
         isinstance(names, list) and all(isinstance(n, str) and n for n in names)
         for names in data.values()

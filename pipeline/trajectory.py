@@ -59,6 +59,27 @@ class Trajectory:
         return cls(table.column("frame").to_numpy(), table.column("stamp_ns").to_numpy(), T)
 
 
+def check_frames_of(frames: NDArray[np.integer], stamps_ns: NDArray[np.int64],
+                    sequence_stamps_ns: NDArray[np.int64], what: str | Path,
+                    sequence: str | Path) -> None:
+    """InputError unless every frame number of a trajectory (``what``) is a frame of
+    ``sequence`` (whose frame stamps are ``sequence_stamps_ns``) at the trajectory's own stamp:
+    the one check `export` (its anchor) and `metric` (its pairs) make before they use a
+    trajectory against a sequence (a run of another sequence, or renumbered frames, is not
+    scored or anchored)."""
+    frames = np.asarray(frames, dtype=np.int64)
+    n = len(sequence_stamps_ns)
+    inside = (frames >= 0) & (frames < n)
+    bad = ~inside
+    bad[inside] = sequence_stamps_ns[frames[inside]] != np.asarray(stamps_ns)[inside]
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise InputError(f"{sequence}: the trajectory {what}'s frame {int(frames[k])} (stamp "
+                         f"{int(stamps_ns[k])} ns) is not a frame of this sequence ({n} frames, "
+                         f"stamps {int(sequence_stamps_ns[0]) if n else '-'}.."
+                         f"{int(sequence_stamps_ns[-1]) if n else '-'} ns)")
+
+
 def write_trajectory(
     path: str | Path, traj: Trajectory, metadata: dict[str, str] | None = None
 ) -> None:

@@ -19,27 +19,22 @@ INTERRUPTED = 130
 """The exit code of a command ended by Ctrl-C, SIGTERM or SIGHUP (128 + SIGINT, as a shell
 reports Ctrl-C); every error is exit code 1."""
 
-COMMANDS: dict[str, tuple[str, str]] = {
-    # name: (module, short help)
+Registry = dict[str, tuple[str, str]]
+"""Command name -> (``module:attribute`` of its click command, short help)."""
+
+COMMANDS: Registry = {
+    # what a user of the method runs: the only commands ``adaptune --help`` lists (<= 15)
+    "init": ("stages.init:init",
+             "Start a project: params.yaml and dvc.yaml for a list of recordings."),
     "ingest": (
         "stages.ingest:ingest",
         "Convert KITTI, ROS bags, MCAP or scan folders into a sequence MCAP.",
     ),
-    "info": ("stages.info:info", "Summarise a sequence MCAP."),
-    "init": ("stages.init:init",
-             "Start a project: params.yaml and dvc.yaml for a list of recordings."),
     "simulate": ("stages.simulate:simulate", "Ray-cast a simulated world into a sequence MCAP."),
-    "metric": ("stages.metric:metric",
-               "Trajectory error metrics (KITTI devkit; RTE, APE, RPE of any length)."),
-    "query": ("stages.query:query", "Run SQL against the results database."),
-    "export": ("stages.export:export", "Export a trajectory as KITTI or TUM text."),
+    "info": ("stages.info:info", "Summarise a sequence MCAP."),
+    "params": ("stages.params:params", "The parameters an algorithm tunes: ranges, defaults."),
     "run": ("stages.run:run", "Run an odometry algorithm once (fixed params or a schedule)."),
     "trials": ("stages.trials:trials", "SMBO (hyperopt TPE) trials of an odometry algorithm."),
-    "portfolio": ("stages.portfolio:portfolio",
-                  "Run a portfolio of parameter sets on every training sequence."),
-    "params": ("stages.params:params", "The parameters an algorithm tunes: ranges, defaults."),
-    "rte": ("stages.rte:rte", "Score trials into the DuckDB results database."),
-    "descriptors": ("stages.descriptors:descriptors", "Environment descriptors of every frame."),
     "surrogate": (
         "stages.surrogate:surrogate",
         "Fit the kNN surrogate and write the model artifact.",
@@ -49,36 +44,20 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "stages.live:live",
         "Stream a sequence through odometry with online parameter selection.",
     ),
-    "adaptive": (
-        "stages.adaptive:adaptive",
-        "Adaptive runs on the evaluated sequences (dvc stage).",
+    "node": (
+        "stages.node:node",
+        "Live ROS 1 node: select from a PointCloud2 topic, set the odometry's parameters.",
     ),
-    "evaluate": (
-        "stages.evaluate:evaluate",
-        "Baseline vs fixed vs adaptive: metrics, plots, report.",
-    ),
-    "generalize": (
-        "stages.generalize:generalize",
-        "Baseline vs fixed vs adaptive on unseen worlds (dvc stage).",
-    ),
-    "verdict": (
-        "stages.verdict:verdict",
-        "The coverage model on a suite of unseen worlds (verdict/dvc.yaml stage).",
-    ),
-    "oracles": (
-        "stages.verdict:oracles",
-        "Run the oracles on the in-distribution suite's worlds (verdict/dvc.yaml stage).",
-    ),
-    "headroom": (
-        "stages.verdict:headroom",
-        "Oracles against SBS and the closed gap of the in-distribution suite (verdict/dvc.yaml "
-        "stage).",
-    ),
-    "tuning-suite": (
-        "stages.verdict:tuning_suite",
-        "Simulate the coverage model's tuning suite, indexed per sensor (verdict/dvc.yaml "
-        "stage).",
-    ),
+    "metric": ("stages.metric:metric",
+               "Trajectory error metrics (KITTI devkit; RTE, APE, RPE of any length)."),
+    "query": ("stages.query:query", "Run SQL against the results database."),
+    "export": ("stages.export:export",
+               "Export a trajectory (KITTI, TUM) or trials (an Optuna storage)."),
+    "study": ("stages.study:study", "The project's own studies of the method (make verdict, "
+              "make kitti, make docs)."),
+}
+STAGES: Registry = {
+    # the commands of the stages of dvc.yaml (and of `adaptune init`'s): run, not listed
     "ingest-set": (
         "stages.ingest:ingest_set",
         "Ingest the recordings of params.yaml's data section (dvc stage).",
@@ -87,45 +66,63 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "stages.simulate:simulate_set",
         "Simulate the toy data set of params.yaml (dvc stage).",
     ),
-    "kitti-preset": (
-        "stages.kitti:kitti_preset",
-        "The `dvc exp run` arguments of the paper's KITTI protocol.",
-    ),
-    "kitti-table": (
-        "stages.kitti:kitti_table",
-        "The paper's Table II from the evaluate metrics of each algorithm.",
-    ),
     "simulate-kitti-set": (
         "stages.simulate:simulate_kitti_set",
         "Simulate KITTI along its ground-truth trajectories (dvc stage).",
     ),
-    "docs": ("stages.docs:docs", "Render the docs pages that quote the committed metrics."),
-    "realism": (
-        "stages.realism:realism",
-        "Real KITTI slices against simulated KITTI: scan statistics, odometry errors.",
+    "descriptors": ("stages.descriptors:descriptors", "Environment descriptors of every frame."),
+    "rte": ("stages.rte:rte", "Score trials into the DuckDB results database."),
+    "portfolio": ("stages.portfolio:portfolio",
+                  "Run a portfolio of parameter sets on every training sequence."),
+    "adaptive": (
+        "stages.adaptive:adaptive",
+        "Adaptive runs on the evaluated sequences (dvc stage).",
+    ),
+    "evaluate": (
+        "stages.evaluate:evaluate",
+        "Baseline vs fixed vs adaptive: metrics, plots, report.",
     ),
     "plot-world": (
         "stages.simulate:plot_world",
         "Top-down PNG of a world, its trajectory and one scan.",
     ),
 }
-
-
-HIDDEN = {
+HIDDEN: Registry = {
     "exec": ("stages.exec_command:exec_command",
              "Run a command with adaptune's pinned CPU dispatch (make test, make bench)."),
 }
 """Commands that run but are not listed by ``adaptune --help``."""
 
 
+def _study_aliases() -> Registry:
+    """The study commands under their old top-level names (``adaptune verdict`` is
+    ``adaptune study verdict``): the dvc.yaml files keep their commands."""
+    from stages.study import STUDY_COMMANDS
+
+    return dict(STUDY_COMMANDS)
+
+
+def every_command() -> Registry:
+    """Every name ``adaptune NAME`` runs, listed or not."""
+    return {**COMMANDS, **STAGES, **HIDDEN, **_study_aliases()}
+
+
 class LazyGroup(click.Group):
-    """A group that imports a sub-command only when it is run or asked for help."""
+    """A group that imports a sub-command only when it is run or asked for help:
+    ``listed`` commands show in ``--help``, ``unlisted`` ones (a callable giving a registry)
+    run too."""
+
+    def __init__(self, *args: Any, listed: Registry | None = None,
+                 unlisted: Any = None, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.listed = listed if listed is not None else COMMANDS
+        self.unlisted = unlisted or (lambda: {**STAGES, **HIDDEN, **_study_aliases()})
 
     def list_commands(self, ctx: click.Context) -> list[str]:
-        return sorted(n for n, (target, _) in COMMANDS.items() if _module_exists(target))
+        return [n for n, (target, _) in self.listed.items() if _module_exists(target)]
 
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
-        known = {**COMMANDS, **HIDDEN}
+        known = self.listed if name in self.listed else self.unlisted()
         if name not in known or not _module_exists(known[name][0]):
             return None
         target, short = known[name]
@@ -135,7 +132,7 @@ class LazyGroup(click.Group):
         return cmd
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
-        rows = [(n, COMMANDS[n][1]) for n in self.list_commands(ctx)]
+        rows = [(n, self.listed[n][1]) for n in self.list_commands(ctx)]
         if rows:
             with formatter.section("Commands"):
                 formatter.write_dl(rows)
@@ -162,7 +159,8 @@ def _module_exists(target: str) -> bool:
     return importlib.util.find_spec(target.split(":")[0]) is not None
 
 
-@click.group(cls=LazyGroup)
+@click.group(cls=LazyGroup, epilog="The stages of dvc.yaml run commands of their own: "
+             + ", ".join(STAGES) + " (adaptune NAME --help).")
 @click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
 @click.version_option(package_name="adaptune")
 def main(verbose: int) -> None:

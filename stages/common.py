@@ -17,15 +17,23 @@ import click
 F = TypeVar("F", bound=Callable[..., Any])
 
 class NoDashPath(click.Path):
-    """A click.Path that refuses ``-``: only ``adaptune query`` reads stdin or writes stdout
-    for it (its SQL and its --out); anywhere else ``-`` would silently be a file of that name
-    (``export --out -`` wrote one, ``metric rte SEQ -`` scored a stale one)."""
+    """A click.Path that refuses ``-`` unless ``allow_dash`` (an output written as a stream:
+    ``-`` is stdout, ``pipeline.io_utils.STDOUT``); anywhere else ``-`` would silently be a
+    file of that name (``metric rte SEQ -`` scored a stale one). A path the kernel cannot take
+    (a name past 255 bytes) is one ConfigError naming the limit
+    (``pipeline.io_utils.check_path_length``), not an OSError later."""
 
     def convert(self, value: Any, param: click.Parameter | None,
                 ctx: click.Context | None) -> Any:
+        where = (param.get_error_hint(ctx) if param is not None and ctx is not None
+                 else "a path")  # e.g. '--out' or 'ESTIMATE'
         if value in ("-", b"-"):
-            refuse_dash(param.get_error_hint(ctx) if param is not None and ctx is not None
-                        else "a path")  # e.g. '--out' or 'ESTIMATE'
+            if not self.allow_dash:
+                refuse_dash(where)
+        elif isinstance(value, str | Path):
+            from pipeline.io_utils import check_path_length
+
+            check_path_length(value, f"path of {where}")
         return super().convert(value, param, ctx)
 
 
@@ -33,12 +41,16 @@ def refuse_dash(where: str) -> None:
     """ConfigError: ``-`` given for ``where``, a file path that is not stdin or stdout."""
     from pipeline.errors import ConfigError
 
-    raise ConfigError(f"{where}: '-' (stdin, stdout) is not read or written here (only by "
-                      "`adaptune query`); give a file path (./- for a file named -)")
+    raise ConfigError(f"{where}: '-' (stdin, stdout) is not read or written here (stdout is "
+                      "an output file's --out -, stdin query's SQL); give a file path (./- "
+                      "for a file named -)")
 
 
 FILE = NoDashPath(dir_okay=False, path_type=Path)
 """A file path (a folder is refused by click, ``-`` by NoDashPath)."""
+OUT_FILE = NoDashPath(dir_okay=False, allow_dash=True, path_type=Path)
+"""A file a command writes as a stream: ``-`` is standard output (written through,
+``pipeline.io_utils.atomic_path``), as a FIFO or a device is."""
 DIR = NoDashPath(file_okay=False, path_type=Path)
 """A folder path (a file is refused by click, ``-`` by NoDashPath)."""
 PATH = NoDashPath(path_type=Path)
@@ -52,6 +64,23 @@ def file_option(flag: str, dest: str | None = None, *, help: str, required: bool
     names = (flag, dest) if dest else (flag,)
     return click.option(*names, type=FILE, required=required and default is None,
                         default=default, show_default=show_default, help=help)
+
+
+def out_option(dest: str | None = None, *, help: str) -> Callable[[F], F]:
+    """``--out FILE``, the one file a command writes: ``-`` is standard output."""
+    names = ("--out", dest) if dest else ("--out",)
+    return click.option(*names, type=OUT_FILE, required=True,
+                        help=f"{help.rstrip('.')} (- for stdout).")
+
+
+def refuse_json_on_stdout(out: Path, as_json: bool) -> None:
+    """ConfigError when both ``--out -`` and ``--json`` would write stdout (the data and the
+    summary mixed in one stream)."""
+    if as_json and str(out) == "-":
+        from pipeline.errors import ConfigError
+
+        raise ConfigError("--out - and --json both write stdout; give --out FILE, or leave "
+                          "--json out (the summary then goes to stderr)")
 
 
 def dir_option(flag: str, dest: str | None = None, *, help: str, required: bool = True
@@ -161,7 +190,7 @@ def report(summary: dict[str, Any], line: str, as_json: bool) -> None:
 
 def model_run_options(out_help: str) -> Callable[[F], F]:
     """``MODEL_DIR SEQUENCE --out FILE [--algorithm NAME] [--json]``: what select and live take."""
-    return compose(model_argument, sequence_argument, file_option("--out", help=out_help),
+    return compose(model_argument, sequence_argument, out_option(help=out_help),
                    algorithm_option("Refuse a model made for another algorithm."), json_option)
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import click
 
-from stages.common import NoDashPath, file_option
+from stages.common import NoDashPath, file_option, out_option, refuse_dash
 
 FRAMES = ["lidar", "kitti-camera"]
 TRAJECTORY_OPTIONS = ("ground_truth", "sequence", "anchor", "frame", "calib")
@@ -29,7 +29,7 @@ TRAJECTORY_OPTIONS = ("ground_truth", "sequence", "anchor", "frame", "calib")
 @click.option("--format", "fmt", type=click.Choice(["kitti", "tum", "optuna"]), required=True,
               help="kitti, tum: pose text of one trajectory; optuna: an Optuna SQLite storage "
               "of the studies of one or more trials folders.")
-@file_option("--out", help="The file to write (pose text, or the SQLite storage).")
+@out_option(help="The file to write: pose text, or with --format optuna the SQLite storage")
 @click.option("--ground-truth", is_flag=True,
               help="SOURCE is a sequence MCAP: export its ground truth.")
 @file_option("--sequence", required=False,
@@ -56,6 +56,8 @@ def export(ctx: click.Context, sources: tuple[Path, ...], fmt: str, out: Path,
         if given:
             raise ConfigError(f"--format optuna exports trials folders: {', '.join(given)} "
                               "belong to a trajectory export (kitti, tum)")
+        if str(out) == "-":
+            refuse_dash("--out of --format optuna (an SQLite file)")
         _export_optuna(sources, out)
         return
     if len(sources) != 1:

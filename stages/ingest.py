@@ -8,9 +8,9 @@ from typing import Any
 
 import click
 
-from stages.common import DIR, FILE, PATH, compose, dir_option, file_option, params_option
+from stages.common import DIR, FILE, PATH, compose, dir_option, out_option, params_option
 
-out_option = file_option("--out", help="The sequence MCAP to write (atomically).")
+mcap_out_option = out_option(help="The sequence MCAP to write (atomically)")
 name_option = click.option("--name", default=None, help="Sequence name (default: from the input).")
 poses_option = click.option(
     "--poses", type=PATH, default=None,
@@ -43,7 +43,7 @@ source_options = compose(
 )
 """The options every recorded source takes: extrinsic, name, sensor, intensity."""
 recording_options = compose(
-    out_option,
+    mcap_out_option,
     click.option("--topic", default=None,
                  help="PointCloud2 topic (default: the only one there is)."),
     click.option("--gt-topic", default=None,
@@ -90,7 +90,7 @@ def ingest() -> None:
 @ingest.command("kitti")
 @click.argument("root", type=DIR)
 @click.argument("seq")
-@out_option
+@mcap_out_option
 @click.option("--start", type=int, default=None, help="First KITTI frame number (default 0).")
 @click.option(
     "--end", type=int, default=None, help="Last KITTI frame number, INCLUSIVE (default: the last)."
@@ -121,7 +121,7 @@ def rosbag(bag: Path, **options: Any) -> None:
 
 @ingest.command("folder")
 @click.argument("folder", type=DIR)
-@out_option
+@mcap_out_option
 @poses_option
 @format_option
 @click.option("--times", type=PATH, default=None,

@@ -17,9 +17,10 @@ import click
 from stages.common import (
     FILE,
     algorithm_option,
-    file_option,
     json_option,
+    out_option,
     refuse_dash,
+    refuse_json_on_stdout,
     report,
     sequence_argument,
 )
@@ -40,10 +41,9 @@ def parse_params(text: str | None, flag: str = "--values") -> dict[str, float]:
         path = Path(text[1:])
         text = read_input_text(path, "parameters file", error=ConfigError, strict=True)
         source = str(path)
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ConfigError(f"{source}: not valid JSON ({exc.msg})") from None
+    from pipeline.json_yaml import parse_json
+
+    data = parse_json(text, source, error=ConfigError)
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: must be a JSON object of parameter name -> value")
     return data
@@ -85,12 +85,14 @@ def configured_adapter(params_path: Path | None, algorithm: str | None,
 def parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
     """``--option key=value`` pairs; a value that parses as JSON is taken as JSON."""
     from pipeline.errors import ConfigError
+    from pipeline.json_yaml import check_json_nesting
 
     out: dict[str, Any] = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
         if not sep or not key:
             raise ConfigError(f"--option must be key=value, got {pair!r}")
+        check_json_nesting(value, f"--option {key}", error=ConfigError)
         try:
             out[key] = json.loads(value)
         except json.JSONDecodeError:
@@ -109,7 +111,7 @@ def parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
               "baseline).")
 @click.option("--schedule", "schedule_path", type=FILE, default=None,
               help="Per-frame parameter schedule (Parquet).")
-@file_option("--out", "out_path", help="Trajectory Parquet to write.")
+@out_option("out_path", help="Trajectory Parquet to write")
 @click.option("--option", "-o", "options", multiple=True,
               help="Adapter option key=value (repeatable), e.g. -o source_voxel_m=0.5.")
 @click.option("--time-limit", "time_limit_s", type=float, default=None, help="Seconds.")
@@ -125,6 +127,7 @@ def run(algorithm: str | None, params_arg: str | None, values_json: str | None,
     from pipeline.odometry.base import Schedule
     from pipeline.trajectory import write_trajectory
 
+    refuse_json_on_stdout(out_path, as_json)
     params_path = None
     values_flag = "--values"
     if params_arg is not None and is_values(params_arg):

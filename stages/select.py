@@ -7,7 +7,12 @@ from pathlib import Path
 
 import click
 
-from stages.common import model_run_options, params_option, report_selection
+from stages.common import (
+    model_run_options,
+    params_option,
+    refuse_json_on_stdout,
+    report_selection,
+)
 
 
 @click.command()
@@ -25,16 +30,19 @@ def select(
     from pipeline.config import SelectSection, load_section
     from pipeline.errors import ConfigError
     from pipeline.io_utils import refuse_input_as_output
+    from pipeline.odometry.registry import declared_space
     from pipeline.runtime import Selector, load_model
     from pipeline.sequence import SequenceReader
 
+    refuse_json_on_stdout(out, as_json)
     refuse_input_as_output(out, [sequence, params_path, *sorted(model_dir.glob("*"))])
     try:
         selection = load_section(params_path, "select", SelectSection).settings().replace(
             period_s=period_s)
     except ValueError as exc:  # --period-s out of range, named as its params key
         raise ConfigError(str(exc)) from None
-    model = load_model(model_dir, expected_algorithm=algorithm)
+    model = load_model(model_dir, expected_algorithm=algorithm,
+                       declared_space=declared_space)
     selector = Selector(model, selection)
     with SequenceReader(sequence) as reader:
         schedule = selector.schedule(reader)

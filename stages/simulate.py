@@ -9,7 +9,7 @@ from typing import Any
 
 import click
 
-from stages.common import compose, dir_option, file_option, params_option
+from stages.common import compose, dir_option, file_option, out_option, params_option
 
 WORLDS = ("cave", "open", "street", "composite", "kitti")
 SENSORS = ("hdl32", "hdl64", "vlp16")
@@ -81,7 +81,7 @@ def _spec(params_path: Path | None, world: str, seed: int, frames: int, sensor: 
 @click.option("--dropout", type=float, default=None,
               help="Return dropout probability (default: the params section's).")
 @click.option("--name", default=None, help="Sequence name (default: the file stem of --out).")
-@file_option("--out", help="Sequence MCAP to write (atomically).")
+@out_option(help="Sequence MCAP to write (atomically)")
 def simulate(name: str | None, out: Path, **world: Any) -> None:
     """Ray-cast a simulated world into a sequence MCAP (points, ground truth, labels)."""
     from pipeline.sim.simulate import simulate_sequence
@@ -134,7 +134,7 @@ def simulate_kitti_set(params_path: Path | None, out: Path) -> None:
 @_world_options
 @click.option("--frame", "scan_frame", type=int, default=None,
               help="Frame whose scan is drawn (default: the middle one).")
-@file_option("--out", help="PNG to write.")
+@out_option(help="PNG to write")
 def plot_world(scan_frame: int | None, out: Path, **world: Any) -> None:
     """Top-down PNG of a world with its trajectory and one scan."""
     from pipeline.sim.plot import plot_world as plot

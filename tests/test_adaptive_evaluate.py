@@ -71,7 +71,7 @@ def test_ingest_set_without_sources_writes_an_empty_index(tmp_path: Path) -> Non
 
 def test_fixed_section_is_validated(tmp_path: Path) -> None:
     """(That --joint takes fixed.iterations over trials.iterations: tests/test_pipeline_dvc.py.)"""
-    rule = r"fixed\.iterations: Input should be greater than or equal to 1, got 0"
+    rule = r"fixed\.iterations: must be an integer in \[1, 1000000\] \(MAX_ITERATIONS\).*got 0"
     with pytest.raises(ConfigError, match=rule):
         load_section(_params(tmp_path, fixed={"iterations": 0}), "fixed", FixedSection)
 

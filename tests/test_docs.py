@@ -16,7 +16,8 @@ import pytest
 import yaml
 
 from pipeline.errors import InputError
-from pipeline.report.pages import (
+from stages.cli import main
+from studies.docs.pages import (
     BEGIN,
     END,
     EVALUATION,
@@ -28,7 +29,6 @@ from pipeline.report.pages import (
     render_docs,
     stale_files,
 )
-from stages.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"

@@ -14,11 +14,11 @@ import pytest
 
 from pipeline.config import validate_section
 from pipeline.errors import ConfigError
-from pipeline.generalization.run import WorldScore
-from pipeline.generalization.suite import GeneralizeSection, suite_worlds, world_of
-from pipeline.generalization.summary import ratio_summary, suite_metrics
 from pipeline.sim.raycast import Raycaster
 from pipeline.sim.simulate import SimSpec, label_ranges, make_world
+from studies.generalization.score import WorldScore
+from studies.generalization.suite import GeneralizeSection, suite_worlds, world_of
+from studies.generalization.summary import ratio_summary, suite_metrics
 
 
 def test_world_i_depends_on_its_root_and_i_alone() -> None:
@@ -151,7 +151,7 @@ def test_replica_factors_and_perturbed_parameters() -> None:
 def test_replica_figures() -> None:
     """The replica ratios divide the settings' medians over their runs; the noise block gives
     the runs' spread and the ratios two runs of one setting show."""
-    from pipeline.generalization.summary import noise_summary, suite_metrics
+    from studies.generalization.summary import noise_summary, suite_metrics
 
     one = WorldScore("a", ("cave",), "hdl32", 10, 1, {"baseline": 2.0, "fixed": 1.0,
                      "adaptive": 1.5}, {}, 0, 0.0,
@@ -177,7 +177,7 @@ def test_a_suite_of_no_world_writes_outputs_that_say_so(tmp_path: Path) -> None:
     say why, the plot data has its header and no row; outputs of an earlier run are replaced."""
     import json
 
-    from pipeline.generalization.report import GeneralizationPaths, run_generalization
+    from studies.generalization.report import GeneralizationPaths, run_generalization
 
     paths = GeneralizationPaths(tmp_path / "no-model", tmp_path / "no-fixed", tmp_path / "runs",
                                 tmp_path / "metrics/g.json", tmp_path / "records/g.json",
@@ -198,8 +198,8 @@ def test_a_suite_of_no_world_writes_outputs_that_say_so(tmp_path: Path) -> None:
 
 def test_the_small_suite_reports_the_verdicts_statistics() -> None:
     """The geometric block: geometric means of the per-world ratios (over the runs' medians
-    with replicas) with their 95 % intervals and Wilson win rates (pipeline.verdict)."""
-    from pipeline.generalization.summary import suite_metrics
+    with replicas) with their 95 % intervals and Wilson win rates (studies.verdict)."""
+    from studies.generalization.summary import suite_metrics
 
     def score(name: str, adaptive: float, replicas: list[float]) -> WorldScore:
         return WorldScore(name, ("cave",), "hdl32", 10, 1, {"baseline": 2.0, "fixed": 1.0,

@@ -6,11 +6,11 @@ from __future__ import annotations
 import json
 from itertools import pairwise
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from click.testing import CliRunner
 from helpers.models import build_model, write_tiny_sequence
+from helpers.ros2_messages import pose_matrix, ros2_messages
 
 from pipeline.odometry.registry import get_adapter
 from pipeline.sequence import SequenceReader
@@ -26,7 +26,7 @@ def test_live_writes_poses_and_params(tmp_path: Path, kitti_root: Path) -> None:
     write_tiny_sequence(seq, kitti_root, "04", n=5, step=4)
     out = tmp_path / "live.mcap"
     res = CliRunner().invoke(main, ["live", "--params", str(params), str(model_dir), str(seq),
-                                    "--out", str(out), "--json"])
+                                    "--out", str(out), "--scans", "--json"])
     assert res.exit_code == 0, res.output
     live = json.loads(res.stdout)
     res = CliRunner().invoke(main, ["select", "--params", str(params), str(model_dir), str(seq),
@@ -81,29 +81,3 @@ def test_live_writes_poses_and_params(tmp_path: Path, kitti_root: Path) -> None:
     for summary in (live, select):
         assert {k: summary[k] for k in ("algorithm", "frames", "selections", "changes")} == {
             "algorithm": "ndt", "frames": 5, "selections": 3, "changes": changes}
-
-
-def ros2_messages(path: Path) -> dict[str, list[tuple[int, Any]]]:
-    """topic -> [(log time, message)] of an MCAP, decoded by mcap_ros2's decoder only."""
-    from mcap.reader import make_reader
-    from mcap_ros2.decoder import DecoderFactory
-
-    out: dict[str, list[tuple[int, Any]]] = {}
-    with path.open("rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for schema, channel, message, decoded in reader.iter_decoded_messages():
-            assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
-            out.setdefault(channel.topic, []).append((message.log_time, decoded))
-    return out
-
-
-def pose_matrix(pose: Any) -> np.ndarray:
-    """(4, 4) of a decoded geometry_msgs Pose or Transform."""
-    from scipy.spatial.transform import Rotation
-
-    t = getattr(pose, "position", None) or pose.translation
-    q = getattr(pose, "orientation", None) or pose.rotation
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
-    T[:3, 3] = [t.x, t.y, t.z]
-    return T

@@ -60,7 +60,7 @@ def fresh_copy(root: Path) -> Path:
     """The repository as a new user gets it, as tests/test_pipeline_dvc.py makes one: its
     dvc.yaml and params.yaml, its code (symlinked; `adaptune` is the installation's)."""
     root.mkdir()
-    for code in ("pipeline", "schemas", "stages"):
+    for code in ("pipeline", "schemas", "stages", "studies"):
         (root / code).symlink_to(REPO / code, target_is_directory=True)
     for name in ("dvc.yaml", "params.yaml", ".dvcignore", ".gitignore"):
         shutil.copy(REPO / name, root / name)

@@ -85,7 +85,7 @@ def project(root: Path, params: dict[str, Any]) -> Path:
     ``params``, on branch ``main`` (nothing run, nothing committed yet)."""
     for name in ("dvc.yaml", ".dvcignore", ".gitignore"):
         shutil.copy(REPO / name, root / name)
-    for code in ("pipeline", "schemas", "stages"):  # the stages' code dependencies
+    for code in ("pipeline", "schemas", "stages", "studies"):  # the stages' code dependencies
         (root / code).symlink_to(REPO / code, target_is_directory=True)
     (root / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     git(root, "init", "-q", "-b", "main")
@@ -199,10 +199,10 @@ def test_outputs_follow_their_schemas(repro: tuple[Path, str]) -> None:
 
 def test_generalize_scores_every_world_of_the_suite(repro: tuple[Path, str]) -> None:
     """The generalize stage: two unseen worlds (one per unseen sensor), three settings each."""
-    from pipeline.generalization.summary import RATIOS
     from pipeline.odometry.base import Schedule
     from pipeline.report.outputs import read_summary
     from pipeline.trajectory import read_trajectory
+    from studies.generalization.summary import RATIOS
 
     root, log = repro
     m = read_summary(root / "metrics/generalization.json")

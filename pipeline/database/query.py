@@ -79,6 +79,7 @@ def run_query(db_path: str | Path, sql: str,
         raise ConfigError(f"--time-limit-s must be a finite number of seconds > 0, got "
                           f"{time_limit_s!r}")
     db_path = input_file(db_path, "database", " (build it with `adaptune rte`)")
+    check_statements(sql)
     stopper = _Stopper(time_limit_s)
     con = None
     try:
@@ -98,6 +99,26 @@ def run_query(db_path: str | Path, sql: str,
     finally:
         if con is not None:
             con.close()
+
+
+def check_statements(sql: str) -> None:
+    """QueryError unless ``sql`` holds a statement: empty SQL, only ``;`` or only comments
+    ran nothing and printed nothing, exit 0 (DuckDB's parser decides what a statement is; SQL it
+    cannot parse is left to the query, whose error names the database)."""
+    import duckdb
+
+    try:
+        statements = duckdb.extract_statements(sql)
+    except duckdb.Error:
+        return
+    if not statements:
+        raise QueryError(f"SQL {_shortened(sql)}: holds no statement (only blanks, ';' or "
+                         "comments); give a query")
+
+
+def _shortened(sql: str, keep: int = 40) -> str:
+    """``sql`` as a quoted literal, elided past ``keep`` characters."""
+    return repr(sql if len(sql) <= keep else f"{sql[:keep]}...")
 
 
 class _Stopper:

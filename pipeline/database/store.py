@@ -26,7 +26,7 @@ from pipeline.geometry import path_distances
 from pipeline.io_utils import atomic_path
 from pipeline.metrics.section import DevkitSection
 from pipeline.sequence_index import read_index
-from pipeline.tuning.layout import read_trials_tables
+from pipeline.tuning.layout import TRIALS_GLOB, read_trials_tables
 from schemas import read_text
 from schemas.arrow import POSE_COLUMNS
 
@@ -203,8 +203,15 @@ def insert_arrow(con: duckdb.DuckDBPyConnection, table: str, rows: pa.Table) -> 
 
 
 def load_trials(con: duckdb.DuckDBPyConnection, studies: Mapping[str, Path]) -> None:
-    """Fill ``trials`` from every study's trials tables; add p_<name> and summary columns."""
+    """Fill ``trials`` from every study's trials tables; add p_<name> and summary columns.
+    InputError when a study's folder holds no trials table (its trials would be dropped from
+    the database without a word)."""
     tables = {study: read_trials_tables(out) for study, out in studies.items()}
+    for study, table in tables.items():
+        if not table.num_rows:
+            raise InputError(f"{studies[study]}: no trials in this {study} folder (no "
+                             f"{TRIALS_GLOB}); give the folder `adaptune trials` wrote, or "
+                             f"leave --{study} out")
     params = sorted({c for t in tables.values() for c in t.column_names if c.startswith("p_")})
     for name in params:
         con.execute(f'ALTER TABLE trials ADD COLUMN "{name}" DOUBLE')

@@ -61,11 +61,15 @@ REL_DELTA_TOL = 0.1
 
 @dataclass(frozen=True)
 class Poses:
-    """(N, 4, 4) poses and their (N,) stamps [ns] where the source has them."""
+    """(N, 4, 4) poses and their (N,) stamps [ns] where the source has them; a trajectory
+    Parquet's frame numbers (``frames``); ``sequence``: the poses are a sequence MCAP's, one
+    per frame."""
 
     what: str
     T: F64
     stamps_ns: NDArray[np.int64] | None
+    frames: NDArray[np.int32] | None = None
+    sequence: bool = False
 
 
 @dataclass(frozen=True)
@@ -102,18 +106,26 @@ def load_poses(path: str | Path, fmt: PoseFormat = "auto") -> Poses:
 
         with SequenceReader(path) as reader:
             gt = reader.require_ground_truth("to compare with")
-            return Poses(str(path), gt, reader.stamps_ns.copy())
+            return Poses(str(path), gt, reader.stamps_ns.copy(), sequence=True)
     if suffix == ".parquet":
         from pipeline.trajectory import read_trajectory
 
         traj = read_trajectory(path)
-        return Poses(str(path), traj.T_world_lidar, traj.stamps_ns)
+        return Poses(str(path), traj.T_world_lidar, traj.stamps_ns, traj.frames)
     pf = read_pose_file(path, fmt)
     return Poses(str(path), pf.T_world_x, pf.stamps_ns)
 
 
 def associate(gt: Poses, est: Poses) -> tuple[F64, F64]:
-    """Paired (M, 4, 4) ground-truth and estimated poses (module docstring: evo's rule)."""
+    """Paired (M, 4, 4) ground-truth and estimated poses (module docstring: evo's rule). A
+    trajectory Parquet against a sequence MCAP: its frames must be the sequence's
+    (``pipeline.trajectory.check_frames_of``, as `export` checks them)."""
+    from pipeline.trajectory import check_frames_of
+
+    for traj, seq in ((est, gt), (gt, est)):
+        if traj.frames is not None and seq.sequence and seq.stamps_ns is not None:
+            check_frames_of(traj.frames, traj.stamps_ns, seq.stamps_ns,  # type: ignore[arg-type]
+                            traj.what, seq.what)
     if gt.stamps_ns is None or est.stamps_ns is None:
         if len(gt.T) != len(est.T):
             raise InputError(f"{est.what}: {len(est.T)} poses, the ground truth {gt.what} has "

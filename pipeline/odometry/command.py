@@ -104,17 +104,14 @@ class CommandOptions(Section):
 
 def load_space(spec: list[dict[str, Any]] | str) -> ParameterSpace:
     """ParameterSpace from a list of ParamSpec dicts or a YAML/JSON file of one."""
-    import yaml
+    from pipeline.json_yaml import parse_yaml
 
     what = "command option space"
     items: object = spec
     if isinstance(spec, str):
         path = Path(spec)
         text = read_input_text(path, "parameter space file", error=ConfigError, strict=True)
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"{path}: not valid YAML/JSON ({exc})") from None
+        data = parse_yaml(text, str(path), error=ConfigError)
         what = str(path)
         items = data.get("params") if isinstance(data, dict) else data
     if not isinstance(items, list) or not items:

@@ -48,6 +48,21 @@ ADAPTERS: dict[str, Callable[[], type[Adapter]]] = {
 }
 
 
+OPTION_SPACES = frozenset({"command"})
+"""Registered adapters whose tuned parameters their options declare (``command``'s ``space``):
+they have no space of their own to check a model's against."""
+
+
+def declared_space(name: str) -> list[tuple[str, str]] | None:
+    """(name, kind) of every parameter the registered adapter ``name`` tunes, in its order:
+    what a model's or a study's parameter space must name (``with_space``'s rule); None for an
+    adapter whose options declare them (``OPTION_SPACES``) or a plugin factory (module:attr).
+    ConfigError for an unknown name."""
+    if ":" in name or name in OPTION_SPACES:
+        return None
+    return [(s.name, s.kind) for s in get_adapter(name).space.specs]
+
+
 def adapter_names() -> list[str]:
     """Names of every registered adapter, in registry order."""
     return list(ADAPTERS)

@@ -108,17 +108,15 @@ def record_beside(metrics_path: Path) -> Path:
 def read_summary(metrics_path: Path, record_path: Path | None = None) -> dict[str, Any]:
     """The summary a stage wrote with ``write_metrics``: its metrics and its record (by
     default the one ``record_beside`` them) together; InputError naming an unreadable file."""
-    from pipeline.errors import InputError
     from pipeline.io_utils import read_input_text
 
     if record_path is None:
         record_path = record_beside(metrics_path)
     parts = []
+    from pipeline.json_yaml import parse_json
+
     for path in (metrics_path, record_path):
-        try:
-            parts.append(json.loads(read_input_text(path, "metrics JSON", strict=True)))
-        except json.JSONDecodeError as exc:
-            raise InputError(f"{path}: cannot read it ({exc})") from None
+        parts.append(parse_json(read_input_text(path, "metrics JSON", strict=True), str(path)))
     return merge_leaves(parts[0], parts[1])
 
 

@@ -1,6 +1,6 @@
 """KITTI's Velodyne HDL-64E S2 as its scans show it (docs/simulator.md, "Sensor model").
 
-Estimated by ``pipeline.realism.sensor_fit.fit_sensor`` from the 40 scans of kitti_mini
+Estimated by ``studies.realism.sensor_fit.fit_sensor`` from the 40 scans of kitti_mini
 (sequences 01, 04, 06, 10, frames 0-9; ``adaptune realism`` re-derives them): the elevation of
 every laser as the files store it (ring 0 the highest), the height of every laser's origin above
 the sensor's origin, and the azimuth sectors of the lowest rings that KITTI's car and roof rack

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -14,7 +15,7 @@ from numpy.typing import NDArray
 
 from pipeline.errors import ConfigError
 from pipeline.geometry import inv_se3
-from pipeline.io_utils import check_plain_name, refuse_input_as_output
+from pipeline.io_utils import STDOUT, check_plain_name, refuse_input_as_output
 from pipeline.sequence import Compression, EnvLabel, Scan, SequenceInfo, SequenceWriter
 from pipeline.sim.effects import SensorEffects
 from pipeline.sim.kitti_world import KittiWorldEffects, check_kitti_args
@@ -182,7 +183,8 @@ def simulate_sequence(
     """Simulate ``spec`` and write the sequence MCAP at ``out_path`` (atomically), its chunks
     compressed by ``compression``."""
     refuse_input_as_output(out_path, [spec.kitti_trajectory])
-    name = check_plain_name(name or Path(out_path).stem, "the sequence name")  # before the work
+    default = spec.world if os.fspath(out_path) == STDOUT else Path(out_path).stem  # --out -
+    name = check_plain_name(name or default, "the sequence name")  # before the work
     world = make_world(spec)
     source = "simulation:" + (f"kitti {Path(spec.kitti_trajectory).name}"
                               if spec.kitti_trajectory else spec.world)

@@ -67,10 +67,14 @@ def rungs_folder(out_dir: str | Path, algorithm: str, sequence: str) -> Path:
     return Path(out_dir) / "rungs" / f"algorithm={algorithm}" / f"sequence={sequence}"
 
 
+TRIALS_GLOB = "trials/algorithm=*/sequence=*/trials.parquet"
+"""Where a trials output folder keeps its trials tables (one per algorithm and sequence)."""
+
+
 def trials_files(out_dir: str | Path) -> list[tuple[str, str, Path]]:
     """(algorithm, sequence, path) of every trials table under ``out_dir``, sorted."""
     found = []
-    for path in sorted(Path(out_dir).glob("trials/algorithm=*/sequence=*/trials.parquet")):
+    for path in sorted(Path(out_dir).glob(TRIALS_GLOB)):
         algorithm = path.parent.parent.name.removeprefix("algorithm=")
         sequence = path.parent.name.removeprefix("sequence=")
         found.append((algorithm, sequence, path))

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pipeline.errors import InputError
+from pipeline.errors import InputError, OutputError
 from pipeline.io_utils import atomic_path, refuse_input_as_output
 from pipeline.odometry.base import ParameterSpace, ParamSpec
 from pipeline.tuning.layout import trajectory_path, trials_files
@@ -68,6 +68,8 @@ def export_optuna(folders: Sequence[str | Path], out: str | Path) -> list[Export
 
     studies = _studies(folders)
     refuse_input_as_output(out, [path for _, _, path in studies])
+    if Path(out).exists() and not Path(out).is_file():
+        raise OutputError(f"{out}: an Optuna SQLite storage is a regular file, this is not one")
     exported = []
     verbosity = optuna.logging.get_verbosity()
     optuna.logging.set_verbosity(optuna.logging.WARNING)  # no "A new study created" lines

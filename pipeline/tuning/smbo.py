@@ -40,7 +40,7 @@ from typing import Any
 
 from pydantic import Field, field_validator, model_validator
 
-from pipeline.config import Section
+from pipeline.config import IterationCount, Section
 from pipeline.errors import ConfigError, InfrastructureError
 from pipeline.executor import open_executor
 from pipeline.io_utils import exclusive_folder
@@ -97,7 +97,7 @@ class TrialsSection(Section):
     """
 
     algorithm: str = "ndt"
-    iterations: int = Field(256, ge=1)
+    iterations: IterationCount = 256
     workers: int = Field(2, ge=1)
     dask: str | None = None
     time_limit_s: float | None = Field(600.0, gt=0)
@@ -168,7 +168,7 @@ class FixedSection(Section):
     fidelity, halving: the joint study's own (null = ``trials.fidelity`` / ``trials.halving``).
     """
 
-    iterations: int | None = Field(64, ge=1)
+    iterations: IterationCount | None = 64
     workers: int | None = Field(None, ge=1)
     warm_start: int = Field(4, ge=0)
     pruning: PruningSection | None = Field(

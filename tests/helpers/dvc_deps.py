@@ -23,7 +23,7 @@ from functools import cache
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-PACKAGES = ("pipeline", "stages", "schemas")
+PACKAGES = ("pipeline", "studies", "stages", "schemas")
 CODE_ROOTS = tuple(f"{p}/" for p in PACKAGES)
 SCHEMA_FILES = {p.relative_to(REPO / "schemas").as_posix(): p
                 for p in (REPO / "schemas").rglob("*")
@@ -161,13 +161,16 @@ def stage_commands(dvc_yaml: str) -> dict[str, str]:
     import yaml
 
     sys.path.insert(0, str(REPO))
-    from stages.cli import COMMANDS
+    from stages.cli import every_command
+    from stages.study import STUDY_COMMANDS
 
     out = {}
     for stage, spec in yaml.safe_load(dvc_yaml)["stages"].items():
         words = " ".join(stage_spec(spec)["cmd"].split()).split()
         assert words[0] == "adaptune", f"{stage}: the command must be an adaptune sub-command"
-        out[stage] = COMMANDS[words[1]][0].split(":")[0]
+        registry, name = ((STUDY_COMMANDS, words[2]) if words[1] == "study"
+                          else (every_command(), words[1]))
+        out[stage] = registry[name][0].split(":")[0]
     return out
 
 

@@ -1,11 +1,11 @@
-"""Synthetic worlds of a verdict suite (pipeline/verdict/runs.py's WorldResult) for the tests of
+"""Synthetic worlds of a verdict suite (studies/suites/runner.py's WorldResult) for the tests of
 its statistics, summary and page."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from pipeline.verdict.runs import WorldResult
+from studies.suites.runner import WorldResult
 
 
 def world(name: str, runs: dict[str, list[list[float]]], labels: list[str],

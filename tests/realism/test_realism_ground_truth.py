@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.realism.ground_truth import shared_error, twists, white_noise
+from studies.realism.ground_truth import shared_error, twists, white_noise
 
 
 def test_the_error_two_odometries_share_is_the_ground_truths() -> None:

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from pipeline.realism.statistics import RANGE_EDGES_M, ring_of_points, scan_statistics
 from pipeline.sim.effects import SensorEffects
 from pipeline.sim.raycast import Raycaster
 from pipeline.sim.sensors import get_sensor
 from pipeline.sim.simulate import SimSpec, make_world
+from studies.realism.statistics import RANGE_EDGES_M, ring_of_points, scan_statistics
 
 AZIMUTHS_DEG = tuple(-157.5 + 45.0 * k for k in range(8))
 """8 firings a ring, 45 deg apart, stored in ascending azimuth as KITTI and the simulator

@@ -9,7 +9,7 @@ import pytest
 from numpy.typing import NDArray
 
 from pipeline.errors import InputError
-from pipeline.realism.registration import step_errors
+from studies.realism.registration import step_errors
 
 F64 = NDArray[np.float64]
 

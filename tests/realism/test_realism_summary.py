@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 
 from pipeline.errors import ConfigError
-from pipeline.realism.compare import (
+from pipeline.sim.kitti_dataset import SimulateKittiSection
+from studies.realism.compare import (
     RealismResult,
     SideErrors,
     SliceResult,
     parse_slice,
     run_realism,
 )
-from pipeline.realism.statistics import ScanStatistics
-from pipeline.sim.kitti_dataset import SimulateKittiSection
+from studies.realism.statistics import ScanStatistics
 
 STATS = ScanStatistics(1.0, (1.0,), (1.0,), 0.0, 1, 1.0)
 
@@ -134,7 +134,7 @@ def test_the_target_compares_the_side_with_the_ground_truths_error() -> None:
 ])
 def test_the_real_medians_interval_is_of_order_statistics(n: int, low: float, high: float,
                                                           coverage: float) -> None:
-    from pipeline.realism.compare import median_interval
+    from studies.realism.compare import median_interval
 
     values = [float(v) for v in np.random.default_rng(n).permutation(np.arange(1, n + 1))]
     got = median_interval(values)

@@ -1,5 +1,5 @@
 """KITTI's HDL-64E as its scans show it (docs/simulator.md, "Sensor model"): the table in
-pipeline/sim/kitti_sensor.py is what pipeline/realism/sensor_fit.py derives from the kitti_mini
+pipeline/sim/kitti_sensor.py is what studies/realism/sensor_fit.py derives from the kitti_mini
 scans."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.realism.sensor_fit import fit_sensor
 from pipeline.sim import kitti_sensor
+from studies.realism.sensor_fit import fit_sensor
 
 
 def test_the_stored_kitti_hdl64_is_what_the_scans_show(kitti_root: Path) -> None:

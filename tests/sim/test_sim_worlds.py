@@ -11,7 +11,6 @@ import pytest
 from click.testing import CliRunner
 
 from pipeline.errors import ConfigError
-from pipeline.realism.statistics import ring_of_points
 from pipeline.sequence import SequenceReader
 from pipeline.sim.effects import SensorEffects
 from pipeline.sim.raycast import Raycaster
@@ -25,6 +24,7 @@ from pipeline.sim.simulate import (
     world_points,
 )
 from stages.cli import main
+from studies.realism.statistics import ring_of_points
 
 SENSOR_FACTS = {  # beams, lowest and highest elevation [deg]
     "hdl32": (32, -30.67, 10.67),

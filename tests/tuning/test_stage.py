@@ -59,7 +59,7 @@ def test_dvc_form_reads_the_split_of_index_json(sequences: list[Path], tmp_path:
     [
         (["--length-m", "500"], "not longer than length_m=500.0"),
         (["--algorithm", "nope"], "unknown odometry algorithm 'nope'"),
-        (["--iterations", "0"], "trials.iterations: Input should be greater than or equal to 1"),
+        (["--iterations", "0"], "trials.iterations: must be an integer in [1, 1000000]"),
         (["--dask", "nowhere"], "dask must be 'local' or a scheduler address"),
     ],
 )

@@ -1,4 +1,4 @@
-"""Two arms of one suite (pipeline.verdict.arms): the gate "not worse beyond the reference's
+"""Two arms of one suite (studies.verdict.arms): the gate "not worse beyond the reference's
 interval" and the paired per-setting ratios, on hand-made suite metrics."""
 
 from __future__ import annotations
@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 
 from pipeline.errors import InputError
-from pipeline.verdict.arms import compare_arms
-from pipeline.verdict.summary import RATIOS, ratio_summary
+from studies.verdict.arms import compare_arms
+from studies.verdict.summary import RATIOS, ratio_summary
 
 SCRIPT = Path(__file__).resolve().parents[2] / "experiments" / "verdict_arms.py"
 
 
 def _suite(medians: dict[str, dict[str, float]], suite: str = "dev") -> dict[str, Any]:
-    """A suite's metrics as pipeline.verdict.summary writes them, from per-world medians."""
+    """A suite's metrics as studies.verdict.summary writes them, from per-world medians."""
     def ratio(w: dict[str, float], den: str) -> float:
         d = min(w["baseline"], w["fixed"]) if den == "min" else w[den]
         return w["adaptive"] / d

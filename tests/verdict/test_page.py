@@ -1,4 +1,4 @@
-"""docs/results/verdict.md as rendered from a run's metrics (pipeline/report/verdict_page.py):
+"""docs/results/verdict.md as rendered from a run's metrics (studies/docs/verdict_page.py):
 every target with its figure, interval and verdict; the power from the suite's own spread."""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ import dataclasses
 import numpy as np
 from helpers.verdict_data import world
 
-from pipeline.report.verdict_page import HEADROOM, ID, OOD, SURROGATE_PREFIX, verdict_page
-from pipeline.verdict.headroom import headroom_metrics
-from pipeline.verdict.runs import WorldResult
-from pipeline.verdict.summary import suite_metrics
+from studies.docs.verdict_page import HEADROOM, ID, OOD, SURROGATE_PREFIX, verdict_page
+from studies.suites.runner import WorldResult
+from studies.verdict.headroom import headroom_metrics
+from studies.verdict.summary import suite_metrics
 
 HEADER = {"algorithm": "ndt", "suite": "test", "seed_root": 1, "world_generator": 1,
           "length_m": 25.0, "replicas": 0, "replica_scale": 0.005,

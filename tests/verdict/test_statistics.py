@@ -1,4 +1,4 @@
-"""The verdict's statistics against hand-computed cases (pipeline/verdict/statistics.py)."""
+"""The verdict's statistics against hand-computed cases (studies/suites/statistics.py)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.verdict.statistics import (
+from studies.suites.statistics import (
     closed_gap,
     detectable_ratio,
     geometric_mean,

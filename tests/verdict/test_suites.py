@@ -1,5 +1,5 @@
 """The verdict's suites: what was frozen, how worlds are drawn, the per-world figures and the
-suite's metrics, the oracles' schedules and choices (pipeline/verdict/). The stages run through
+suite's metrics, the oracles' schedules and choices (studies/verdict/). The stages run through
 DVC on a tiny project in tests/verdict/test_verdict_dvc.py."""
 
 from __future__ import annotations
@@ -20,18 +20,18 @@ from pipeline.odometry.ndt import SPACE
 from pipeline.sim import GENERATOR_VERSION
 from pipeline.sim.dataset import SimulateSection
 from pipeline.sim.effects import SensorEffects
-from pipeline.verdict.headroom import (
+from studies.suites.runner import read_results, write_world
+from studies.suites.statistics import geometric_mean
+from studies.verdict.headroom import (
     best_per_label,
     candidate_set,
     class_choice,
     held_schedule,
     label_means,
 )
-from pipeline.verdict.runs import read_results, write_world
-from pipeline.verdict.section import VerdictSection
-from pipeline.verdict.statistics import geometric_mean
-from pipeline.verdict.summary import suite_metrics, targets_met
-from pipeline.verdict.worlds import check_generator, sensor_template, suite_worlds
+from studies.verdict.section import VerdictSection
+from studies.verdict.summary import suite_metrics, targets_met
+from studies.verdict.worlds import check_generator, sensor_template, suite_worlds
 
 REPO = Path(__file__).resolve().parents[2]
 TEMPLATE = sensor_template(SimulateSection(), 42)
@@ -208,7 +208,7 @@ def test_the_tuning_suite_is_drawn_as_the_id_suites_from_its_own_root() -> None:
     """verdict.tuning: worlds id_tune_<i> of the id draw (sensors alternate, 900-1200 frames,
     2-4 segments) from the frozen root 45453, none of them a dev or test world; the index lists
     every world under train and each sensor's under its name; a root a suite uses is refused."""
-    from pipeline.verdict.tuning import tuning_index, tuning_worlds
+    from studies.verdict.tuning import tuning_index, tuning_worlds
 
     section = VerdictSection()
     assert (section.tuning.seed_root, section.tuning.worlds) == (45453, 24)
@@ -234,7 +234,7 @@ def test_a_model_folder_per_sensor_gives_each_world_its_sensors_artifact(tmp_pat
     without one (the VLP-16, kept out of training) borrows another's (verdict.borrow_model), or
     gets None: its worlds run the fixed set. A folder holding neither is refused before any
     world runs."""
-    from pipeline.verdict.runs import AdaptiveSetting
+    from studies.suites.runner import AdaptiveSetting
 
     one = tmp_path / "model"
     one.mkdir()
@@ -260,9 +260,9 @@ def test_a_model_folder_per_sensor_gives_each_world_its_sensors_artifact(tmp_pat
 def test_a_world_whose_sensor_has_no_model_runs_the_fixed_set(tmp_path: Path) -> None:
     """A per-sensor model folder without the VLP-16's: the VLP-16 world's adaptive is the
     fixed set, its runs fixed's (not run again), no schedule written, every scan unfamiliar."""
-    from pipeline.verdict.runs import AdaptiveSetting, SuiteInputs, score_world
-    from pipeline.verdict.section import SuiteDraw
-    from pipeline.verdict.worlds import world_of
+    from studies.suites.runner import AdaptiveSetting, SuiteInputs, score_world
+    from studies.verdict.section import SuiteDraw
+    from studies.verdict.worlds import world_of
 
     models = tmp_path / "models" / "hdl32"
     models.mkdir(parents=True)

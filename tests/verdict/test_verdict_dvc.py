@@ -60,7 +60,7 @@ def project(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
     root = tmp_path_factory.mktemp("verdict")
     for name in ("dvc.yaml", "params.yaml", ".dvcignore", ".gitignore"):
         shutil.copy(REPO / name, root / name)
-    for code in ("pipeline", "schemas", "stages"):
+    for code in ("pipeline", "schemas", "stages", "studies"):
         (root / code).symlink_to(REPO / code, target_is_directory=True)
     (root / "verdict").mkdir()
     shutil.copy(REPO / "verdict" / "dvc.yaml", root / "verdict" / "dvc.yaml")

@@ -1,4 +1,4 @@
-"""A suite world held in memory (pipeline/verdict/world.py): the same scans, poses and labels,
+"""A suite world held in memory (studies/suites/loaded.py): the same scans, poses and labels,
 and the same runs, as the world written to an MCAP and read back (the path it replaced)."""
 
 from __future__ import annotations
@@ -14,14 +14,15 @@ from pipeline.odometry.ndt import SPACE
 from pipeline.sequence import Scan, SequenceReader
 from pipeline.sim.dataset import SimulateSection
 from pipeline.sim.simulate import simulate_scans, simulate_sequence
-from pipeline.verdict.section import VerdictSection
-from pipeline.verdict.world import LoadedWorld
-from pipeline.verdict.worlds import VerdictWorld, sensor_template, suite_worlds
+from studies.suites.loaded import LoadedWorld
+from studies.suites.worlds import SimulatedWorld
+from studies.verdict.section import VerdictSection
+from studies.verdict.worlds import sensor_template, suite_worlds
 
 FRAMES = 40
 
 
-def _world(sensor: str) -> VerdictWorld:
+def _world(sensor: str) -> SimulatedWorld:
     worlds = suite_worlds(VerdictSection(), "id", sensor_template(SimulateSection(), 42))
     w = next(w for w in worlds if w.spec.sensor == sensor)
     return replace(w, spec=replace(w.spec, frames=FRAMES))

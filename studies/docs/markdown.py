@@ -1,0 +1,51 @@
+"""Markdown for the generated docs pages (``studies.docs.pages``,
+``studies.docs.verdict_page``): numbers, tables, prose wrapped at 96 columns."""
+
+from __future__ import annotations
+
+import math
+import textwrap
+from collections.abc import Mapping, Sequence
+
+
+def number(v: float | None, digits: int = 3) -> str:
+    """``v`` with ``digits`` decimals; ``-`` for None or a non-finite value."""
+    return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}f}"
+
+
+def percent(v: float | None) -> str:
+    """A share as a whole percentage (``-`` for None)."""
+    return "-" if v is None else f"{100 * v:.0f} %"
+
+
+def values(p: Mapping[str, float]) -> str:
+    """Parameters as ``name value, ...`` (3 significant digits)."""
+    return ", ".join(f"{k} {v:.3g}" for k, v in p.items())
+
+
+def wrap(text: str, prefix: str = "") -> str:
+    """``text`` as lines of at most 96 characters, each starting with ``prefix``."""
+    return textwrap.fill(text, 96, initial_indent=prefix, subsequent_indent=prefix,
+                         break_long_words=False, break_on_hyphens=False)
+
+
+def fill(text: str) -> str:
+    """``text`` with its prose lines wrapped by ``wrap``: tables, headings, quotes, HTML and
+    fenced code as they are."""
+    out, fenced = [], False
+    for line in text.split("\n"):
+        if line.startswith("```"):
+            fenced = not fenced
+        keep = fenced or line.startswith(("```", "|", "#", ">", "<")) or len(line) <= 96
+        out.append(line if keep else wrap(line))
+    return "\n".join(out)
+
+
+def row(cells: Sequence[object]) -> str:
+    """One table row."""
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def table(head: Sequence[str], rows: Sequence[Sequence[object]]) -> list[str]:
+    """A table's lines: the head, the rule, the rows."""
+    return [row(head), "|" + "---|" * len(head), *(row(r) for r in rows)]

@@ -1,0 +1,1 @@
+"""The paper's KITTI protocol (Table II) as a preset of params values (``preset``)."""
