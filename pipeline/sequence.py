@@ -507,6 +507,12 @@ class SequenceReader:
             yield decode_pose_stamped(msg.data, f"{self.path} {topic}")
 
 
+def as_recorded(T_world_lidar: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(4, 4) the ground-truth pose a sequence MCAP gives back for ``T_world_lidar``: its
+    PoseStamped (a quaternion) decoded again, whose rotation may differ in its last bit."""
+    return decode_pose_stamped(encode_pose_stamped(0, T_world_lidar), "a pose")[1]
+
+
 def read_ground_truth(path: str | Path, purpose: str) -> NDArray[np.float64]:
     """(N, 4, 4) ground-truth T_world_lidar of the sequence MCAP at ``path``
     (``SequenceReader.require_ground_truth``: InputError naming ``purpose`` when it has none)."""

@@ -112,7 +112,8 @@ def _joint_table(out: Path, algorithm: str = "ndt", status: str = "ok") -> Path:
     space = get_adapter(algorithm).space
     result = TrialResult(0, status, "" if status == "ok" else "boom", 1.5, 1.0, 7,
                          space.defaults())
-    write_trials(trials_path(out, algorithm, JOINT), space, [result], {"space": space.to_json()})
+    write_trials(trials_path(out, algorithm, JOINT), space, [result],
+                 {"space": space.to_json(), "adapter_options": {}})
     return out
 
 

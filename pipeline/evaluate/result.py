@@ -41,17 +41,18 @@ class SettingScore:
     @property
     def rte_pct(self) -> float:
         """Mean RTE [%] over the start frames that have a segment."""
-        return _mean(self.t_err_pct)
+        return finite_mean(self.t_err_pct)
 
     @property
     def replica_rte_pct(self) -> list[float]:
         """Mean RTE [%] of every replica run (NaN where the odometry failed)."""
-        return [math.nan if r.t_err_pct is None else _mean(r.t_err_pct) for r in self.replicas]
+        return [math.nan if r.t_err_pct is None else finite_mean(r.t_err_pct)
+                for r in self.replicas]
 
     def per_label(self) -> dict[str, float]:
         """Mean RTE [%] of the segments starting in each environment label."""
         labels = np.array([lab or "" for lab in self.labels])
-        return {lab: _mean(self.t_err_pct[labels == lab])
+        return {lab: finite_mean(self.t_err_pct[labels == lab])
                 for lab in dict.fromkeys(labels.tolist()) if lab}
 
 
@@ -103,14 +104,15 @@ class Evaluation:
 
     def overall(self, setting: str, split: str | None = None) -> float:
         """Mean RTE [%] of ``setting`` over the segments of ``split`` (None: all) pooled."""
-        return _mean(self.pooled(setting, split))
+        return finite_mean(self.pooled(setting, split))
 
     def overall_per_label(self, setting: str, split: str | None = None) -> dict[str, float]:
         """Mean RTE [%] of ``setting`` per environment label, ``split`` (None: all) pooled."""
         labels = np.concatenate([[lab or "" for lab in s.labels]
                                  for s in self._of(setting, split)])
         errs = self.pooled(setting, split)
-        return {lab: _mean(errs[labels == lab]) for lab in dict.fromkeys(labels.tolist()) if lab}
+        return {lab: finite_mean(errs[labels == lab])
+                for lab in dict.fromkeys(labels.tolist()) if lab}
 
     def kitti_split(self, setting: str, split: str) -> dict[str, float]:
         """The devkit metric of ``setting`` over every segment of the ``split`` sequences pooled
@@ -134,12 +136,13 @@ class Evaluation:
             ok = [(run.t_err_pct, run.kitti) for run in (s.replicas[r] for s in scores)
                   if run.t_err_pct is not None and run.kitti is not None]
             failed = len(ok) < len(scores)
-            rte.append(math.nan if failed else _mean(np.concatenate([e for e, _ in ok])))
+            rte.append(math.nan if failed else finite_mean(np.concatenate([e for e, _ in ok])))
             kitti.append(math.nan if failed else KittiSegments.concat([k for _, k in ok]).t_err_pct)
         return {"rte_pct": rte, "kitti_t_err_pct": kitti}
 
 
-def _mean(values: NDArray[np.float64]) -> float:
+def finite_mean(values: NDArray[np.float64]) -> float:
+    """Mean of the finite values (NaN without one): an RTE [%] over start frames."""
     v = values[np.isfinite(values)]
     return float(v.mean()) if len(v) else math.nan
 

@@ -6,7 +6,7 @@ import logging
 import os
 import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
@@ -163,9 +163,14 @@ class SimulatedScans:
 def simulate_scans(spec: SimSpec) -> SimulatedScans:
     """Simulate ``spec`` into memory, for a world that is run and thrown away (the verdict's
     suites): the same scans as ``simulate_sequence`` writes, without encoding, compressing and
-    decoding them (x0.71 of a suite's wall time: docs/performance.md, "The verdict's suites")."""
+    decoding them (x0.71 of a suite's wall time: docs/performance.md, "The verdict's suites");
+    the ground-truth poses as the MCAP gives them back (``as_recorded``), to the bit."""
+    from pipeline.sequence import as_recorded
+
     world = make_world(spec)
-    scans = list(iter_scans(world, spec.sensor_model(), spec.seed, motion=spec.motion))
+    scans = [scan if scan.T_world_lidar is None
+             else replace(scan, T_world_lidar=as_recorded(scan.T_world_lidar))
+             for scan in iter_scans(world, spec.sensor_model(), spec.seed, motion=spec.motion)]
     return SimulatedScans(scans, list(world.poses.frame_labels))
 
 

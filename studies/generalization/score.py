@@ -10,7 +10,9 @@ import statistics
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from pipeline.evaluate.result import SETTINGS
+import numpy as np
+
+from pipeline.evaluate.result import SETTINGS, finite_mean
 from studies.suites.runner import WorldResult
 
 
@@ -79,13 +81,15 @@ def _ratio(a: float, b: float) -> float:
 def world_score(result: WorldResult, adaptive: str = "adaptive") -> WorldScore:
     """The toy's view of one world's runs (``studies.suites.runner``): the nominal run's RTE
     of every setting, overall and per label, the replicas' RTE (NaN: failed) and the adaptive
-    schedule's parameter changes."""
-    labels = [lab for lab in dict.fromkeys(result.labels) if lab]
-    runs = {s: result.run_rte(s) for s in ("baseline", "fixed", adaptive)}
+    schedule's parameter changes; every mean the evaluate stage's (``finite_mean``), as the
+    toy's figures have always been."""
+    labels = np.array(result.labels)
+    names = [lab for lab in dict.fromkeys(result.labels) if lab]
+    t = {s: result.t_err_pct[s] for s in ("baseline", "fixed", adaptive)}
     return WorldScore(
         result.name, result.segments, result.sensor, result.frames, result.seed,
-        {s: float(runs[s][0]) for s in SETTINGS},
-        {s: {lab: float(result.run_rte(s, lab)[0]) for lab in labels} for s in SETTINGS},
+        {s: finite_mean(t[s][0]) for s in SETTINGS},
+        {s: {lab: finite_mean(t[s][0][labels == lab]) for lab in names} for s in SETTINGS},
         int(result.selection[adaptive]["changes"]), result.wall_time_s,
-        {s: [float(v) for v in runs[s][1:]] for s in SETTINGS} if len(runs["fixed"]) > 1
+        {s: [finite_mean(row) for row in t[s][1:]] for s in SETTINGS} if len(t["fixed"]) > 1
         else {})

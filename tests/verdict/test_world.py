@@ -47,14 +47,14 @@ def test_a_world_in_memory_is_the_world_its_mcap_gives_back(tmp_path: Path) -> N
         np.testing.assert_array_equal(a.points_lidar, b.points_lidar)
         assert a.time_s is not None  # swept scans (the training sensor model's motion)
         np.testing.assert_array_equal(a.time_s, b.time_s)
-        np.testing.assert_allclose(a.T_world_lidar, b.T_world_lidar, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(a.T_world_lidar, b.T_world_lidar)  # as recorded, to the bit
 
     params = {"resolution": 1.5, "keyframe_interval": 4.0}
     in_memory = _loaded(world.name, memory.scans, memory.labels).run(params, 0, 0.005)
     from_mcap = _loaded(world.name, decoded, labels).run(params, 0, 0.005)
     assert not in_memory[1] and not from_mcap[1]
     assert np.isfinite(in_memory[0]).any()
-    np.testing.assert_allclose(in_memory[0], from_mcap[0], rtol=1e-9, equal_nan=True)
+    np.testing.assert_array_equal(in_memory[0], from_mcap[0])  # the same runs, to the bit
 
 
 def test_a_world_without_ground_truth_or_labels_is_refused() -> None:
