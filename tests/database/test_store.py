@@ -13,7 +13,7 @@ import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
 from helpers.evaluation_data import cli_fails
-from helpers.results_db import KITTI_LENGTHS, LENGTH_M, World, build_database
+from helpers.results_db import KITTI_LENGTHS, LENGTH_M, World, build_database, make_world
 
 from pipeline.database.store import frame_label_table
 from pipeline.errors import InputError
@@ -30,7 +30,7 @@ from stages.cli import main
 
 @pytest.fixture(scope="module")
 def world(tmp_path_factory: pytest.TempPathFactory) -> World:
-    return build_database(tmp_path_factory.mktemp("world"))
+    return build_database(make_world(tmp_path_factory.mktemp("world")))
 
 
 def connect(world: World) -> duckdb.DuckDBPyConnection:

@@ -12,14 +12,14 @@ from pathlib import Path
 import duckdb
 import numpy as np
 import pytest
-from helpers.results_db import build_database
+from helpers.results_db import build_database, make_world
 from helpers.scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[2] / "experiments" / "portfolio_loso.py"
 
 
 def test_a_run_on_a_small_database(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    world = build_database(tmp_path)
+    world = build_database(make_world(tmp_path))
     load_script(SCRIPT).main(["--db", str(world.db), "--k", "2,5"])
     lines = capsys.readouterr().out.splitlines()
     assert "2 sequences, 85 frames, 3 members" in lines[0]

@@ -74,16 +74,15 @@ def write_environment(path: Path, gts: dict[str, np.ndarray]) -> None:
     pq.write_table(pa.table(cols), path)
 
 
-def build_database(root: Path) -> World:
-    """``make_world`` in ``root``, its descriptors (``root``/environment.parquet) and the
-    database the ``rte`` command builds from them (``World.db``)."""
+def build_database(world: World) -> World:
+    """``world``'s descriptors (its root/environment.parquet) and the database the ``rte``
+    command builds from them and its studies (``World.db``)."""
     from click.testing import CliRunner
 
     from stages.cli import main
 
-    world = make_world(root)
-    write_environment(root / "environment.parquet", world.gts)
+    write_environment(world.root / "environment.parquet", world.gts)
     result = CliRunner().invoke(main, world.args(world.db, "--environment",
-                                                 str(root / "environment.parquet")))
+                                                 str(world.root / "environment.parquet")))
     assert result.exit_code == 0, result.output
     return world
