@@ -88,14 +88,14 @@ verdict-headroom: setup
 # the docs pages that quote metrics/*.json (docs/results/toy.md, the README's result), rendered
 # from the committed metrics, dvc.lock and docs/results/runs.yaml; a test checks they are current
 docs: setup
-	$(BIN)/adaptune docs
+	$(BIN)/adaptune study docs
 
 # The paper's KITTI protocol (Table II): train 00-05, test 06-10, L = 100 m, the devkit metric.
 #   make kitti KITTI_ROOT=/data/kitti/dataset         real KITTI (a KITTI odometry root), or
 #   make kitti KITTI_SIMULATED=<folder of NN.txt>     simulated KITTI along the real trajectories
 #   [KITTI_ALGORITHMS="gicp kiss_icp ndt"] [KITTI_OPTS="--start 0 --end 999 --iterations 64"]
 # One `dvc exp run evaluate generalize` per algorithm (the stages they need, not the toy's
-# simulate; adaptune kitti-preset prints the --set-params, among them generalize.worlds=0:
+# simulate; adaptune study kitti-preset prints the --set-params, among them generalize.worlds=0:
 # KITTI needs no generalization suite, and that stage then writes outputs that say so, not
 # the toy's), then the table of all of them: $(KITTI_OUT)/table.md and
 # table.json (from each algorithm's metrics and record).
@@ -107,13 +107,13 @@ kitti: setup
 	  { echo "make kitti: set KITTI_ROOT=<KITTI odometry root> or KITTI_SIMULATED=<folder>" >&2; exit 1; }
 	mkdir -p $(KITTI_OUT)/metrics $(KITTI_OUT)/records
 	for a in $(KITTI_ALGORITHMS); do \
-	  $(BIN)/adaptune kitti-preset $(KITTI_SOURCE) --algorithm $$a $(KITTI_OPTS) \
+	  $(BIN)/adaptune study kitti-preset $(KITTI_SOURCE) --algorithm $$a $(KITTI_OPTS) \
 	    > $(KITTI_OUT)/$$a.args && \
 	  PATH="$(abspath $(BIN)):$$PATH" xargs -a $(KITTI_OUT)/$$a.args -d '\n' $(BIN)/dvc exp run evaluate generalize && \
 	  cp metrics/evaluation.json $(KITTI_OUT)/metrics/$$a.json && \
 	  cp records/evaluation.json $(KITTI_OUT)/records/$$a.json || exit 1; \
 	done
-	$(BIN)/adaptune kitti-table $(foreach a,$(KITTI_ALGORITHMS),$(KITTI_OUT)/metrics/$(a).json) \
+	$(BIN)/adaptune study kitti-table $(foreach a,$(KITTI_ALGORITHMS),$(KITTI_OUT)/metrics/$(a).json) \
 	  --out $(KITTI_OUT)
 
 clean:

@@ -7,7 +7,8 @@
 - ``matrix4``: a 4x4 matrix a pose on 4 lines; element (3, 3) is 1, or the stamp [s] (as the
   LiDAR-inertial mapping tools write it).
 ``auto`` tells them apart by their content only where that is unambiguous (numbers a line,
-commas and a header); otherwise it asks for the format. Rotations must be rotations (R^T R = I,
+commas and a header: ``fitting_formats``); otherwise it asks for the format, naming every one
+that could fit. Rotations must be rotations (R^T R = I,
 det +1) and quaternions unit ones. Which frame the poses are in (camera or LiDAR) is the
 caller's business. Errors name the file and the line.
 """
@@ -86,25 +87,48 @@ def _rows(path: Path) -> _Rows:
     return _Rows(lines, tokens, values, commas, header)
 
 
-def guess_format(path: Path, rows: _Rows) -> str:
-    """The format of a pose file from its content, where unambiguous (module docstring)."""
+def fitting_formats(rows: _Rows) -> list[str]:
+    """Every format whose shape the data has, by its first line (a later line of another width
+    is then an error naming that line): ``kitti`` 12 numbers, ``tum`` 8, ``euroc`` 8 or more
+    comma-separated, ``matrix4`` 4, in blocks of 4 lines whose last rows start 0 0 0."""
     width = len(rows.values[0])
-    head = " ".join(rows.header).lower()
-    if rows.commas:
-        if width >= 8 and ("q_rs_w" in head or head.startswith("#timestamp")):
-            return "euroc"
-        raise InputError(f"{path}: comma-separated poses without an EuRoC header: EuRoC (qw "
-                         "first) or TUM (qw last)? give --poses-format euroc|tum")
+    fits = []
     if width == 12:
-        return "kitti"
+        fits.append("kitti")
     if width == 8:
-        return "tum"
+        fits.append("tum")
+    if rows.commas and width >= 8:
+        fits.append("euroc")
     if width == 4 and len(rows.values) % 4 == 0 and all(
             rows.values[i][:3] == [0.0, 0.0, 0.0] for i in range(3, len(rows.values), 4)):
-        return "matrix4"
-    raise InputError(f"{path}: cannot tell the pose format from {width} numbers a line "
-                     "(kitti: 12, tum: 8, matrix4: 4 lines of 4, euroc: CSV with a header); "
-                     "give --poses-format")
+        fits.append("matrix4")
+    return fits
+
+
+def guess_format(path: Path, rows: _Rows) -> str:
+    """The format of a pose file from its content, where unambiguous (module docstring): the
+    only format that fits (``fitting_formats``), EuRoC only with its header (a CSV of 8 numbers
+    could be EuRoC, qw first, or TUM with commas, qw last). InputError naming every format
+    that could fit otherwise."""
+    fits = fitting_formats(rows)
+    head = " ".join(rows.header).lower()
+    if "euroc" in fits and ("q_rs_w" in head or head.startswith("#timestamp")):
+        return "euroc"
+    if len(fits) == 1 and fits != ["euroc"]:
+        return fits[0]
+    shape = f"{len(rows.values[0])} numbers a line" + (", comma-separated" if rows.commas
+                                                        else "")
+    if fits:
+        no_header = " without an EuRoC header" if "euroc" in fits else ""
+        return _refuse_format(path, f"{shape}{no_header} could be {' or '.join(fits)}; give "
+                              f"--poses-format {'|'.join(fits)}")
+    return _refuse_format(path, f"cannot tell the pose format from {shape} (kitti: 12, tum: 8, "
+                          "matrix4: 4 lines of 4, euroc: CSV with a header); give "
+                          "--poses-format")
+
+
+def _refuse_format(path: Path, why: str) -> str:
+    raise InputError(f"{path}: {why}")
 
 
 def read_pose_file(path: str | Path, fmt: PoseFormat = "auto") -> PoseFile:

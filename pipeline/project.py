@@ -4,10 +4,13 @@ data set").
 ``init_project`` writes ``DIR/params.yaml`` and ``DIR/dvc.yaml``, as ``dvc init`` and
 ``kiss_icp_pipeline`` start a user off:
 
+- a KITTI root stands for its sequences that have ground truth, each a recording
+  (``pipeline.sources.detect.recordings_of``);
 - every recording is described by ``pipeline.sources.detect.recording_entry`` (its kind,
-  point-cloud topic and ground truth, found where unambiguous, checked by opening it) and
-  becomes a source of the ``data`` section, its path relative to DIR when it lies inside DIR,
-  else absolute;
+  point-cloud topic and ground truth, found where unambiguous, checked by opening it; its
+  ground truth must run longer than ``length_m``, written as base.length_m) and becomes a
+  source of the ``data`` section, its path relative to DIR when it lies inside DIR, else
+  absolute; the sequences of one KITTI root in one split are one source;
 - splits: a recording's own ``split`` option, else ``validation`` / ``test`` (the recordings
   named there), else, when no recording is in the validation split and there are two or more,
   the last one is validation; the rest train. Recordings in the test split are evaluated too
@@ -44,9 +47,15 @@ LEFT_OUT = ("simulate", "simulate_kitti", "generalize")
 """Stages of DVC_YAML a project of recordings has no use for."""
 CODE_PACKAGES = ("pipeline", "stages", "schemas")
 """Dependencies of DVC_YAML's stages in these folders are adaptune's code."""
-PARAMS_SECTIONS = ("base", "data", "descriptors", "trials", "fixed", "devkit", "surrogate",
-                   "select", "evaluate")
-"""The sections the new project's params.yaml spells out (the others keep their defaults)."""
+PARAMS_KEYS: dict[str, tuple[str, ...]] = {
+    "base": ("seed", "length_m", "sequences"), "data": ("sources",), "descriptors": (),
+    "trials": ("algorithm", "iterations", "workers"), "fixed": ("iterations",),
+    "devkit": ("lengths_m",), "surrogate": ("k",), "select": ("period_s",),
+    "evaluate": ("splits", "workers")}
+"""The sections the new project's stages read, and the keys its params.yaml spells out: the
+ones a first run edits. Every other key takes the code's default, so that `dvc exp show` has a
+column for these (DVC shows every key of params.yaml) and not for 60 more; `dvc exp run -S
+++section.key=value` adds one (docs/usage.md, "DVC experiments on a project")."""
 PATH_OPTIONS = ("poses", "times", "extrinsic")
 """Options of a recording that are paths (relative: to the list file that gives them)."""
 
@@ -69,10 +78,22 @@ class Project:
     sources: list[dict[str, Any]]
     evaluate_splits: list[str]
 
-    def splits(self) -> dict[str, list[str]]:
-        """Split -> the paths of its recordings."""
-        out: dict[str, list[str]] = {}
+    def recordings(self) -> list[dict[str, Any]]:
+        """One source a recording (a KITTI source: one a sequence, its path
+        ``ROOT/sequences/NN``), in order."""
+        out = []
         for s in self.sources:
+            if s["kind"] != "kitti":
+                out.append(s)
+                continue
+            out += [{**s, "path": f"{s['path']}/sequences/{seq}", "sequences": [seq],
+                     "poses": f"{s['path']}/poses/{seq}.txt"} for seq in s["sequences"]]
+        return out
+
+    def splits(self) -> dict[str, list[str]]:
+        """Split -> the paths of its recordings (``recordings``)."""
+        out: dict[str, list[str]] = {}
+        for s in self.recordings():
             out.setdefault(s["split"], []).append(s["path"])
         return out
 
@@ -109,13 +130,15 @@ def read_recording_list(path: str | Path) -> list[Recording]:
 
 def init_project(directory: str | Path, recordings: Sequence[Recording],
                  validation: Sequence[str | Path] = (), test: Sequence[str | Path] = (),
-                 force: bool = False) -> Project:
+                 force: bool = False, length_m: float | None = None) -> Project:
     """Write ``directory``/params.yaml and dvc.yaml for ``recordings`` (module docstring).
 
-    ``validation`` / ``test``: paths of recordings for those splits. ConfigError when a file
-    exists (unless ``force``), when a recording is ambiguous or has no ground truth, or when
-    a split names a path that is not a recording."""
-    from pipeline.sources.detect import recording_entry
+    ``validation`` / ``test``: paths of recordings for those splits (a KITTI root's: its
+    sequence folders). ``length_m``: base.length_m (None: the code's default). ConfigError
+    when a file exists (unless ``force``), when a recording is ambiguous or has no ground
+    truth, or when a split names a path that is not a recording; InputError naming a
+    recording whose ground truth runs no longer than ``length_m``."""
+    from pipeline.sources.detect import recording_entry, recordings_of
 
     directory = Path(directory).resolve()
     params_path, dvc_path = directory / "params.yaml", directory / "dvc.yaml"
@@ -124,19 +147,63 @@ def init_project(directory: str | Path, recordings: Sequence[Recording],
         raise ConfigError(f"{existing[0]}: exists; give --force to overwrite it")
     if not recordings:
         raise ConfigError("no recordings: give at least one (--recording PATH or --list FILE)")
+    recordings = [Recording(path, rec.options) for rec in recordings
+                  for path in recordings_of(rec.path.resolve())]
+    length = float(section_defaults("base")["length_m"]) if length_m is None else length_m
     splits = assign_splits(recordings, validation, test)
-    sources = []
+    sources: list[dict[str, Any]] = []
     for rec, split in zip(recordings, splits, strict=True):
-        entry = recording_entry(rec.path.resolve(), {**rec.options, "split": split})
-        sources.append(_relative(entry, directory))
+        entry = _relative(recording_entry(rec.path, {**rec.options, "split": split}, length),
+                          directory)
+        if sources and _same_kitti_root(sources[-1], entry):
+            sources[-1]["sequences"] = [*sources[-1]["sequences"], *entry["sequences"]]
+        else:
+            sources.append(entry)
     evaluate_splits: list[str] = [s for s in ("validation", "test") if s in splits] or ["train"]
-    params = project_params(sources, evaluate_splits)
+    params = project_params(sources, evaluate_splits, length)
     deps = list(dict.fromkeys(d for s in sources for d in _deps(s)))
     stages, plots = project_stages(deps)
     directory.mkdir(parents=True, exist_ok=True)
     _write(params_path, PARAMS_HEADER, params)
     _write(dvc_path, DVC_HEADER, {"stages": stages, "plots": plots})
+    ignore_outputs(directory, stages)
     return Project(params_path, dvc_path, sources, evaluate_splits)
+
+
+def cached_outputs(stages: Mapping[str, Any]) -> list[str]:
+    """The outputs of ``stages`` that DVC caches (and git must not track): every ``outs`` entry
+    but those with ``cache: false`` (metrics, records, plot data: committed to git)."""
+    out = []
+    for stage in stages.values():
+        for item in stage.get("outs", []):
+            path = _path_of(item)
+            options = item[path] if isinstance(item, Mapping) else None
+            if not (isinstance(options, Mapping) and options.get("cache") is False):
+                out.append(path)
+    return out
+
+
+def ignore_outputs(directory: Path, stages: Mapping[str, Any]) -> list[Path]:
+    """Write the ``.gitignore`` entries DVC writes for the cached outputs when their stage runs
+    (``/name`` in the ``.gitignore`` of the output's folder), before any stage runs: a first
+    ``dvc repro`` that fails leaves no output for ``git add -A`` to commit. Entries already
+    there are kept; returns the files written."""
+    from pipeline.io_utils import atomic_write_text
+
+    wanted: dict[Path, list[str]] = {}
+    for out in cached_outputs(stages):
+        path = Path(out)
+        wanted.setdefault(directory / path.parent / ".gitignore", []).append(f"/{path.name}")
+    written = []
+    for gitignore, entries in wanted.items():
+        text = gitignore.read_text(encoding="utf-8") if gitignore.is_file() else ""
+        missing = [e for e in dict.fromkeys(entries) if e not in text.splitlines()]
+        if missing:
+            body = text if not text or text.endswith("\n") else text + "\n"
+            gitignore.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(gitignore, body + "".join(f"{e}\n" for e in missing))
+            written.append(gitignore)
+    return written
 
 
 def assign_splits(recordings: Sequence[Recording], validation: Sequence[str | Path],
@@ -157,11 +224,22 @@ def assign_splits(recordings: Sequence[Recording], validation: Sequence[str | Pa
     return splits
 
 
-def project_params(sources: list[dict[str, Any]], evaluate_splits: list[str]) -> dict[str, Any]:
-    """The new project's params: PARAMS_SECTIONS at their defaults, the data and where it
-    goes, checked against every section's rules."""
-    params = {name: section_defaults(name) for name in PARAMS_SECTIONS}
+def _same_kitti_root(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
+    """Whether the KITTI sources ``a`` and ``b`` differ in their sequences only."""
+    return a["kind"] == b["kind"] == "kitti" and all(
+        a.get(k) == b.get(k) for k in {*a, *b} - {"sequences"})
+
+
+def project_params(sources: list[dict[str, Any]], evaluate_splits: list[str],
+                   length_m: float | None = None) -> dict[str, Any]:
+    """The new project's params: the keys of PARAMS_KEYS at their defaults (base.length_m
+    ``length_m`` when given), the data and where it goes, checked against every section's
+    rules."""
+    params = {name: {k: v for k, v in section_defaults(name).items() if k in keys}
+              for name, keys in PARAMS_KEYS.items()}
     params["base"]["sequences"] = SEQUENCE_FOLDERS["ingest"]
+    if length_m is not None:
+        params["base"]["length_m"] = length_m
     params["data"] = {"sources": sources}
     params["evaluate"]["splits"] = evaluate_splits
     check_params(params, "the new params.yaml")
@@ -223,24 +301,25 @@ def _relative(entry: dict[str, Any], directory: Path) -> dict[str, Any]:
 def _deps(entry: Mapping[str, Any]) -> list[str]:
     """What the ingest stage reads of a source (paths as params.yaml gives them): the
     recording and its pose, times and extrinsic files outside it; of a KITTI root, the
-    sequences' folders and pose files."""
+    sequences' folders and its poses folder (one dependency, one `dvc exp show` column, for
+    every sequence's ground truth)."""
     from pipeline.sources.poses import is_numbers
 
     root = str(entry["path"])
     if entry["kind"] == "kitti":
-        return [f"{root}/{part}" for seq in entry["sequences"]
-                for part in (f"sequences/{seq}", f"poses/{seq}.txt")]
+        return [*(f"{root}/sequences/{seq}" for seq in entry["sequences"]), f"{root}/poses"]
     files = [str(entry[k]) for k in PATH_OPTIONS
              if entry.get(k) is not None and not (k == "extrinsic" and is_numbers(entry[k]))]
     return [root, *(f for f in files if not Path(f).is_relative_to(root))]
 
 
 PARAMS_HEADER = """\
-# adaptune params.yaml, written by `adaptune init` from a list of recordings: every number of
-# the pipeline, one section per stage (docs/design.md, "Stages"), at the code's defaults.
-# data.sources are your recordings (paths relative to this file): edit their options or splits
-# here (docs/usage.md, "Your own data set"). A first run: fewer trials.iterations, a
-# base.length_m your recordings are longer than, then `dvc repro`.
+# adaptune params.yaml, written by `adaptune init` from a list of recordings: one section per
+# stage (docs/design.md, "Stages") with the keys a first run edits; every other key takes the
+# code's default (adaptune's own params.yaml lists them all): add one here or with
+# `dvc exp run -S ++section.key=value`. data.sources are your recordings (paths relative to
+# this file): edit their options or splits here (docs/usage.md, "Your own data set"). A first
+# run: fewer trials.iterations, then `dvc repro`.
 """
 DVC_HEADER = """\
 # adaptune dvc.yaml, written by `adaptune init`: adaptune's own stages from your recordings

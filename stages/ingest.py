@@ -155,14 +155,16 @@ def mcap(path: Path, **options: Any) -> None:
             help="Folder for <name>.mcap and index.json (data/recordings).")
 def ingest_set(params_path: Path | None, out_dir: Path) -> None:
     """Ingest the recordings of the params section ``data`` (dvc stage); relative paths in it
-    are relative to the params file's folder."""
-    from pipeline.config import load_section
+    are relative to the params file's folder. A recording whose ground truth runs no longer
+    than base.length_m is refused before any is written."""
+    from pipeline.config import BaseSection, load_section
     from pipeline.sequence_index import read_index
     from pipeline.sources.dataset import DataSection, ingest_data_set
 
     section = load_section(params_path, "data", DataSection)
+    length_m = load_section(params_path, "base", BaseSection).length_m
     base_dir = params_path.parent if params_path is not None else Path.cwd()
-    for report in ingest_data_set(section, out_dir, base_dir):
+    for report in ingest_data_set(section, out_dir, base_dir, length_m):
         _done(report)
     splits = read_index(out_dir).splits
     click.echo(f"{out_dir / 'index.json'}: "

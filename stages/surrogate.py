@@ -77,6 +77,13 @@ def surrogate(
                       (*RECORD_KEYS, "provenance"))
     click.echo(
         f"{algo}: {training['rows']} rows, {training['environments']} frames "
-        f"-> {out}; LOSO CV MAE {cv['mae']}, RMSE {cv['rmse']}, regret {cv['regret_mean']}",
+        f"-> {out}; LOSO CV MAE {cv['mae']}, RMSE {cv['rmse']}, regret {cv['regret_mean']}, "
+        f"rank gap {cv['rank_gap_median']}",
         err=True,
     )
+    from pipeline.report.checks import surrogate_error_exceeds_rank_gap
+
+    if surrogate_error_exceeds_rank_gap(cv):
+        click.echo("warning: the CV MAE exceeds the rank gap (the median RTE gap between the "
+                   "best and the worst trial at a held-out frame): the surrogate's choices are "
+                   "close to chance", err=True)

@@ -116,13 +116,16 @@ def _joint_table(out: Path, algorithm: str = "ndt", status: str = "ok") -> Path:
     return out
 
 
+def _evaluate_args(tmp_path: Path, sequences: Path, fixed: Path, adaptive: Path) -> list[str]:
+    return ["evaluate", "--params", str(REPO / "params.yaml"), "--sequences", str(sequences),
+            "--trials", str(tmp_path / "trials"), "--fixed", str(fixed), "--adaptive",
+            str(adaptive), "--out", str(tmp_path / "ev"), "--metrics", str(tmp_path / "m.json"),
+            "--record", str(tmp_path / "r.json"), "--plots", str(tmp_path / "plots"),
+            "--report", str(tmp_path / "report")]
+
+
 def _evaluate(tmp_path: Path, sequences: Path, fixed: Path, adaptive: Path) -> tuple[int, str]:
-    return _invoke("evaluate", "--params", str(REPO / "params.yaml"), "--sequences",
-                   str(sequences), "--trials", str(tmp_path / "trials"), "--fixed", str(fixed),
-                   "--adaptive", str(adaptive), "--out", str(tmp_path / "ev"), "--metrics",
-                   str(tmp_path / "m.json"), "--record", str(tmp_path / "r.json"),
-                   "--plots", str(tmp_path / "plots"), "--report",
-                   str(tmp_path / "report"))
+    return _invoke(*_evaluate_args(tmp_path, sequences, fixed, adaptive))
 
 
 def test_evaluate_without_the_fixed_stage_is_one_line(tmp_path: Path,
@@ -287,3 +290,60 @@ def test_replicas_run_each_setting_with_its_perturbed_parameters(
     assert len(runs["kitti_t_err_pct"]) == 3
     assert m["sequences"]["composite_0"]["replicas_rte_pct"]["fixed"] == (
         ev.score("fixed", "composite_0").replica_rte_pct)
+
+
+def test_the_report_and_the_metrics_carry_the_warnings(tmp_path: Path, kitti_root: Path,
+                                                       validation_set: Path) -> None:
+    """evaluate --model: metrics/evaluation.json's ``warnings`` flags follow the validation
+    figures and the model's cross-validation (issue 57.5); report.md opens with one sentence
+    for every flag set, and the stage prints them."""
+    from helpers.models import build_model
+
+    from pipeline.adaptive import run_adaptive
+    from pipeline.artifact import read_manifest
+
+    model = build_model(tmp_path / "model", kitti_root)
+    run_adaptive(model, [validation_set / "composite_0.mcap"], tmp_path / "adaptive")
+    fixed = _joint_table(tmp_path / "fixed")
+    (tmp_path / "trials").mkdir()  # no per-sequence study: none to count
+    code, out = _invoke(*_evaluate_args(tmp_path, validation_set, fixed, tmp_path / "adaptive"),
+                        "--model", str(model))
+    assert code == 0, out
+    metrics = json.loads((tmp_path / "m.json").read_text())
+    rte = metrics["rte_pct"]
+    cv = read_manifest(model)["cross_validation"]
+    assert metrics["warnings"] == {
+        "adaptive_worse_than_baseline": rte["adaptive"] > rte["baseline"],
+        "adaptive_worse_than_fixed": rte["adaptive"] > rte["fixed"],
+        "surrogate_error_exceeds_rank_gap": cv["mae"] > cv["rank_gap_median"]}
+    sentences = json.loads((tmp_path / "r.json").read_text())["warning_text"]
+    assert len(sentences) == sum(metrics["warnings"].values())
+    report = (tmp_path / "report" / "report.md").read_text()
+    for sentence in sentences:
+        assert f"> **Warning**: {sentence}." in report and f"warning: {sentence}" in out
+
+
+def test_warnings_name_their_figures() -> None:
+    from pipeline.report.checks import evaluation_warnings, warning_lines
+
+    m = {"headline_split": "train", "splits": {
+        "train": {"rte_pct": {"baseline": 1.0, "fixed": 1.0, "adaptive": 9.0}},
+        "validation": {"rte_pct": {"baseline": 1.357, "fixed": 2.0, "adaptive": 14.84}}}}
+    cv = {"mae": 15.7, "rank_gap_median": 3.2}
+    assert evaluation_warnings(m, cv) == {"adaptive_worse_than_baseline": True,
+                                          "adaptive_worse_than_fixed": True,
+                                          "surrogate_error_exceeds_rank_gap": True}
+    assert warning_lines(m, cv) == [
+        "adaptive is worse than baseline on the validation split: 14.840 % against 1.357 % "
+        "(x10.94)",
+        "adaptive is worse than fixed on the validation split: 14.840 % against 2.000 % (x7.42)",
+        "the surrogate's cross-validated error (MAE 15.700 %) exceeds the median RTE gap "
+        "between the best and the worst trial it ranks at a held-out frame (3.200 %): its "
+        "choices of parameters are close to chance"]
+    good = {"headline_split": "validation", "splits": {
+        "validation": {"rte_pct": {"baseline": 2.0, "fixed": 1.5, "adaptive": 1.0}}}}
+    assert evaluation_warnings(good, {"mae": 1.0, "rank_gap_median": 3.0}) == {
+        "adaptive_worse_than_baseline": False, "adaptive_worse_than_fixed": False,
+        "surrogate_error_exceeds_rank_gap": False}
+    assert warning_lines(good, None) == [] and "surrogate_error_exceeds_rank_gap" not in \
+        evaluation_warnings(good, {"mae": None, "rank_gap_median": None})

@@ -180,3 +180,21 @@ def test_the_defaults_check_sees_a_difference(tmp_path: Path) -> None:
     assert {d.split(":")[0] for d in differences} >= {
         "base.length_m", "trials.length_m", "evaluate.length_m", "trials.pruning.percentile",
         "select.settings.window"}
+
+
+def test_options_of_another_adapter_are_refused_on_load(tmp_path: Path) -> None:
+    """trials.adapter_options another algorithm takes (the command adapter's, after a change
+    of trials.algorithm) are one line naming them, whichever section a stage reads (issue
+    57.6); an algorithm's own options load."""
+    from pipeline.config import load_section
+
+    path = tmp_path / "params.yaml"
+    path.write_text("trials: {algorithm: kiss_icp, adapter_options: {command: ./tool, "
+                    "space: s.yaml, deskew: false}}\n")
+    with pytest.raises(ConfigError, match=r"^trials\.adapter_options: command, space are not "
+                       r"options of kiss_icp \(its options: deskew, .*\): left by another "
+                       r"algorithm\? drop them with `dvc exp run -S trials\.algorithm=kiss_icp "
+                       r"-S '~trials\.adapter_options'`"):
+        load_section(path, "base", BaseSection)
+    path.write_text("trials: {algorithm: kiss_icp, adapter_options: {deskew: false}}\n")
+    assert load_section(path, "base", BaseSection).length_m == 25.0

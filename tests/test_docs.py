@@ -196,3 +196,37 @@ def test_every_quick_start_command_is_valid() -> None:
     (params,) = [yaml.safe_load(b) for b in _blocks(_quick_start(), "yaml")]
     trials = validate_section(TrialsSection, "trials", params["trials"])
     validate_section(CommandOptions, "command option", trials.adapter_options)
+
+
+# ---------------------------------------------------------------- the metric's figure
+
+USAGE = REPO / "docs" / "usage.md"
+METRIC_FIGURE = REPO / "docs" / "figures" / "metric-rte.png"
+
+
+def _marked_commands(page: Path, marker: str) -> list[list[str]]:
+    """The `adaptune` command lines of the sh block after ``<!-- marker -->`` in ``page``."""
+    block = page.read_text().split(f"<!-- {marker} -->\n```sh\n", 1)[1].split("```", 1)[0]
+    return [shlex.split(ln)[1:] for ln in block.replace("\\\n", " ").splitlines()
+            if ln.startswith("adaptune ")]
+
+
+def test_the_metric_figure_is_made_by_the_documented_commands(
+        kitti_root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/usage.md's `metric rte --plot` lines run as written on the real KITTI 04 scans
+    (the KITTI root is the test data's): they give a table of the two estimates and a PNG of
+    the committed figure's size."""
+    from click.testing import CliRunner
+    from PIL import Image
+
+    commands = _marked_commands(USAGE, "metric plot")
+    assert [c[0] for c in commands] == ["ingest", "run", "run", "metric"]
+    monkeypatch.chdir(tmp_path)
+    for args in commands:
+        args = [str(kitti_root) if a == "/data/kitti/dataset" else a for a in args]
+        result = CliRunner().invoke(main, args)
+        assert result.exit_code == 0, (args, result.output)
+    rows = result.stdout.splitlines()[3:]
+    assert [r.split()[0] for r in rows] == ["gicp.parquet", "kiss_icp.parquet"]
+    with Image.open(tmp_path / "metric-rte.png") as made, Image.open(METRIC_FIGURE) as committed:
+        assert made.size == committed.size

@@ -17,22 +17,29 @@ from pipeline.errors import ConfigError
 from pipeline.sim.raycast import Raycaster
 from pipeline.sim.simulate import SimSpec, label_ranges, make_world
 from studies.generalization.score import WorldScore
-from studies.generalization.suite import GeneralizeSection, suite_worlds, world_of
-from studies.generalization.summary import ratio_summary, suite_metrics
+from studies.generalization.suite import (
+    GeneralizeSection,
+    GeneralizeTargets,
+    generalization_world,
+    generalization_worlds,
+)
+from studies.generalization.summary import generalization_metrics, median_summary
+
+TARGETS = GeneralizeTargets.model_validate({}).model_dump()
 
 
 def test_world_i_depends_on_its_root_and_i_alone() -> None:
     section = GeneralizeSection(worlds=6)
-    more = suite_worlds(section.model_copy(update={"worlds": 9}))
-    assert suite_worlds(section) == more[:6]
-    dev = suite_worlds(section.model_copy(update={"suite": "dev"}))
+    more = generalization_worlds(section.model_copy(update={"worlds": 9}))
+    assert generalization_worlds(section) == more[:6]
+    dev = generalization_worlds(section.model_copy(update={"suite": "dev"}))
     assert {w.spec.seed for w in dev}.isdisjoint(w.spec.seed for w in more)
     assert [w.name for w in dev] == [f"dev_{i:02d}" for i in range(6)]
 
 
 def test_worlds_follow_the_section() -> None:
     section = GeneralizeSection(worlds=40, segments=(2, 5), segment_frames=(100, 200))
-    worlds = suite_worlds(section)
+    worlds = generalization_worlds(section)
     for i, w in enumerate(worlds):
         segs = w.spec.segments
         assert 2 <= len(segs) <= 5 and set(segs) <= set(section.labels)
@@ -73,12 +80,12 @@ def test_a_short_cave_between_streets_is_driven_to_the_last_frame() -> None:
 
 def test_ratio_summary() -> None:
     names = ["a", "b", "c", "d", "e"]
-    s = ratio_summary(names, [0.5, 0.8, 1.2, 0.6, math.nan], 500, seed=1)
+    s = median_summary(names, [0.5, 0.8, 1.2, 0.6, math.nan], 500, seed=1)
     assert s["median"] == pytest.approx(0.7) and s["worlds"] == 4
     assert (s["worst"], s["worst_world"], s["win_rate"]) == (1.2, "c", 0.75)
     lo, hi = s["median_interval"]
     assert 0.5 <= lo <= s["median"] <= hi <= 1.2
-    assert ratio_summary(names, [0.5, 0.8, 1.2, 0.6, math.nan], 500, seed=1) == s
+    assert median_summary(names, [0.5, 0.8, 1.2, 0.6, math.nan], 500, seed=1) == s
 
 
 def test_the_verdict_is_a_metric() -> None:
@@ -88,10 +95,11 @@ def test_the_verdict_is_a_metric() -> None:
         return WorldScore(f"w{i}", ("cave", "open"), "hdl32", 100, i,
                           {"baseline": 2.0, "fixed": 4.0, "adaptive": adaptive}, {}, 0, 0.0)
 
-    good = suite_metrics([world(i, 1.0) for i in range(5)], "test", 1, 200, "ndt", 25.0)
+    good = generalization_metrics([world(i, 1.0) for i in range(5)], "test", 1, 200, "ndt", 25.0,
+                                  TARGETS)
     assert good["summary"]["adaptive_vs_best"]["targets_met"] is True
-    one_loss = suite_metrics([*(world(i, 1.0) for i in range(5)), world(5, 2.2)], "test", 1,
-                             200, "ndt", 25.0)
+    one_loss = generalization_metrics([*(world(i, 1.0) for i in range(5)), world(5, 2.2)],
+                                      "test", 1, 200, "ndt", 25.0, TARGETS)
     assert one_loss["summary"]["adaptive_vs_best"]["targets_met"] is False  # worst 1.1
     assert "targets_met" not in one_loss["summary"]["adaptive_vs_fixed"]
 
@@ -124,8 +132,9 @@ def test_bad_section_values_name_the_rule(data: dict, message: str) -> None:
 
 def test_world_of_draws_from_the_named_suite() -> None:
     section = GeneralizeSection()
-    assert world_of(section, "test", 3) == suite_worlds(section)[3]
-    assert world_of(section, "dev", 3).spec != world_of(section, "test", 3).spec
+    assert generalization_world(section, "test", 3) == generalization_worlds(section)[3]
+    dev, test = (generalization_world(section, s, 3) for s in ("dev", "test"))
+    assert dev.spec != test.spec
 
 
 def test_replica_factors_and_perturbed_parameters() -> None:
@@ -151,24 +160,25 @@ def test_replica_factors_and_perturbed_parameters() -> None:
 def test_replica_figures() -> None:
     """The replica ratios divide the settings' medians over their runs; the noise block gives
     the runs' spread and the ratios two runs of one setting show."""
-    from studies.generalization.summary import noise_summary, suite_metrics
+    from studies.generalization.summary import generalization_metrics, noise_summary
 
     one = WorldScore("a", ("cave",), "hdl32", 10, 1, {"baseline": 2.0, "fixed": 1.0,
                      "adaptive": 1.5}, {}, 0, 0.0,
                      {"baseline": [4.0, 3.0], "fixed": [1.0, 1.0], "adaptive": [0.5, math.nan]})
     assert one.replica_medians() == {"baseline": 3.0, "fixed": 1.0, "adaptive": 1.0}
     assert one.replica_ratios()["adaptive_vs_best"] == 1.0
-    noise = noise_summary([one])
+    noise = noise_summary([one], TARGETS["worst"])
     # pairs: baseline 2/4 2/3 4/2 4/3 3/2 3/4, fixed all 1 -> 3 of 12 above 1.05 (2, 4/3, 1.5)
     assert noise["chance_above_worst_target"] == pytest.approx(3 / 12)
     assert noise["failed_replicas"] == 1
     assert noise["cv_median"]["fixed"] == 0.0
     assert noise["cv_median"]["baseline"] == pytest.approx(np.std([2, 4, 3]) / 3)
-    m = suite_metrics([one], "dev", 1, 200, "ndt", 25.0)
+    m = generalization_metrics([one], "dev", 1, 200, "ndt", 25.0, TARGETS)
     assert m["replicas"] == 2 and m["replica_summary"]["adaptive_vs_best"]["median"] == 1.0
     plain = WorldScore("b", ("cave",), "hdl32", 10, 1, {"baseline": 2.0, "fixed": 1.0,
                        "adaptive": 1.5}, {}, 0, 0.0)
-    assert "replica_summary" not in suite_metrics([plain], "dev", 1, 200, "ndt", 25.0)
+    plain_metrics = generalization_metrics([plain], "dev", 1, 200, "ndt", 25.0, TARGETS)
+    assert "replica_summary" not in plain_metrics
 
 
 def test_a_suite_of_no_world_writes_outputs_that_say_so(tmp_path: Path) -> None:
@@ -199,7 +209,7 @@ def test_a_suite_of_no_world_writes_outputs_that_say_so(tmp_path: Path) -> None:
 def test_the_small_suite_reports_the_verdicts_statistics() -> None:
     """The geometric block: geometric means of the per-world ratios (over the runs' medians
     with replicas) with their 95 % intervals and Wilson win rates (studies.verdict)."""
-    from studies.generalization.summary import suite_metrics
+    from studies.generalization.summary import generalization_metrics
 
     def score(name: str, adaptive: float, replicas: list[float]) -> WorldScore:
         return WorldScore(name, ("cave",), "hdl32", 10, 1, {"baseline": 2.0, "fixed": 1.0,
@@ -208,7 +218,8 @@ def test_the_small_suite_reports_the_verdicts_statistics() -> None:
 
     scores = [score("a", 0.5, [0.5, 9.0]), score("b", 2.0, [2.0, 2.0]),
               score("c", 0.25, [0.25, 0.25])]
-    g = suite_metrics(scores, "dev", 1, 200, "ndt", 25.0)["geometric"]["adaptive_vs_fixed"]
+    m = generalization_metrics(scores, "dev", 1, 200, "ndt", 25.0, TARGETS)
+    g = m["geometric"]["adaptive_vs_fixed"]
     assert g["value"] == pytest.approx((0.5 * 2.0 * 0.25) ** (1 / 3))  # medians 0.5, 2, 0.25
     assert g["low"] < g["value"] < g["high"]
     assert g["win_rate"]["value"] == pytest.approx(2 / 3) and g["worlds"] == 3

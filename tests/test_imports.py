@@ -104,3 +104,22 @@ def test_the_graph_sees_imports_inside_functions() -> None:
     """A check of the checker: an import inside a function counts (pipeline.adaptive imports
     pipeline.runtime only inside its functions)."""
     assert "pipeline.runtime" in edges()["pipeline.adaptive"]
+
+
+SUITE_NAMES = ("run_suite", "score_world", "SuiteInputs", "suite_metrics", "ratio_summary",
+               "plot_rows", "suite_worlds", "world_of", "_logged", "suite_figure", "load_world",
+               "write_world", "read_results", "WorldResult", "costliest_first")
+"""The names the toy's generalization suite and the verdict once both defined (two runners of
+"settings over a suite of worlds"): one suite runner now, ``studies.suites``."""
+
+
+def test_no_two_modules_define_the_same_suite_function() -> None:
+    import ast
+
+    where: dict[str, list[str]] = defaultdict(list)
+    for package in ("pipeline", "studies"):
+        for path in sorted((REPO / package).rglob("*.py")):
+            for node in ast.parse(path.read_text(encoding="utf-8")).body:
+                if isinstance(node, ast.FunctionDef | ast.ClassDef) and node.name in SUITE_NAMES:
+                    where[node.name].append(str(path.relative_to(REPO)))
+    assert {name: files for name, files in where.items() if len(files) > 1} == {}

@@ -105,7 +105,8 @@ def test_recordings_to_a_model_with_init_and_dvc_repro(kitti_root: Path, tmp_pat
     project = tmp_path / "myproject"
     out = run(clone, env, str(BIN / "adaptune"), "init", str(project),
               "--recording", str(recordings / "drive1"), "--recording",
-              str(recordings / "drive2"), "--recording", str(recordings / "scans"))
+              str(recordings / "drive2"), "--recording", str(recordings / "scans"),
+              "--length", "4")
     assert "3 recordings (2 train, 1 validation)" in out
     params = yaml.safe_load((project / "params.yaml").read_text())
     assert [(s["kind"], s["split"], s.get("gt_topic") or s.get("poses"))

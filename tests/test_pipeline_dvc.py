@@ -15,6 +15,7 @@ evaluate stage, to keep the suite short.
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import shlex
@@ -302,11 +303,17 @@ DOCUMENTED = ("README.md", "docs/usage.md")
 is their home; a line added to the README would be run too)."""
 
 
+ELSEWHERE = "<!-- set-param forms -->\n"
+"""The marker of docs/usage.md's `dvc exp run -S` forms of an `adaptune init` project, which
+tests/test_project_dvc.py runs on one (not experiments of this pipeline)."""
+
+
 def documented_variations() -> dict[str, list[str]]:
-    """The `dvc exp run` lines (in every ``sh`` block) of the DOCUMENTED pages, keyed by what
-    they set."""
+    """The `dvc exp run` lines (in every ``sh`` block but the one marked ELSEWHERE) of the
+    DOCUMENTED pages, keyed by what they set."""
     blocks = [b.split("```", 1)[0] for page in DOCUMENTED
-              for b in (REPO / page).read_text().split("```sh")[1:]]
+              for before, b in itertools.pairwise((REPO / page).read_text().split("```sh"))
+              if not before.endswith(ELSEWHERE)]
     lines = {}
     for line in "\n".join(blocks).replace("\\\n", " ").splitlines():
         if not line.startswith("dvc exp run "):

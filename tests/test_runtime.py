@@ -82,11 +82,22 @@ def test_every_flipped_byte_is_refused(model_dir: Path, tmp_path: Path) -> None:
             bad = copy_model(model_dir, tmp_path / f"{name}.{pos}")
             data = bytearray((bad / name).read_bytes())
             data[pos] ^= 0x01
+            if name == "manifest.json" and _same_json(bytes(data), model_dir / name):
+                continue  # the 17th digit of a float: the same number, the same manifest
             (bad / name).write_bytes(bytes(data))
             with pytest.raises(ArtifactError) as exc:
                 load_model(bad)
             msg = str(exc.value)
             assert "\n" not in msg and str(bad) in msg, msg
+
+
+def _same_json(data: bytes, original: Path) -> bool:
+    """Whether ``data`` is JSON that says what ``original`` says (a flipped last digit of a
+    17-digit float can give the same double)."""
+    try:
+        return bool(json.loads(data) == json.loads(original.read_bytes()))
+    except (ValueError, UnicodeDecodeError):
+        return False
 
 
 def rewrite_manifest(dst: Path, **changes: object) -> None:

@@ -86,6 +86,19 @@ def test_cross_validation_is_leave_one_sequence_out(tmp_path: Path, kitti_root: 
     assert cv["y_chosen_mean"] < rows.y.mean()
 
 
+def test_the_rank_gap_is_the_median_spread_of_a_frames_trials(kitti_root: Path) -> None:
+    """rank_gap_median: over every held-out frame, the worst trial's y there minus the best's,
+    their median (every frame held out once with cv_max_frames above the frames)."""
+    rows, _ = synthetic_rows(kitti_root)
+    fitted = fit_surrogate(rows, get_adapter("ndt").space.to_json(),
+                           SurrogateSection(n_sobol=0, cv_max_frames=1000))
+    gaps = [rows.y[sel].max() - rows.y[sel].min()
+            for seq in np.unique(rows.sequences) for f in np.unique(rows.frames)
+            if (sel := (rows.sequences == seq) & (rows.frames == f)).sum() > 1]
+    assert len(gaps) == 40
+    assert fitted.cv["rank_gap_median"] == pytest.approx(np.median(gaps), rel=1e-12)
+
+
 def test_novelty_distance_is_the_leave_one_sequence_out_quantile(kitti_root: Path) -> None:
     rows, _ = synthetic_rows(kitti_root)
     space = get_adapter("ndt").space.to_json()

@@ -5,9 +5,12 @@ evo's Python API).
 - RTE: the pipeline's own per-start-frame relative error over ``length_m`` metres
   (pipeline.metrics.rte), averaged over the start frames: the number trials optimise. It is
   taken on the estimate as given (no alignment).
-- Alignment of the estimate to the ground truth (evo's ``-a`` / ``-s`` / ``--align_origin``):
-  ``none``; ``origin`` (its first pose onto the ground truth's first pose); ``se3`` (Umeyama:
-  rotation and translation fitted to every position); ``sim3`` (Umeyama with scale).
+- Alignment of the estimate to the ground truth (evo's ``-a`` / ``-as`` / ``-s`` /
+  ``--align_origin``): ``none``; ``origin`` (its first pose onto the ground truth's first
+  pose); ``se3`` (Umeyama: rotation and translation fitted to every position); ``sim3``
+  (Umeyama with scale); ``scale`` (the scale of the Sim(3) fit alone, applied to the
+  estimate's positions about its origin, as evo's ``-s`` without ``-a``). ``align_first``
+  N fits the Umeyama alignments to the first N paired poses only (evo's ``--n_to_align``).
 - APE (evo_ape): per pose, the translation error [m] and the rotation angle [deg] of
   inv(est) gt, after the alignment.
 - RPE (evo_rpe): per pair (i, j), the translation error [m] and the rotation angle [deg] of
@@ -27,7 +30,8 @@ other within 10 ms (the earlier one on a tie); otherwise pose k pairs with pose 
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -41,8 +45,12 @@ from pipeline.posefile import PoseFormat, read_pose_file
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
-Alignment = Literal["none", "origin", "se3", "sim3"]
-ALIGNMENTS: tuple[Alignment, ...] = ("none", "origin", "se3", "sim3")
+Alignment = Literal["none", "origin", "se3", "sim3", "scale"]
+ALIGNMENTS: tuple[Alignment, ...] = ("none", "origin", "se3", "sim3", "scale")
+FITTED: tuple[Alignment, ...] = ("se3", "sim3", "scale")
+"""The alignments fitted by Umeyama, which ``align_first`` restricts to the first poses."""
+MIN_ALIGN_POSES = 3
+"""Umeyama needs 3 poses at least (evo refuses fewer: a degenerate covariance)."""
 DeltaUnit = Literal["frames", "m"]
 MAX_STAMP_DIFF_NS = 10_000_000
 """Stamped poses pair with the nearest stamp within 10 ms (evo's max_diff 0.01 s)."""
@@ -166,17 +174,37 @@ def umeyama(src: F64, dst: F64, scale: bool) -> tuple[F64, F64, float]:
     return R, mu_d - s * R @ mu_s, s
 
 
-def align(gt: F64, est: F64, alignment: Alignment) -> tuple[F64, float]:
-    """(``est`` aligned to ``gt`` (M, 4, 4), the scale applied) for paired (M, 4, 4) poses."""
+def align(gt: F64, est: F64, alignment: Alignment,
+          align_first: int | None = None) -> tuple[F64, float]:
+    """(``est`` aligned to ``gt`` (M, 4, 4), the scale applied) for paired (M, 4, 4) poses;
+    a Umeyama alignment fitted to the first ``align_first`` pairs only when given."""
+    check_align_first(alignment, align_first, len(est))
     if alignment == "none":
         return est, 1.0
     if alignment == "origin":
         return gt[0] @ inv_se3(est[:1]) @ est, 1.0
-    R, t, s = umeyama(est[:, :3, 3], gt[:, :3, 3], scale=alignment == "sim3")
+    n = len(est) if align_first is None else align_first
+    R, t, s = umeyama(est[:n, :3, 3], gt[:n, :3, 3], scale=alignment in ("sim3", "scale"))
     aligned = est.copy()
+    if alignment == "scale":
+        aligned[:, :3, 3] = s * est[:, :3, 3]
+        return aligned, s
     aligned[:, :3, :3] = R @ est[:, :3, :3]
     aligned[:, :3, 3] = s * est[:, :3, 3] @ R.T + t
     return aligned, s
+
+
+def check_align_first(alignment: Alignment, align_first: int | None, poses: int) -> None:
+    """InputError unless ``align_first`` (None: every pose) suits ``alignment`` and the
+    ``poses`` paired poses."""
+    if align_first is None:
+        return
+    if alignment not in FITTED:
+        raise InputError(f"--align-first fits a Umeyama alignment ({', '.join(FITTED)}), "
+                         f"got --align {alignment}")
+    if not MIN_ALIGN_POSES <= align_first <= poses:
+        raise InputError(f"--align-first must be in [{MIN_ALIGN_POSES}, {poses}] (the paired "
+                         f"poses), got {align_first}")
 
 
 def rotation_angle_deg(R: F64) -> F64:
@@ -265,10 +293,25 @@ def _stats(err: F64) -> dict[str, float]:
             "min": float(err.min()), "max": float(err.max())}
 
 
-def trajectory_errors(gt: F64, est: F64, length_m: float, alignment: Alignment = "se3",
-                      rpe: RpeSettings | None = None) -> dict[str, Any]:
-    """RTE over ``length_m`` (of ``est`` as given), then APE and RPE after ``alignment``, of
-    paired (M, 4, 4) poses; JSON-ready."""
+@dataclass(frozen=True)
+class Comparison:
+    """One estimate against the ground truth: the JSON-ready ``summary`` and the per-pose
+    arrays behind it (M paired poses): ``gt`` and ``aligned`` (M, 4, 4), ``path_m`` (M,)
+    the ground truth's path distance [m], ``ape_t_m`` (M,) the APE translation error [m],
+    ``rte_t_pct`` (M,) the translational RTE [%] of the segment starting there (NaN: none)."""
+
+    summary: dict[str, Any]
+    gt: F64
+    aligned: F64
+    path_m: F64
+    ape_t_m: F64
+    rte_t_pct: F64
+
+
+def compare(gt: F64, est: F64, length_m: float, alignment: Alignment = "se3",
+            rpe: RpeSettings | None = None, align_first: int | None = None) -> Comparison:
+    """RTE over ``length_m`` (of ``est`` as given), then APE and RPE after ``alignment`` (fitted
+    to the first ``align_first`` poses when given), of paired (M, 4, 4) poses."""
     rpe = rpe or RpeSettings()
     path = path_distances(gt)
     if path[-1] <= length_m:
@@ -276,34 +319,42 @@ def trajectory_errors(gt: F64, est: F64, length_m: float, alignment: Alignment =
                          f"--length {length_m:g} m: no sub-trajectory to score")
     t_err, r_err = per_frame_rte(gt, est, length_m)
     ok = np.isfinite(t_err)
-    aligned, scale = align(gt, est, alignment)
+    aligned, scale = align(gt, est, alignment, align_first)
     ape_t, ape_r = ape_errors(gt, aligned)
     i, j = rpe_pairs(gt if rpe.pairs_from_reference else aligned, rpe)
     rpe_t, rpe_r = rpe_errors(gt, aligned, i, j)
-    return {
+    summary = {
         "frames": len(gt), "path_m": float(path[-1]),
         "rte": {"length_m": float(length_m), "segments": int(ok.sum()),
                 "t_err_pct": float(t_err[ok].mean()),
                 "r_err_deg_per_m": float(np.degrees(r_err[ok].mean())),
                 "t_err_pct_median": float(np.median(t_err[ok])),
                 "t_err_pct_max": float(t_err[ok].max())},
-        "alignment": {"method": alignment, "scale": scale},
+        "alignment": {"method": alignment, "scale": scale,
+                      "poses": len(gt) if align_first is None else align_first},
         "ape": {"translation_m": _stats(ape_t), "rotation_deg": _stats(ape_r)},
         "rpe": {"delta": rpe.delta, "delta_unit": rpe.unit, "all_pairs": rpe.all_pairs,
                 "pairs_from": "ground truth" if rpe.pairs_from_reference else "estimate",
                 "pairs": len(i), "translation_m": _stats(rpe_t), "rotation_deg": _stats(rpe_r)},
     }
+    return Comparison(summary, gt, aligned, path, ape_t, t_err)
 
 
-def evaluate_files(gt_path: str | Path, est_path: str | Path, length_m: float,
-                   alignment: Alignment = "se3", rpe: RpeSettings | None = None,
-                   gt_format: PoseFormat = "auto",
-                   est_format: PoseFormat = "auto") -> dict[str, Any]:
-    """``trajectory_errors`` of two files (module docstring: which files)."""
+def compare_files(gt_path: str | Path, est_paths: Sequence[str | Path], length_m: float,
+                  alignment: Alignment = "se3", rpe: RpeSettings | None = None,
+                  gt_format: PoseFormat = "auto", est_format: PoseFormat = "auto",
+                  align_first: int | None = None) -> tuple[Poses, list[Comparison]]:
+    """(the ground truth, ``compare`` of each estimate against it) for files (module
+    docstring: which files); every summary names its ground truth and estimate."""
     if not length_m > 0:
         raise InputError(f"--length must be > 0 m, got {length_m}")
-    gt, est = associate(load_poses(gt_path, gt_format), load_poses(est_path, est_format))
-    if not (np.isfinite(gt).all() and np.isfinite(est).all()):
-        raise InputError(f"{est_path}: a pose is not finite")
-    return {"ground_truth": str(gt_path), "estimate": str(est_path),
-            **trajectory_errors(gt, est, length_m, alignment, rpe)}
+    truth = load_poses(gt_path, gt_format)
+    out = []
+    for est_path in est_paths:
+        gt, est = associate(truth, load_poses(est_path, est_format))
+        if not (np.isfinite(gt).all() and np.isfinite(est).all()):
+            raise InputError(f"{est_path}: a pose is not finite")
+        c = compare(gt, est, length_m, alignment, rpe, align_first)
+        named = {"ground_truth": str(gt_path), "estimate": str(est_path), **c.summary}
+        out.append(replace(c, summary=named))
+    return truth, out

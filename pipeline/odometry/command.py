@@ -134,6 +134,8 @@ class CommandAdapter:
     name = "command"
     accepts_time_limit = True
 
+    options_model = CommandOptions
+
     def __init__(self, **options: object) -> None:
         self.options = parse_options(CommandOptions, self.name, dict(options))
         self.space = load_space(self.options.space)

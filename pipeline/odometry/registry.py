@@ -1,9 +1,10 @@
 """The explicit registry of odometry adapters (docs/design.md, "Seams").
 
-``ADAPTERS`` maps a name to a factory ``(**options) -> Adapter``. Factories import their
-module lazily, so that listing the names never imports small_gicp or kiss_icp.
+``ADAPTERS`` maps a name to a loader of its adapter class (``(**options) -> Adapter``), which
+imports its module lazily, so that listing the names never imports small_gicp or kiss_icp.
 Options are adapter-specific settings that are not tuned (e.g. ``source_voxel_m`` of ``ndt``,
-``command`` of ``command``); each adapter validates its own and rejects unknown ones.
+``command`` of ``command``): the class's ``options_model`` (``option_names``); each adapter
+validates its own and rejects unknown ones.
 """
 
 from __future__ import annotations
@@ -15,31 +16,31 @@ from pipeline.errors import ConfigError
 from pipeline.odometry.base import Adapter, ParameterSpace, with_space
 
 
-def _ndt(**options: Any) -> Adapter:
+def _ndt() -> type[Adapter]:
     from pipeline.odometry.ndt import NdtAdapter
 
-    return NdtAdapter(**options)
+    return NdtAdapter
 
 
-def _gicp(**options: Any) -> Adapter:
+def _gicp() -> type[Adapter]:
     from pipeline.odometry.gicp import GicpAdapter
 
-    return GicpAdapter(**options)
+    return GicpAdapter
 
 
-def _kiss_icp(**options: Any) -> Adapter:
+def _kiss_icp() -> type[Adapter]:
     from pipeline.odometry.kiss import KissIcpAdapter
 
-    return KissIcpAdapter(**options)
+    return KissIcpAdapter
 
 
-def _command(**options: Any) -> Adapter:
+def _command() -> type[Adapter]:
     from pipeline.odometry.command import CommandAdapter
 
-    return CommandAdapter(**options)
+    return CommandAdapter
 
 
-ADAPTERS: dict[str, Callable[..., Adapter]] = {
+ADAPTERS: dict[str, Callable[[], type[Adapter]]] = {
     "ndt": _ndt,
     "gicp": _gicp,
     "kiss_icp": _kiss_icp,
@@ -67,12 +68,23 @@ def adapter_names() -> list[str]:
     return list(ADAPTERS)
 
 
+def adapter_class(name: str) -> Any:
+    """The adapter class registered as ``name``; ConfigError for an unknown name."""
+    load = ADAPTERS.get(name)
+    if load is None:
+        raise ConfigError(f"unknown odometry algorithm {name!r} (known: {', '.join(ADAPTERS)})")
+    return load()
+
+
 def get_adapter(name: str, **options: Any) -> Adapter:
     """A new adapter ``name`` configured with ``options``; ConfigError for an unknown name."""
-    factory = ADAPTERS.get(name)
-    if factory is None:
-        raise ConfigError(f"unknown odometry algorithm {name!r} (known: {', '.join(ADAPTERS)})")
-    return factory(**options)
+    adapter: Adapter = adapter_class(name)(**options)
+    return adapter
+
+
+def option_names(name: str) -> list[str]:
+    """The untuned options the registered adapter ``name`` takes (its ``options_model``)."""
+    return list(adapter_class(name).options_model.model_fields)
 
 
 def build_adapter(name: str, options: Mapping[str, Any] | None = None,

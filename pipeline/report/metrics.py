@@ -11,9 +11,10 @@ from typing import Any
 from pipeline.evaluate.result import SETTINGS, Evaluation
 
 RECORD_KEYS = ("length_m", "replicas", "kitti_lengths_m", "segments", "wall_time_s", "params",
-               "trials", "replicas_rte_pct")
+               "trials", "replicas_rte_pct", "warning_text")
 """The summary's bookkeeping (besides its text): params echoed, segment counts, wall times,
-the parameters baseline and fixed ran with, trial counts, the replica runs' raw lists."""
+the parameters baseline and fixed ran with, trial counts, the replica runs' raw lists, the
+warnings' sentences (their flags, ``warnings``, are metrics: ``pipeline.report.checks``)."""
 
 
 def trials_summary(studies: Mapping[str, Path]) -> dict[str, dict[str, float]]:

@@ -13,12 +13,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pipeline.artifact import read_manifest
 from pipeline.evaluate.result import SETTINGS, Evaluation
 from pipeline.evaluate.runs import best_fixed_params, evaluate
 from pipeline.evaluate.section import EvaluateSection
 from pipeline.io_utils import atomic_write_text
 from pipeline.outputs import csv_text, write_metrics
 from pipeline.report import figures
+from pipeline.report.checks import evaluation_warnings, warning_lines
 from pipeline.report.metrics import RECORD_KEYS, metrics, trials_summary
 from pipeline.report.table2 import table2_json, table2_markdown
 
@@ -36,6 +38,7 @@ class EvaluationPaths:
     record: Path  # records/evaluation.json (the rest of the summary)
     plots: Path  # plots/ (CSV for dvc plots)
     report: Path  # report/ (report.md + PNG)
+    model: Path | None = None  # model/: its cross-validation for the warnings (None: unknown)
 
 
 def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection) -> dict[str, Any]:
@@ -49,6 +52,9 @@ def run_evaluation(paths: EvaluationPaths, settings: EvaluateSection) -> dict[st
     ev = evaluate(list(split_of), algorithm, fixed, paths.adaptive, paths.runs, settings,
                   paths.fixed, {p.stem: split for p, split in split_of.items()})
     result = metrics(ev, trials_summary({"trials": paths.trials, "fixed": paths.fixed}))
+    cv = None if paths.model is None else read_manifest(paths.model)["cross_validation"]
+    result["warnings"] = evaluation_warnings(result, cv)
+    result["warning_text"] = warning_lines(result, cv)
     write_metrics(paths.metrics, paths.record, result, RECORD_KEYS)
     write_plot_data(ev, paths.plots)
     trial_rows = [r for r in read_trials_tables(paths.trials).to_pylist()
@@ -141,9 +147,11 @@ def report_markdown(ev: Evaluation, m: Mapping[str, Any], pngs: Mapping[str, lis
     labels = list(dict.fromkeys(lab for s in SETTINGS for lab in m["rte_pct_per_label"][s]))
     head = ["method", *labels, "overall"]
     head_split = m["headline_split"]
+    warned = [f"> **Warning**: {line}." for line in m.get("warning_text", [])]
     lines = [
         f"# adaptune: baseline vs fixed vs adaptive ({ev.algorithm})",
         "",
+        *[part for line in warned for part in (line, "")],
         f"Split {head_split!r}: {', '.join(ev.in_split(head_split))}. Mean translational RTE "
         f"[%] of {ev.length_m:g} m sub-trajectories, one starting at every frame; a segment "
         "counts for the environment of its start frame; all sequences of the split pooled.",

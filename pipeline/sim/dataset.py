@@ -22,7 +22,6 @@ from pipeline.sim.simulate import (
     MotionMode,
     SimSpec,
     SimSummary,
-    costliest_first,
     derive_seed,
     simulate_sequence,
 )
@@ -119,15 +118,17 @@ def simulate_folder(specs: Mapping[str, SimSpec], index: Mapping[str, list[str]]
     what was written, in ``specs``' order.
 
     ``workers`` sequences at a time in spawned processes, the costliest first
-    (``costliest_first``); each sequence depends only on its own spec, so the files are the
-    same whatever ``workers``. ``progress``: a bar per sequence (one worker only); a log line
-    per finished sequence otherwise."""
+    (``pipeline.executor.costliest_first``); each sequence depends only on its own spec, so the
+    files are the same whatever ``workers``. ``progress``: a bar per sequence (one worker only); a
+    log line per finished sequence otherwise."""
+    from pipeline.executor import costliest_first
+
     out = output_folder(Path(out_dir))
     bars = progress and workers == 1
     jobs = [(spec, out / f"{name}.mcap", name, bars, compression)
             for name, spec in specs.items()]
     summaries = simulate_all(simulate_sequence, jobs, [job[1] for job in jobs], workers,
-                             not bars, costliest_first(list(specs.values())))
+                             not bars, costliest_first([s.rays() for s in specs.values()]))
     write_index(out, dict(index))
     return summaries
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import os
 import zlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
@@ -86,13 +86,6 @@ class SimSummary:
     points: int
     length_m: float
     labels: list[EnvLabel]
-
-
-def costliest_first(specs: Sequence[SimSpec]) -> list[int]:
-    """Indices of ``specs`` by falling ``SimSpec.rays``, ties in list order: the order to start
-    worlds in on a pool, so that no worker is left with a long world at the end (an HDL-64E
-    world costs about twice an HDL-32E one of as many frames)."""
-    return sorted(range(len(specs)), key=lambda i: -specs[i].rays())
 
 
 def derive_seed(base_seed: int, name: str) -> int:

@@ -66,6 +66,13 @@ class Source(Protocol):
         """The scans in time order."""
         ...
 
+    def ground_truth_poses(self) -> NDArray[np.float64] | None:
+        """(N, 4, 4) T_world_lidar of the N scans ``frames`` yields (their ``T_world_lidar``),
+        None without ground truth; without decoding the scans' points, so that what needs
+        the ground truth (its length: ``pipeline.sources.dataset.check_length``) is checked
+        before anything is written."""
+        ...
+
 
 def input_files(*items: str | Path | None) -> tuple[Path, ...]:
     """The items that name existing files or folders (an ``--extrinsic`` may be numbers)."""

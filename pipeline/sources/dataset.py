@@ -14,7 +14,8 @@ options, one to one those of ``adaptune ingest <kind>`` (with underscores for da
 
 Relative paths (path, poses, times, an extrinsic file) are relative to the folder of the params
 file, not the working directory, and ``~`` is the home folder. ``ingest_data_set`` checks
-every recording first (layout, topics, ground truth, unique names), then writes
+every recording first (layout, topics, ground truth, unique names, and that its ground truth
+runs longer than base.length_m: ``check_length``), then writes
 ``<out>/<name>.mcap`` for each and ``<out>/index.json`` ({"train": [...], "validation": [...],
 "test": [...]}; test only when a recording is in it), the layout the ``simulate`` stage writes,
 so every later stage reads either. With no sources it writes an empty index.
@@ -29,7 +30,7 @@ from typing import Annotated, Any, ClassVar, Literal
 from pydantic import Field, field_validator, model_validator
 
 from pipeline.config import Section
-from pipeline.errors import ConfigError
+from pipeline.errors import ConfigError, InputError
 from pipeline.io_utils import check_plain_name, output_folder
 from pipeline.sequence_index import write_index
 from pipeline.sources.base import IngestReport, IntensityMode, Source, write_sequence
@@ -176,10 +177,30 @@ class DataSection(Section):
         return self.model_copy(update={"sources": [s.resolved(base) for s in self.sources]})
 
 
-def ingest_data_set(section: DataSection, out_dir: str | Path,
-                    base_dir: str | Path) -> list[IngestReport]:
+def check_length(source: Source, length_m: float, what: str) -> bool:
+    """InputError, naming ``what``, when ``source``'s ground truth runs no longer than
+    ``length_m`` (base.length_m: an RTE segment of that length must fit, as the trials and the
+    evaluation require: ``pipeline.metrics.rte.check_scorable``); False when it has no ground
+    truth, True when it is long enough."""
+    from pipeline.metrics.rte import check_scorable
+
+    gt = source.ground_truth_poses()
+    if gt is None:
+        return False
+    try:
+        check_scorable(gt, length_m, what)
+    except InputError as exc:
+        raise InputError(f"{exc} (base.length_m, the RTE's length, `adaptune init --length`: "
+                         "give a longer recording or a smaller length)") from None
+    return True
+
+
+def ingest_data_set(section: DataSection, out_dir: str | Path, base_dir: str | Path,
+                    length_m: float | None = None) -> list[IngestReport]:
     """Ingest every recording of ``section`` into ``out_dir`` (module docstring); relative
-    paths are relative to ``base_dir``. ConfigError when two recordings have one name."""
+    paths are relative to ``base_dir``. ConfigError when two recordings have one name;
+    InputError, before any is written, when a recording's ground truth runs no longer than
+    ``length_m`` (``check_length``)."""
     out_dir = Path(out_dir)
     if not section.sources:
         log.info("ingest: no data sources configured, writing an empty data set")
@@ -195,6 +216,8 @@ def ingest_data_set(section: DataSection, out_dir: str | Path,
                               f"{entry.path}); give one of them a name")
         where[name] = entry.path
         splits.setdefault(entry.split, []).append(name)
+        if length_m is not None:
+            check_length(source, length_m, f"data.sources: {entry.path} (sequence {name})")
     output_folder(out_dir)  # once every recording opened and every name is checked
     reports = []
     for i, (entry, source) in enumerate(opened, 1):

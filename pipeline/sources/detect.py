@@ -10,8 +10,13 @@ everything ambiguous or missing is one error now, naming what to give:
   (the extrinsic, as for KITTI's camera poses) and the one other text file that reads as a
   pose file (KITTI, TUM, EuRoC or 4x4 blocks);
 - a KITTI sequence folder ``ROOT/sequences/NN``: the root and the sequence (its ground truth is
-  ``ROOT/poses/NN.txt``).
+  ``ROOT/poses/NN.txt``); a KITTI root (``ROOT`` with ``sequences/`` and ``poses/``) is its
+  sequences that have ground truth (``recordings_of``), each a recording.
 
+Every recording must have ground truth that runs longer than ``length_m`` (base.length_m, the
+RTE's length; ``pipeline.sources.dataset.check_length``), read without decoding its scans. A
+text file beside a folder's scans that is not a pose file of any format is named with the
+reason when the folder has no other (not dropped, to end in "no ground truth found").
 Options in ``given`` (the keys of a ``data`` source) win over what is found.
 """
 
@@ -22,13 +27,31 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.errors import ConfigError, InputError
-from pipeline.sources.base import Source
 from pipeline.sources.scanfiles import SCAN_SUFFIXES
 
 KINDS_HELP = ("a ROS 1 .bag file, a ROS 2 bag folder (metadata.yaml), an .mcap file, a folder of "
-              ".bin / .pcd / .ply scans or a KITTI ROOT/sequences/NN folder")
+              ".bin / .pcd / .ply scans, a KITTI ROOT/sequences/NN folder or a KITTI ROOT")
 POSE_SUFFIXES = (".txt", ".csv", ".tum")
 """Files of a scan folder that may be its pose file."""
+
+
+def is_kitti_root(path: Path) -> bool:
+    """Whether ``path`` is a KITTI odometry root: a folder with ``sequences/`` and ``poses/``."""
+    return path.is_dir() and (path / "sequences").is_dir() and (path / "poses").is_dir()
+
+
+def recordings_of(path: Path) -> list[Path]:
+    """The recordings at ``path``: a KITTI root's sequence folders that have ground truth
+    (``ROOT/sequences/NN`` with ``ROOT/poses/NN.txt``, in name order); else ``path`` itself.
+    ConfigError for a KITTI root without one."""
+    if not is_kitti_root(path):
+        return [path]
+    found = sorted(p for p in (path / "sequences").iterdir()
+                   if (p / "velodyne").is_dir() and (path / "poses" / f"{p.name}.txt").is_file())
+    if not found:
+        raise ConfigError(f"{path}: a KITTI root without a sequence that has ground truth "
+                          "(sequences/NN/velodyne with poses/NN.txt)")
+    return found
 
 
 def recording_kind(path: Path) -> str:
@@ -52,14 +75,16 @@ def recording_kind(path: Path) -> str:
                      f"{KINDS_HELP}); give its kind")
 
 
-def recording_entry(path: str | Path, given: Mapping[str, Any] | None = None) -> dict[str, Any]:
+def recording_entry(path: str | Path, given: Mapping[str, Any] | None = None,
+                    length_m: float | None = None) -> dict[str, Any]:
     """The ``data.sources`` entry of the recording at ``path`` (module docstring), checked by
-    opening it; ``path`` as given unless the kind moves it (a ROS 2 bag's file -> its folder,
-    a KITTI sequence folder -> its root)."""
+    opening it (and its ground truth's length against ``length_m`` when given); ``path`` as
+    given unless the kind moves it (a ROS 2 bag's file -> its folder, a KITTI sequence folder
+    -> its root)."""
     from pydantic import TypeAdapter, ValidationError
 
     from pipeline.config import format_validation_error
-    from pipeline.sources.dataset import SourceEntry
+    from pipeline.sources.dataset import SourceEntry, check_length
 
     path = Path(path)
     given = dict(given or {})
@@ -78,7 +103,11 @@ def recording_entry(path: str | Path, given: Mapping[str, Any] | None = None) ->
         raise ConfigError(f"{path}: {format_validation_error('', exc)}") from None
     sources = checked.open()
     for source in sources:
-        _require_ground_truth(source, path)
+        has_truth = (source.ground_truth_poses() is not None if length_m is None
+                     else check_length(source, length_m, str(path)))
+        if not has_truth:
+            raise ConfigError(f"{path}: no ground truth found (tuning needs it): give its "
+                              "gt_topic (with gt_child_frame for TF) or a pose file (poses)")
     found = {key: getattr(sources[0], attr, None)
              for key, attr in (("topic", "topic"), ("gt_topic", "gt_topic"))}
     return entry | {k: v for k, v in found.items() if v is not None and k not in given}
@@ -98,26 +127,23 @@ def folder_files(folder: Path, given: Mapping[str, Any]) -> dict[str, str]:
             found["times"] = str(p)
         elif p.suffix == ".txt" and has_kitti_calib(p.read_text(errors="replace")):
             found["extrinsic"] = str(p)
-    candidates = []
+    candidates, refused = [], []
     for p in others:
         if str(p) in found.values():
             continue
         try:
             read_pose_file(p)
-        except InputError:
+        except InputError as exc:
+            refused.append(f"{p.name}: {str(exc).removeprefix(f'{p}: ')}")
             continue
         candidates.append(p)
-    if len(candidates) > 1 and "poses" not in given:
-        raise ConfigError(f"{folder}: {len(candidates)} files read as poses "
-                          f"({', '.join(p.name for p in candidates)}); give the one that is")
+    if "poses" not in given:
+        if len(candidates) > 1:
+            raise ConfigError(f"{folder}: {len(candidates)} files read as poses "
+                              f"({', '.join(p.name for p in candidates)}); give the one that is")
+        if refused and not candidates:
+            raise ConfigError(f"{folder}: no pose file beside the scans reads as one: "
+                              f"{'; '.join(refused)}; give poses (and poses_format)")
     if candidates:
         found["poses"] = str(candidates[0])
     return {k: v for k, v in found.items() if k not in given}
-
-
-def _require_ground_truth(source: Source, path: Path) -> None:
-    """ConfigError unless ``source``'s scans come with ground truth (its first frame has)."""
-    first = next(iter(source.frames()), None)
-    if first is None or first.T_world_lidar is None:
-        raise ConfigError(f"{path}: no ground truth found (tuning needs it): give its "
-                          "gt_topic (with gt_child_frame for TF) or a pose file (poses)")

@@ -122,6 +122,9 @@ class FolderSource:
     def expected_frames(self) -> int:
         return len(self.files)
 
+    def ground_truth_poses(self) -> NDArray[np.float64] | None:
+        return None if self.T_world_lidar is None else self.T_world_lidar.copy()
+
     def frames(self) -> Iterator[Frame]:
         for k, path in enumerate(self.files):
             scan = read_scan(path)

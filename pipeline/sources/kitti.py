@@ -105,6 +105,9 @@ class KittiSource:
     def expected_frames(self) -> int:
         return len(self.bins)
 
+    def ground_truth_poses(self) -> NDArray[np.float64] | None:
+        return None if self.T_world_lidar is None else self.T_world_lidar.copy()
+
     def frames(self) -> Iterator[Frame]:
         for k, path in enumerate(self.bins):
             yield Frame(

@@ -15,6 +15,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numpy as np
+from numpy.typing import NDArray
+
 from pipeline.errors import InputError
 from pipeline.io_utils import input_file
 from pipeline.sequence import SequenceInfo, mcap_errors
@@ -33,6 +36,7 @@ from pipeline.sources.rosmsg import (
     collect_poses,
     normalise_type,
     poses_of,
+    stamp_ns,
 )
 
 ENCODINGS = ("cdr", "ros1")
@@ -151,6 +155,17 @@ class McapSource:
 
     def expected_frames(self) -> int | None:
         return self.count
+
+    def ground_truth_poses(self) -> NDArray[np.float64] | None:
+        """The ground truth at the scans' stamps (their headers read, their points not)."""
+        if self.gt is None:
+            return None
+        dec = _Decoder(self.schema, self.channel.message_encoding, f"{self.path} {self.topic}")
+        with open_mcap(self.path) as (reader, _):
+            stamps = [stamp_ns(dec.checked(msg.data, f"{self.path} {self.topic} message {k}"),
+                               msg.log_time)
+                      for k, (_, _, msg) in enumerate(reader.iter_messages(topics=[self.topic]))]
+        return self.gt.all_at(np.array(stamps, np.int64))
 
     def frames(self) -> Iterator[Frame]:
         dec = _Decoder(self.schema, self.channel.message_encoding, f"{self.path} {self.topic}")

@@ -18,6 +18,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numpy as np
+from numpy.typing import NDArray
+
 from pipeline.errors import InputError
 from pipeline.sequence import SequenceInfo
 from pipeline.sources.base import (
@@ -36,6 +39,7 @@ from pipeline.sources.rosmsg import (
     collect_poses,
     normalise_type,
     poses_of,
+    stamp_ns,
 )
 
 log = logging.getLogger(__name__)
@@ -196,6 +200,16 @@ class RosbagSource:
 
     def expected_frames(self) -> int:
         return self.count
+
+    def ground_truth_poses(self) -> NDArray[np.float64] | None:
+        """The ground truth at the scans' stamps (their headers read, their points not)."""
+        if self.gt is None:
+            return None
+        with open_bag(self.bag) as reader:
+            conns = [c for c in reader.connections if c.topic == self.topic]
+            stamps = [stamp_ns(reader.deserialize(raw, conn.msgtype), log_ns)
+                      for conn, log_ns, raw in reader.messages(connections=conns)]
+        return self.gt.all_at(np.array(stamps, np.int64))
 
     def frames(self) -> Iterator[Frame]:
         with open_bag(self.bag) as reader:

@@ -6,6 +6,12 @@ fitted on the other sequences' rows and predicts the held-out rows. Reported in 
 best among that frame's trials against the best trial of that frame (mean of y_chosen - y_best,
 and of y_best, y_chosen). Trials predicted exactly alike (the same k neighbours) tie; y_chosen
 is then their mean y, what a random pick among them gives on average.
+
+The *rank gap* (``rank_gap_median``, % RTE) is what the surrogate must tell apart: at every
+held-out frame with two trials or more, the measured y of the worst trial there minus that of
+the best (the candidates it ranks at that frame); their median over the held-out frames. A
+surrogate whose MAE exceeds it errs by more than the typical spread it ranks: the evaluation
+warns of it (``pipeline.report.checks``).
 """
 
 from __future__ import annotations
@@ -29,7 +35,8 @@ def _empty(note: str | None = None) -> dict[str, Any]:
     out: dict[str, Any] = {"method": METHOD, "folds": 0}
     if note:
         out["note"] = note
-    return {**out, "mae": None, "rmse": None, "regret_mean": None, "per_sequence": {}}
+    return {**out, "mae": None, "rmse": None, "regret_mean": None, "rank_gap_median": None,
+            "per_sequence": {}}
 
 
 def cross_validate(
@@ -48,7 +55,7 @@ def cross_validate(
     if len(seqs) < 2:
         return _empty("needs >= 2 sequences")
     rng = np.random.default_rng(settings.seed)
-    errs, per_seq, regrets, chosen, best = [], {}, [], [], []
+    errs, per_seq, regrets, chosen, best, gaps = [], {}, [], [], [], []
     for seq in seqs:
         test = rows.sequences == seq
         train = ~test
@@ -76,6 +83,8 @@ def cross_validate(
             regrets.append(y_chosen - yt.min())
             chosen.append(y_chosen)
             best.append(yt.min())
+            if len(yt) > 1:
+                gaps.append(yt.max() - yt.min())
     if not errs:
         return _empty()
     e = np.concatenate(errs)
@@ -87,5 +96,6 @@ def cross_validate(
         "regret_mean": float(np.mean(regrets)),
         "y_chosen_mean": float(np.mean(chosen)),
         "y_oracle_mean": float(np.mean(best)),
+        "rank_gap_median": float(np.median(gaps)) if gaps else None,
         "per_sequence": per_seq,
     }

@@ -7,9 +7,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from pipeline.config import IterationCount, Section, validate_section
+from pipeline.errors import ConfigError
 from pipeline.tuning.pruning import Fidelity, HalvingSection, PruningSection, StoppingRule
 
 
@@ -66,6 +67,24 @@ class TrialsSection(Section):
     def stopping(self) -> StoppingRule:
         """How the study stops trials (``pipeline.tuning.pruning.StoppingRule``)."""
         return StoppingRule.of(self.fidelity, self.pruning, self.halving)
+
+    @model_validator(mode="after")
+    def _options_of_the_algorithm(self) -> TrialsSection:
+        """adapter_options another algorithm takes (left by a change of ``algorithm``) are one
+        line naming them and how to drop them, at the load of params.yaml by any stage."""
+        if not self.adapter_options or ":" in self.algorithm:  # a factory: its own checks
+            return self
+        from pipeline.odometry.registry import option_names
+
+        known = option_names(self.algorithm)  # ConfigError for an unknown algorithm
+        foreign = sorted(set(self.adapter_options) - set(known))
+        if foreign:
+            raise ConfigError(
+                f"trials.adapter_options: {', '.join(foreign)} are not options of "
+                f"{self.algorithm} (its options: {', '.join(known)}): left by another "
+                f"algorithm? drop them with `dvc exp run -S trials.algorithm={self.algorithm} "
+                "-S '~trials.adapter_options'`, or delete them from params.yaml")
+        return self
 
     @field_validator("dask")
     @classmethod

@@ -24,14 +24,12 @@ import numpy as np
 from pipeline.io_utils import atomic_write_text
 from pipeline.selection import SelectionSettings
 from studies.generalization.score import WorldScore, world_score
-from studies.generalization.suite import GeneralizeSection, suite_worlds
+from studies.generalization.suite import GeneralizeSection, generalization_worlds
 from studies.generalization.summary import (
     PLOT_COLUMNS,
     RECORD_KEYS,
-    TARGET_MEDIAN,
-    TARGET_WORST,
-    plot_rows,
-    suite_metrics,
+    generalization_metrics,
+    generalization_rows,
 )
 
 
@@ -69,13 +67,13 @@ def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
     inputs = SuiteInputs(algorithm, space, space.defaults(), fixed, options,
                          section.length_m, section.replicas, section.replica_scale,
                          penalty_pct=None, adaptive={"adaptive": adaptive})
-    results = run_suite(suite_worlds(section), inputs, paths.runs, section.workers)
+    results = run_suite(generalization_worlds(section), inputs, paths.runs, section.workers)
     scores = [world_score(r) for r in results]
-    result = suite_metrics(scores, section.suite, section.root, section.bootstrap, algorithm,
-                           section.length_m)
+    result = generalization_metrics(scores, section.suite, section.root, section.bootstrap,
+                                    algorithm, section.length_m, section.targets.model_dump())
     write_metrics(paths.metrics, paths.record, result, RECORD_KEYS)
-    atomic_write_text(paths.plot_data, csv_text(plot_rows(scores)))
-    suite_figure(scores, result, paths.figure)
+    atomic_write_text(paths.plot_data, csv_text(generalization_rows(scores)))
+    generalization_figure(scores, result, paths.figure)
     return result
 
 
@@ -97,7 +95,8 @@ def no_suite(paths: GeneralizationPaths, section: GeneralizeSection) -> dict[str
     return summary
 
 
-def suite_figure(scores: Sequence[WorldScore], metrics: Mapping[str, Any], out_png: Path) -> Path:
+def generalization_figure(scores: Sequence[WorldScore], metrics: Mapping[str, Any],
+                          out_png: Path) -> Path:
     """RTE of every setting per world (top, log scale; with replicas a line over the range of
     its runs) and adaptive / min(baseline, fixed) per world (bottom, log scale; with replicas
     the ratio of the settings' medians as a diamond) with the median and the targets."""
@@ -126,8 +125,10 @@ def suite_figure(scores: Sequence[WorldScore], metrics: Mapping[str, Any], out_p
         if best["median"] is not None:
             ax[1, 0].axhline(best["median"], color="tab:blue", ls="-",
                              label=f"median {best['median']:.2f}")
-        ax[1, 0].axhline(TARGET_MEDIAN, color="tab:blue", ls=":", label="target median")
-        ax[1, 0].axhline(TARGET_WORST, color="tab:red", ls=":", label="target worst")
+        ax[1, 0].axhline(metrics["targets"]["median"], color="tab:blue", ls=":",
+                         label="target median")
+        ax[1, 0].axhline(metrics["targets"]["worst"], color="tab:red", ls=":",
+                         label="target worst")
         ax[1, 0].set_yscale("log")
         ax[1, 0].set_ylabel("adaptive / min(baseline, fixed)")
         ax[1, 0].legend(fontsize=8)

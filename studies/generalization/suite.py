@@ -28,6 +28,16 @@ from studies.suites.worlds import (
 )
 
 
+class GeneralizeTargets(Section):
+    """What the toy's suite is asked, of adaptive / min(baseline, fixed) over its test worlds:
+    the median at most, the worst world at most and the win rate at least (docs/results/
+    toy.md)."""
+
+    median: float = Field(0.75, gt=0)
+    worst: float = Field(1.05, gt=0)
+    win_rate: float = Field(0.90, ge=0, le=1)
+
+
 class GeneralizeSection(Section):
     """params.yaml ``generalize``: which suite, how it is drawn and summarised.
 
@@ -38,7 +48,8 @@ class GeneralizeSection(Section):
     median ratio; replicas: extra runs of every setting on every world with the parameters
     moved by at most ``replica_scale`` (relative), to measure how far one run is from the next
     (``pipeline.evaluate.replicas``; 0: none); workers: worlds run in parallel;
-    length_m: the RTE length L (from base).
+    length_m: the RTE length L (from base); targets: what the suite is asked
+    (``GeneralizeTargets``).
     """
 
     suite: Literal["dev", "test"] = "test"
@@ -53,6 +64,8 @@ class GeneralizeSection(Section):
     replica_scale: float = Field(0.005, gt=0, le=0.1)
     workers: int = Field(2, ge=1)
     length_m: float = Field(25.0, gt=0)
+    targets: GeneralizeTargets = Field(
+        default_factory=lambda: GeneralizeTargets.model_validate({}))
 
     @field_validator("seed_roots")
     @classmethod
@@ -90,12 +103,12 @@ class GeneralizeSection(Section):
         return self.seed_roots[self.suite]
 
 
-def suite_worlds(section: GeneralizeSection) -> list[SimulatedWorld]:
+def generalization_worlds(section: GeneralizeSection) -> list[SimulatedWorld]:
     """The worlds of ``section.suite`` (module docstring), in order."""
-    return [world_of(section, section.suite, i) for i in range(section.worlds)]
+    return [generalization_world(section, section.suite, i) for i in range(section.worlds)]
 
 
-def world_of(section: GeneralizeSection, suite: str, i: int) -> SimulatedWorld:
+def generalization_world(section: GeneralizeSection, suite: str, i: int) -> SimulatedWorld:
     """World ``i`` of ``suite``: from (the suite's seed root, i) alone (``draw_world``, with the
     toy worlds' sensor model: ``SimSpec``'s defaults)."""
     return draw_world(f"{suite}_{i:02d}", "", section.seed_roots[suite], i,

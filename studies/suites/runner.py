@@ -169,7 +169,7 @@ def run_suite(worlds: Sequence[Subject], inputs: SuiteInputs, out_dir: Path,
               workers: int) -> list[WorldResult]:
     """Score every subject (module docstring), the costliest started first; ``out_dir`` is
     written atomically."""
-    from pipeline.executor import map_in_processes
+    from pipeline.executor import costliest_first, map_in_processes
     from pipeline.io_utils import atomic_dir
 
     PROGRESS.info("%d worlds (%d frames), %d replicas, %d workers", len(worlds),
@@ -177,18 +177,13 @@ def run_suite(worlds: Sequence[Subject], inputs: SuiteInputs, out_dir: Path,
     t0 = time.monotonic()
     finished = itertools.count(1)
     with atomic_dir(out_dir) as tmp:
-        return map_in_processes(score_world, [(w, inputs, tmp) for w in worlds], workers,
-                                on_done=lambda _, r: _logged(r, next(finished), len(worlds), t0),
-                                order=costliest_first(worlds))
+        return map_in_processes(
+            score_world, [(w, inputs, tmp) for w in worlds], workers,
+            on_done=lambda _, r: _world_logged(r, next(finished), len(worlds), t0),
+            order=costliest_first([w.cost for w in worlds]))
 
 
-def costliest_first(worlds: Sequence[Subject]) -> list[int]:
-    """The subjects' indices by decreasing cost (rays of a world, bytes of a run), so that no
-    worker is left with the costliest at the end."""
-    return sorted(range(len(worlds)), key=lambda i: -worlds[i].cost)
-
-
-def _logged(result: WorldResult, finished: int, n: int, t0: float) -> WorldResult:
+def _world_logged(result: WorldResult, finished: int, n: int, t0: float) -> WorldResult:
     """A progress line for the ``finished``-th world of ``n`` to finish."""
     m = {s: result.median(s) for s in result.settings}
     PROGRESS.info("[%d/%d] %s (%s, %s, %d frames): %s; %.0f s (%.0f s in all)", finished, n,
@@ -228,7 +223,7 @@ def score_world(world: Subject, inputs: SuiteInputs, out_dir: Path) -> WorldResu
     result = WorldResult(world.name, world.family, world.segments, world.sensor,
                          world.frames, world.seed, loaded.labels, t_err, failed,
                          selection, time.perf_counter() - t0)
-    write_world(out_dir / world.name, result)
+    write_runs(out_dir / world.name, result)
     return result
 
 
@@ -251,7 +246,7 @@ def load_world(world: Subject, inputs: SuiteInputs) -> Any:
                        inputs.space, length_m, inputs.penalty_pct)
 
 
-def write_world(folder: Path, result: WorldResult) -> None:
+def write_runs(folder: Path, result: WorldResult) -> None:
     """``rte.parquet`` and ``world.json`` of one world (module docstring)."""
     import pyarrow as pa
     import pyarrow.parquet as pq

@@ -179,25 +179,25 @@ def run_headroom(worlds: Sequence[SimulatedWorld], inputs: SuiteInputs,
     """Both passes over ``worlds`` (module docstring), the costliest worlds started first;
     ``out_dir`` written atomically: every world's oracle runs (``<world>/rte.parquet`` and
     ``world.json``, as the suite's)."""
-    from pipeline.executor import map_in_processes
+    from pipeline.executor import costliest_first, map_in_processes
     from pipeline.io_utils import atomic_dir, atomic_write_text
-    from studies.suites.runner import costliest_first, write_world
+    from studies.suites.runner import write_runs
 
     PROGRESS.info("headroom: %d worlds, %d candidates", len(worlds), len(candidates))
     t0 = time.monotonic()
-    order = costliest_first(worlds)
+    order = costliest_first([w.cost for w in worlds])
     firsts, seconds = itertools.count(1), itertools.count(1)
     with atomic_dir(out_dir) as tmp:
         first = map_in_processes(first_pass, [(w, inputs, candidates, period_s)
                                               for w in worlds], workers,
-                                 on_done=lambda _, r: _logged("cross-fitted", r.oracle,
+                                 on_done=lambda _, r: _pass_logged("cross-fitted", r.oracle,
                                                               next(firsts), len(worlds), t0),
                                  order=order)
         label_rte = {r.name: r.label_rte for r in first}
         second = map_in_processes(second_pass, [(w, inputs, candidates,
                                                  class_choice(w.name, label_rte), period_s)
                                                 for w in worlds], workers,
-                                  on_done=lambda _, r: _logged("class", r, next(seconds),
+                                  on_done=lambda _, r: _pass_logged("class", r, next(seconds),
                                                                len(worlds), t0),
                                   order=order)
         merged = []
@@ -207,7 +207,7 @@ def run_headroom(worlds: Sequence[SimulatedWorld], inputs: SuiteInputs,
             both.failed.update(b.failed)
             both.selection.update(b.selection)
             both.wall_time_s += b.wall_time_s
-            write_world(tmp / both.name, both)
+            write_runs(tmp / both.name, both)
             atomic_write_text(tmp / both.name / "candidates.json", json.dumps(
                 {"candidates": candidates, "selection_replica_rte_pct": a.label_rte,
                  "choice": a.choice}, indent=2) + "\n")
@@ -215,7 +215,7 @@ def run_headroom(worlds: Sequence[SimulatedWorld], inputs: SuiteInputs,
     return first, merged
 
 
-def _logged(what: str, r: WorldResult, finished: int, n: int, t0: float) -> Any:
+def _pass_logged(what: str, r: WorldResult, finished: int, n: int, t0: float) -> Any:
     """A progress line for the ``finished``-th world of ``n`` to finish a pass."""
     setting = next(iter(r.t_err_pct))
     PROGRESS.info("[%d/%d] %s %s oracle %.3f %%; %.0f s (%.0f s in all)", finished, n, r.name,
@@ -226,10 +226,10 @@ def _logged(what: str, r: WorldResult, finished: int, n: int, t0: float) -> Any:
 def headroom_metrics(suite: Sequence[WorldResult], oracles: Sequence[WorldResult],
                      candidates: list[Params],
                      header: Mapping[str, Any], confidence: float, resamples: int,
-                     seed: int) -> dict[str, Any]:
+                     seed: int, closed_gap_target: float) -> dict[str, Any]:
     """The JSON of the headroom study: every oracle and adaptive against SBS, the closed gaps
-    and their target, every world."""
-    from studies.verdict.summary import CLOSED_GAP_TARGET, ratio_summary
+    and their target (params ``verdict.closed_gap_target``), every world."""
+    from studies.verdict.summary import ratio_summary
 
     by_name = {r.name: r for r in suite}
     missing = [o.name for o in oracles if o.name not in by_name]
@@ -254,9 +254,9 @@ def headroom_metrics(suite: Sequence[WorldResult], oracles: Sequence[WorldResult
         "ratios": ratios,
         "closed_gap": gaps,
         "headroom": headroom["high"] is not None and headroom["high"] < 1.0,
-        "targets": {"closed_gap": {"at_least": CLOSED_GAP_TARGET, "low_above": 0.0,
+        "targets": {"closed_gap": {"at_least": closed_gap_target, "low_above": 0.0,
                                    "met": bool(gap["value"] is not None
-                                               and gap["value"] >= CLOSED_GAP_TARGET
+                                               and gap["value"] >= closed_gap_target
                                                and gap["low"] is not None and gap["low"] > 0)}},
         "per_world": {o.name: {"sbs_rte_pct": float(s), "adaptive_rte_pct": float(a),
                                **{f"{k}_rte_pct": float(medians[k][i]) for k in ORACLES},

@@ -23,7 +23,7 @@ from pipeline.selection import SelectionSettings
 from pipeline.sim.simulate import SimSpec
 from studies.suites.runner import AdaptiveSetting, SuiteInputs, WorldResult
 from studies.verdict.section import VerdictSection
-from studies.verdict.summary import RATIOS, TARGETS
+from studies.verdict.summary import RATIOS
 
 
 @dataclass(frozen=True)
@@ -93,7 +93,7 @@ def run_verdict(paths: VerdictPaths, family: str, section: VerdictSection,
               "baseline": inputs.baseline, "fixed": inputs.fixed, "fixed_study": study,
               "select": settings.selection.to_json()}
     metrics = suite_metrics(results, header, section.failure_pct, section.confidence,
-                            section.resamples, section.root(family))
+                            section.resamples, section.root(family), targets=section.targets)
     write_json(paths.metrics, metrics)
     atomic_write_text(paths.plot_data, csv_text(plot_rows(results)))
     suite_figure(results, metrics, paths.figure)
@@ -153,7 +153,8 @@ def score_headroom(paths: HeadroomPaths, section: VerdictSection,
               "fixed": inputs.fixed, "fixed_study": study, "confidence": section.confidence}
     suite = read_results(paths.suite)
     metrics = headroom_metrics(suite, oracles, candidates, header, section.confidence,
-                               section.resamples, section.root("id"))
+                               section.resamples, section.root("id"),
+                               section.closed_gap_target)
     write_json(paths.metrics, metrics)
     headroom_figure(suite, oracles, metrics, paths.figure)
     return metrics
@@ -269,7 +270,9 @@ def suite_figure(results: Sequence[WorldResult], metrics: Mapping[str, Any],
                           label=f"{100 * metrics['confidence']:.0f} % interval "
                                 f"{s['low']:.2f}-{s['high']:.2f}")
             a.axhline(1.0, color="black", lw=0.8)
-            for value in TARGETS.get(metrics["family"], {}).get(name, ()):
+            target = metrics["targets"].get(name)
+            for value in () if target is None else (target["geomean_at_most"],
+                                                     target["upper_end"][1]):
                 a.axhline(value, color="tab:purple", ls=":", lw=1.0)
             a.set_yscale("log")
             a.set_ylabel(name.replace("_vs_", " / ").replace("best", "min(b, f)"))

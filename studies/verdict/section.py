@@ -100,20 +100,20 @@ class VerdictSection(Section):
     """params.yaml ``verdict`` (module docstring).
 
     suite: which suite of each family runs (``test``: reported; ``dev``: where every choice is
-    made); world_generator: ``pipeline.sim.GENERATOR_VERSION`` the suites are frozen with (a
-    run on another generator is refused); baseline: the baseline parameters (the joint study's
-    stored defaults must equal them); fixed_trials / fixed_warm_start: the joint study's least
-    budget (``fixed.iterations`` / ``fixed.warm_start`` below them are refused); failure_pct:
-    a sub-trajectory with a larger RTE [%] fails (the headroom study's candidate grid is the
+    made); world_generator: ``pipeline.sim.GENERATOR_VERSION`` the suites are frozen with (a run on
+    another generator is refused); baseline: the baseline parameters (the joint study's stored
+    defaults must equal them); fixed_trials / fixed_warm_start: the joint study's least budget
+    (``fixed.iterations`` / ``fixed.warm_start`` below them are refused); failure_pct: a
+    sub-trajectory with a larger RTE [%] fails (the headroom study's candidate grid is the
     portfolio's, params ``portfolio.grid``: one grid for both); tuning: the tuning suite the
-    coverage model's portfolio runs on (``TuningDraw``);
-    borrow_model: with one model per sensor, the sensor whose model a sensor without one runs
-    (None: such a world runs the fixed set; hdl64 chosen on the out-of-distribution dev suite,
-    docs/results/selector-dev.md);
-    replicas: extra runs of every setting on every world with the parameters moved by at most
-    ``replica_scale`` (``pipeline.evaluate.replicas``); confidence / resamples: the bootstrap's
-    level and resamples; workers: worlds run at a time (processes); length_m: L (from base).
-    """
+    coverage model's portfolio runs on (``TuningDraw``); borrow_model: with one model per sensor,
+    the sensor whose model a sensor without one runs (None: such a world runs the fixed set; hdl64
+    chosen on the out-of-distribution dev suite, docs/results/selector-dev.md); replicas: extra runs
+    of every setting on every world with the parameters moved by at most ``replica_scale``
+    (``pipeline.evaluate.replicas``); targets: per family and ratio, (the geometric mean at most,
+    the upper end of its interval below (id) / at most (ood)); closed_gap_target: the headroom's
+    closed gap at least (its interval's lower end > 0); confidence / resamples: the bootstrap's
+    level and resamples; workers: worlds run at a time (processes); length_m: L (from base). """
 
     suite: Literal["dev", "test"] = "test"
     world_generator: int = Field(2, ge=1)
@@ -127,6 +127,10 @@ class VerdictSection(Section):
     failure_pct: float = Field(10.0, gt=0)
     replicas: int = Field(2, ge=0)
     replica_scale: float = Field(0.005, gt=0, le=0.1)
+    targets: dict[str, dict[str, tuple[float, float]]] = Field(default_factory=lambda: {
+        "id": {"adaptive_vs_fixed": (0.75, 0.90), "adaptive_vs_baseline": (0.75, 0.90)},
+        "ood": {"adaptive_vs_fixed": (1.00, 1.05), "adaptive_vs_baseline": (1.00, 1.05)}})
+    closed_gap_target: float = Field(0.5, gt=0, le=1)
     confidence: float = Field(0.95, gt=0, lt=1)
     resamples: int = Field(10000, ge=100)
     workers: int = Field(2, ge=1)

@@ -1,5 +1,5 @@
 """experiments/headroom_controls.py on a hand-made oracles output: four worlds written as the
-oracles stage writes them (studies.suites.runner.write_world and candidates.json), three
+oracles stage writes them (studies.suites.runner.write_runs and candidates.json), three
 candidates, two labels and two sensors whose per-label best candidates are swapped, so that
 every control's ratio to SBS is known by hand."""
 
@@ -13,7 +13,7 @@ import pytest
 from helpers.scripts import load_script
 from helpers.verdict_data import world
 
-from studies.suites.runner import write_world
+from studies.suites.runner import write_runs
 
 SCRIPT = Path(__file__).resolve().parents[2] / "experiments" / "headroom_controls.py"
 CANDIDATES = [{"resolution": 2.0, "keyframe_interval": 4.0},  # the fixed set: SBS
@@ -29,7 +29,7 @@ def _headroom(folder: Path) -> None:
         best = {"cave": 1, "street": 2} if sensor == "hdl32" else {"cave": 2, "street": 1}
         label_rte = {lab: [2.0, 1.0 if b == 1 else 3.0, 1.0 if b == 2 else 3.0]
                      for lab, b in best.items()}
-        write_world(folder / name, world(name, {"oracle": [[1.0] * 20]}, labels, sensor=sensor))
+        write_runs(folder / name, world(name, {"oracle": [[1.0] * 20]}, labels, sensor=sensor))
         (folder / name / "candidates.json").write_text(json.dumps(
             {"candidates": CANDIDATES, "selection_replica_rte_pct": label_rte, "choice": {}}))
 

@@ -46,7 +46,7 @@ PARITY_RTOL = 1e-4
 """Each statistic equals evo's to this relative difference (issue 34's target; 1e-12 absolute
 for those that are 0 up to rounding, as the min of an origin-aligned APE)."""
 ALIGN_ARGS = {"none": [], "origin": ["--align", "origin"], "se3": ["--align", "se3"],
-              "sim3": ["--align", "sim3"]}
+              "sim3": ["--align", "sim3"], "scale": ["--align", "scale"]}
 RPE_CASES = {
     "1 frame": [],
     "10 frames, all pairs": ["--delta", "10", "--all-pairs"],
@@ -73,16 +73,18 @@ def drift_pair(kitti_trajectories: Path, tmp_path_factory: pytest.TempPathFactor
         read_kitti_poses(root / "est.txt")
 
 
-def evo_aligned(gt: np.ndarray, est: np.ndarray, alignment: str) -> tuple[object, object]:
+def evo_aligned(gt: np.ndarray, est: np.ndarray, alignment: str,
+                n: int = -1) -> tuple[object, object]:
     """evo's (reference, estimate) PosePath3D pair, the estimate aligned as evo_ape's
-    ``-a`` / ``-as`` / ``--align_origin`` do."""
+    ``-a`` / ``-as`` / ``-s`` / ``--align_origin`` do (``--n_to_align n``)."""
     from evo.core.trajectory import PosePath3D
 
     ref, path = PosePath3D(poses_se3=list(gt)), PosePath3D(poses_se3=list(est))
     if alignment == "origin":
         path.align_origin(ref)
-    elif alignment in ("se3", "sim3"):
-        path.align(ref, correct_scale=alignment == "sim3")
+    elif alignment in ("se3", "sim3", "scale"):
+        path.align(ref, correct_scale=alignment == "sim3",
+                   correct_only_scale=alignment == "scale", n=n)
     return ref, path
 
 
@@ -123,11 +125,37 @@ def test_ape_matches_evo(drift_pair: tuple[Path, Path, np.ndarray, np.ndarray],
         ape = metrics.APE(relation)
         ape.process_data((ref, path))
         assert_evo_stats(got["ape"][key], ape.get_all_statistics(), f"APE {key}")
-    if alignment == "sim3":
+    if alignment in ("sim3", "scale"):
         assert got["alignment"]["scale"] == pytest.approx(1 / 1.02, rel=0.02)
 
 
-@pytest.mark.parametrize("alignment", ["se3", "sim3"])
+@pytest.mark.parametrize("alignment", ["se3", "sim3", "scale"])
+def test_alignment_to_the_first_poses_matches_evo(
+        drift_pair: tuple[Path, Path, np.ndarray, np.ndarray], alignment: str) -> None:
+    """--align-first N fits the alignment to the first N poses, as evo's --n_to_align: APE and
+    RPE equal evo's; the scale and the errors differ from a fit to every pose."""
+    from evo.core import metrics
+
+    gt_path, est_path, gt, est = drift_pair
+    args = ["metric", "rte", str(gt_path), str(est_path), "--length", "50", "--align", alignment]
+    got = run_json([*args, "--align-first", "60"])
+    whole = run_json(args)
+    assert got["alignment"]["poses"] == 60 and whole["alignment"]["poses"] == 500
+    assert got["ape"]["translation_m"]["rmse"] != pytest.approx(
+        whole["ape"]["translation_m"]["rmse"], rel=1e-3)
+    ref, path = evo_aligned(gt, est, alignment, n=60)
+    for relation, key in ((metrics.PoseRelation.translation_part, "translation_m"),
+                          (metrics.PoseRelation.rotation_angle_deg, "rotation_deg")):
+        ape = metrics.APE(relation)
+        ape.process_data((ref, path))
+        assert_evo_stats(got["ape"][key], ape.get_all_statistics(), f"APE {key}")
+        rpe = metrics.RPE(relation, delta=20.0, delta_unit=metrics.Unit.meters)
+        rpe.process_data((ref, path))
+        got_rpe = run_json([*args, "--align-first", "60", "--delta", "20", "--delta-unit", "m"])
+        assert_evo_stats(got_rpe["rpe"][key], rpe.get_all_statistics(), f"RPE {key}")
+
+
+@pytest.mark.parametrize("alignment", ["se3", "sim3", "scale"])
 @pytest.mark.parametrize("case", list(RPE_CASES))
 def test_rpe_matches_evo(drift_pair: tuple[Path, Path, np.ndarray, np.ndarray],
                          alignment: str, case: str) -> None:
@@ -211,3 +239,48 @@ def test_short_runs_and_stamped_formats(kitti_trajectories: Path, tmp_path: Path
     long = CliRunner().invoke(main, ["metric", "rte", str(tmp_path / "gt.tum"),
                                      str(tmp_path / "est.tum"), "--length", "500"])
     assert long.exit_code == 1 and "not longer than --length 500 m" in long.stderr
+
+
+def test_alignment_refusals_are_one_line(drift_pair: tuple[Path, Path, np.ndarray, np.ndarray]
+                                         ) -> None:
+    gt_path, est_path, _, _ = drift_pair
+    args = ["metric", "rte", str(gt_path), str(est_path), "--length", "20"]
+    for extra, message in ((["--align", "origin", "--align-first", "5"],
+                            "--align-first fits a Umeyama alignment (se3, sim3, scale), got "
+                            "--align origin"),
+                           (["--align-first", "2"], "must be in [3, 500]"),
+                           (["--align-first", "501"], "must be in [3, 500]")):
+        result = CliRunner().invoke(main, [*args, *extra])
+        assert result.exit_code == 1 and message in result.stderr, result.output
+
+
+def test_several_estimates_give_one_table_and_a_plot(
+        drift_pair: tuple[Path, Path, np.ndarray, np.ndarray], tmp_path: Path) -> None:
+    """Two estimates: one table (a row each, the figures of each one's own report), a JSON
+    list, and a PNG with the top view and the errors along the path."""
+    gt_path, est_path, gt, _ = drift_pair
+    other = tmp_path / "other.txt"
+    write_kitti_poses(other, noisy_estimate(gt, 0.97, seed=11))
+    args = ["metric", "rte", str(gt_path), str(est_path), str(other), "--length", "50"]
+    png = tmp_path / "errors.png"
+    result = CliRunner().invoke(main, [*args, "--plot", str(png)])
+    assert result.exit_code == 0, result.output
+    head, columns, _, *rows = result.stdout.splitlines()
+    assert head.startswith("RTE over L = 50 m; APE and RPE after se3 alignment")
+    assert columns.split()[:4] == ["estimate", "frames", "rte_t_pct", "rte_r_deg_per_m"]
+    assert len(rows) == 2 and rows[0].startswith(str(est_path)) and rows[1].startswith(str(other))
+    listed = run_json(args)
+    for path, row, summary in zip((est_path, other), rows, listed, strict=True):
+        alone = run_json(["metric", "rte", str(gt_path), str(path), "--length", "50"])
+        assert summary == alone
+        cells = row.split()
+        assert float(cells[2]) == pytest.approx(alone["rte"]["t_err_pct"], rel=1e-5)
+        assert float(cells[4]) == pytest.approx(alone["ape"]["translation_m"]["rmse"], rel=1e-5)
+    assert f"{png}: top view, APE and RTE along the path of 2 estimates" in result.stderr
+    from PIL import Image
+
+    with Image.open(png) as image:
+        assert image.format == "PNG" and image.size[0] > 2 * image.size[1]
+        colours = {image.convert("RGB").getpixel((x, y)) for x in range(0, image.size[0], 7)
+                   for y in range(0, image.size[1], 7)}
+    assert (31, 119, 180) in colours and (255, 127, 14) in colours  # C0 and C1: both drawn

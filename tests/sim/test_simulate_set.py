@@ -87,9 +87,9 @@ def test_worlds_start_costliest_first() -> None:
     16 x 1800), ties in list order: the HDL-64E's 500 frames (69.4 M rays) before the
     HDL-32E's 1000 (57.6 M) and the VLP-16's 2000 (57.6 M); by frames it would start last
     but one."""
-    from pipeline.sim.simulate import costliest_first
+    from pipeline.executor import costliest_first
 
     specs = [SimSpec("street", 1, 1000, sensor="hdl32"), SimSpec("street", 1, 500, sensor="hdl64"),
              SimSpec("street", 1, 2000, sensor="vlp16"), SimSpec("street", 1, 400, sensor="hdl32")]
     assert [s.rays() for s in specs] == [57_600_000, 69_440_000, 57_600_000, 23_040_000]
-    assert costliest_first(specs) == [1, 0, 2, 3]
+    assert costliest_first([s.rays() for s in specs]) == [1, 0, 2, 3]

@@ -209,6 +209,15 @@ class TestSourceContract:
         assert report.has_ground_truth and gt is not None
         np.testing.assert_allclose(gt, case.T_world_lidar, atol=1e-8)  # quaternion round trip
 
+    def test_ground_truth_without_the_scans(self, ingested: tuple[Case, Path, Any]) -> None:
+        """``ground_truth_poses`` (what the length check before ingesting reads) is the ground
+        truth ``frames`` gives the scans, to the bit."""
+        case, _, _ = ingested
+        poses = case.source.ground_truth_poses()
+        assert poses is not None
+        frames = np.stack([f.T_world_lidar for f in case.source.frames()])
+        np.testing.assert_array_equal(poses, frames)
+
     def test_info_summary(self, ingested: tuple[Case, Path, Any]) -> None:
         case, out, _ = ingested
         s = summarize_sequence(out)

@@ -40,7 +40,8 @@ def ingest_set(params: Path, out: str) -> tuple[int, str]:
 
 def write_params(path: Path, sources: list[dict[str, Any]]) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(yaml.safe_dump({"data": {"sources": sources}}, sort_keys=False))
+    path.write_text(yaml.safe_dump({"base": {"length_m": 1.0}, "data": {"sources": sources}},
+                                   sort_keys=False))
     return path
 
 

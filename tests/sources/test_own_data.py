@@ -149,6 +149,33 @@ def pose_file_variants(kf: KittiFrames, tmp: Path) -> dict[str, Path]:
     return paths
 
 
+def test_the_format_hint_names_every_format_that_fits(frames: KittiFrames,
+                                                      tmp_path: Path) -> None:
+    """4x4 blocks with trailing commas fit matrix4 alone: read as such (issue 57.5, they were
+    refused with a hint of euroc or tum); a CSV of 12 numbers could be KITTI or EuRoC (without
+    its header), and the error names both."""
+    from pipeline.errors import InputError
+
+    blocks = tmp_path / "blocks.txt"
+    blocks.write_text("".join(" ".join(f"{v:.9f}," for v in row) + "\n"
+                              for T in frames.T_world_lidar for row in T))
+    pf = read_pose_file(blocks)
+    assert pf.format == "matrix4" and pf.stamps_ns is None
+    np.testing.assert_allclose(pf.T_world_x, frames.T_world_lidar, atol=1e-8)
+    kitti_csv = tmp_path / "kitti.csv"
+    kitti_csv.write_text("".join(",".join(f"{v:.9f}" for v in T[:3].ravel()) + "\n"
+                                 for T in frames.T_world_lidar))
+    with pytest.raises(InputError, match=r"12 numbers a line, comma-separated without an EuRoC "
+                                         r"header could be kitti or euroc; give --poses-format "
+                                         r"kitti\|euroc"):
+        read_pose_file(kitti_csv)
+    assert read_pose_file(kitti_csv, "kitti").T_world_x.shape == (len(frames.T_world_lidar), 4, 4)
+    odd = tmp_path / "odd.txt"
+    odd.write_text("1 2 3 4 5\n")
+    with pytest.raises(InputError, match="cannot tell the pose format from 5 numbers a line"):
+        read_pose_file(odd)
+
+
 def test_every_pose_format_is_read_and_guessed(frames: KittiFrames, tmp_path: Path) -> None:
     for kind, path in pose_file_variants(frames, tmp_path).items():
         pf = read_pose_file(path)  # auto
@@ -162,7 +189,7 @@ def test_every_pose_format_is_read_and_guessed(frames: KittiFrames, tmp_path: Pa
     bare.write_text("1.0,0,0,0,0,0,0,1\n2.0,1,0,0,0,0,0,1\n")
     code, _, err = ingest(scan_folder(tmp_path, frames), "--poses", bare, "--out",
                           tmp_path / "s.mcap")
-    assert code == 1 and "give --poses-format euroc|tum" in err, err
+    assert code == 1 and "could be tum or euroc; give --poses-format tum|euroc" in err, err
     assert read_pose_file(bare, "tum").format == "tum"
     for fmt, path in (("tum", "tum"), ("euroc", "euroc"), ("matrix4", "matrix4_stamped")):
         variants = pose_file_variants(frames, tmp_path)

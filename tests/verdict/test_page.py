@@ -11,6 +11,7 @@ from helpers.verdict_data import world
 from studies.docs.verdict_page import HEADROOM, ID, OOD, SURROGATE_PREFIX, verdict_page
 from studies.suites.runner import WorldResult
 from studies.verdict.headroom import headroom_metrics
+from studies.verdict.section import VerdictSection
 from studies.verdict.summary import suite_metrics
 
 HEADER = {"algorithm": "ndt", "suite": "test", "seed_root": 1, "world_generator": 1,
@@ -20,13 +21,17 @@ HEADER = {"algorithm": "ndt", "suite": "test", "seed_root": 1, "world_generator"
           "fixed_study": {"trials": 64, "pruned": 50}}
 
 
+VERDICT = VerdictSection()
+
+
 def suite(family: str, ratio: float, n: int) -> tuple[dict[str, object], list[WorldResult]]:
     rng = np.random.default_rng(len(family))
     worlds = [world(f"{family}_test_{i:02d}",
                     {"baseline": [[2.0, 2.0]], "fixed": [[1.0, 1.0]],
                      "adaptive": [[r, r]]}, ["cave", "street"])
               for i, r in enumerate(ratio * np.exp(rng.normal(0, 0.05, n)))]
-    return suite_metrics(worlds, {**HEADER, "family": family}, 10.0, 0.95, 999, 0), worlds
+    return suite_metrics(worlds, {**HEADER, "family": family}, 10.0, 0.95, 999, 0,
+                         targets=VERDICT.targets), worlds
 
 
 def test_the_page_gives_every_target_its_figure_and_verdict() -> None:
@@ -38,13 +43,13 @@ def test_the_page_gives_every_target_its_figure_and_verdict() -> None:
                            {"oracle": {"choice": {}}, "class_oracle": {"choice": {}}}, 0.0)
                for w in worlds]
     head = headroom_metrics(worlds, oracles, [HEADER["baseline"]], {**HEADER, "family": "id"},
-                            0.95, 999, 0)
+                            0.95, 999, 0, VERDICT.closed_gap_target)
     models = {f"{SURROGATE_PREFIX}{sensor}.json": {"algorithm": "ndt", "folds": folds,
                                                      "mae": 1.0, "rmse": 2.0, "regret_mean": r}
               for sensor, folds, r in (("hdl32", 12, 0.5), ("hdl64", 11, 0.75))}
     page = verdict_page({ID: ids, OOD: ood, HEADROOM: head, **models},
                         ["> provenance"], {"verdict": {"suite": "test"}})
-    targets = page.split("## The targets (issue 29)")[1].split("\n## ")[0]
+    targets = page.split("## The targets")[1].split("\n## ")[0]
     rows = [line for line in targets.splitlines() if line.startswith("| id") or
             line.startswith("| ood")]
     assert len(rows) == 6  # id: 2 ratios, closed gap, headroom; ood: 2 ratios
@@ -71,7 +76,8 @@ def test_a_suite_of_two_sensors_is_also_given_per_sensor() -> None:
                                          "adaptive": [[r, r]]}, ["cave", "street"]),
                                   sensor=sensor)
               for i, (sensor, r) in enumerate([("hdl32", 0.5), ("hdl64", 1.0)] * 3)]
-    m = suite_metrics(worlds, {**HEADER, "family": "id"}, 10.0, 0.95, 999, 0)
+    m = suite_metrics(worlds, {**HEADER, "family": "id"}, 10.0, 0.95, 999, 0,
+                      targets=VERDICT.targets)
     page = verdict_page({ID: m}, ["> provenance"], {})
     rows = [line for line in page.splitlines() if line.startswith("| hdl")]
     assert rows == ["| hdl32 | 3 | 0.50 | 3 / 3 | 0.50 | 0.25 |",
@@ -97,8 +103,9 @@ def test_the_headroom_is_also_given_per_sensor() -> None:
                            {"oracle": {"choice": {}}, "class_oracle": {"choice": {}}}, 0.0)
                for w, (_, o) in zip(worlds, cases, strict=True)]
     header = {**HEADER, "family": "id"}
-    ids = suite_metrics(worlds, header, 10.0, 0.95, 999, 0)
-    head = headroom_metrics(worlds, oracles, [HEADER["baseline"]], header, 0.95, 999, 0)
+    ids = suite_metrics(worlds, header, 10.0, 0.95, 999, 0, targets=VERDICT.targets)
+    head = headroom_metrics(worlds, oracles, [HEADER["baseline"]], header, 0.95, 999, 0,
+                            VERDICT.closed_gap_target)
     section = verdict_page({ID: ids, HEADROOM: head}, ["> provenance"], {}).split(
         "## Headroom on the id test suite")[1].split("\n## ")[0]
     rows = [line for line in section.splitlines() if line.startswith("| hdl")]

@@ -20,7 +20,7 @@ from pipeline.odometry.ndt import SPACE
 from pipeline.sim import GENERATOR_VERSION
 from pipeline.sim.dataset import SimulateSection
 from pipeline.sim.effects import SensorEffects
-from studies.suites.runner import read_results, write_world
+from studies.suites.runner import read_results, write_runs
 from studies.suites.statistics import geometric_mean
 from studies.verdict.headroom import (
     best_per_label,
@@ -34,6 +34,7 @@ from studies.verdict.summary import suite_metrics, targets_met
 from studies.verdict.worlds import check_generator, sensor_template, suite_worlds
 
 REPO = Path(__file__).resolve().parents[2]
+TARGETS = VerdictSection().targets
 TEMPLATE = sensor_template(SimulateSection(), 42)
 
 
@@ -144,7 +145,7 @@ def test_a_worlds_figure_is_the_median_over_its_runs(tmp_path: Path) -> None:
     assert w.ratio("adaptive", "fixed") == pytest.approx(5 / 12)
     assert w.ratio("adaptive", "min") == pytest.approx(5 / 6)  # min(baseline 2, fixed 4)
     assert w.median("adaptive", "street") == 1.0  # the street frame of each run: 1, 1, 100
-    write_world(tmp_path / "w", w)
+    write_runs(tmp_path / "w", w)
     back = read_results(tmp_path)[0]
     assert back.name == "w" and back.labels == LABELS
     for s in w.settings:
@@ -160,7 +161,8 @@ def test_suite_metrics_by_hand() -> None:
     worlds.append(world("w3", {"baseline": [[1, 1]], "fixed": [[1, 1]], "adaptive": [[100, 100]]},
                         ["cave", "street"], {"baseline": [False], "fixed": [False],
                                              "adaptive": [True]}))
-    m = suite_metrics(worlds[:3], {"family": "id"}, 10.0, 0.95, 500, 0)
+    m = suite_metrics(worlds[:3], {"family": "id"}, 10.0, 0.95, 500, 0,
+                      targets=TARGETS)
     r = m["ratios"]["adaptive_vs_fixed"]
     assert r["geomean"] == pytest.approx(geometric_mean([0.5, 0.25, 2.0]))
     assert (r["wins"], r["worlds"], r["worst"]) == (2, 3, 2.0)
@@ -168,7 +170,8 @@ def test_suite_metrics_by_hand() -> None:
     assert m["ratios"]["adaptive_vs_baseline"]["geomean"] == pytest.approx(
         geometric_mean([0.5, 0.125, 2.0]))
     assert m["pooled"]["adaptive"]["rte_pct"] == pytest.approx(4 / 3)
-    with_failure = suite_metrics(worlds, {"family": "id"}, 10.0, 0.95, 500, 0)
+    with_failure = suite_metrics(worlds, {"family": "id"}, 10.0, 0.95, 500, 0,
+                                 targets=TARGETS)
     assert with_failure["pooled"]["adaptive"]["failure_rate"] == pytest.approx(2 / 8)
     assert with_failure["failed_runs"] == {"baseline": 0, "fixed": 0, "adaptive": 1}
     assert with_failure["selector"]["novel_share"] == pytest.approx(0.25)
@@ -179,11 +182,11 @@ def test_targets_are_strict_in_distribution_and_not_out_of_it() -> None:
         return {k: {"geomean": g, "high": high}
                 for k in ("adaptive_vs_fixed", "adaptive_vs_baseline")}
 
-    assert targets_met("id", ratios(0.75, 0.89))["adaptive_vs_fixed"]["met"]
-    assert not targets_met("id", ratios(0.75, 0.90))["adaptive_vs_fixed"]["met"]
-    assert not targets_met("id", ratios(0.76, 0.80))["adaptive_vs_fixed"]["met"]
-    assert targets_met("ood", ratios(1.0, 1.05))["adaptive_vs_baseline"]["met"]
-    assert not targets_met("ood", ratios(1.0, 1.06))["adaptive_vs_baseline"]["met"]
+    assert targets_met("id", ratios(0.75, 0.89), TARGETS)["adaptive_vs_fixed"]["met"]
+    assert not targets_met("id", ratios(0.75, 0.90), TARGETS)["adaptive_vs_fixed"]["met"]
+    assert not targets_met("id", ratios(0.76, 0.80), TARGETS)["adaptive_vs_fixed"]["met"]
+    assert targets_met("ood", ratios(1.0, 1.05), TARGETS)["adaptive_vs_baseline"]["met"]
+    assert not targets_met("ood", ratios(1.0, 1.06), TARGETS)["adaptive_vs_baseline"]["met"]
 
 
 def test_the_candidate_set_is_the_grid_the_baseline_and_the_fixed_set() -> None:
