@@ -20,7 +20,7 @@ from pathlib import Path
 from common import Row, best_of, data_root, size
 
 from pipeline.export import export_ground_truth, export_trajectory
-from pipeline.metrics.trajectory_error import evaluate_files
+from pipeline.metrics.trajectory_error import compare_files
 from pipeline.sequence import SequenceReader, read_ground_truth
 from pipeline.sources import ingest_kitti
 from pipeline.trajectory import Trajectory, write_trajectory
@@ -50,7 +50,7 @@ def run() -> list[Row]:
             "export --ground-truth": best_of(lambda: export_ground_truth(seq, "kitti", out)),
             "export (anchored trajectory)": best_of(
                 lambda: export_trajectory(traj, "kitti", out, sequence=seq)),
-            "metric rte": best_of(lambda: evaluate_files(seq, traj, 0.5)),
+            "metric rte": best_of(lambda: compare_files(seq, [traj], 0.5)),
         }
         t_cli = cli_seconds(["export", str(seq), "--ground-truth", "--format", "kitti",
                              "--out", str(out)])
