@@ -19,7 +19,6 @@ selection, its risk-aware twin and main's are timed in turns, scan by scan).
 
 from __future__ import annotations
 
-import sys
 import tempfile
 import time
 from collections.abc import Iterator
@@ -27,9 +26,6 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from common import Row, best_of, data_root, size
 
 from pipeline.descriptors.ndt_histogram import describe

@@ -10,15 +10,11 @@ descriptors) in every run.
 from __future__ import annotations
 
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from bench_model import kitti_scans, synthetic_rows
 from common import Row, best_of, size, smoke
 

@@ -154,7 +154,7 @@ def studies_side_by_side(tmp: Path, seq: Path) -> tuple[float, float]:
         run_trials(paths, tmp / "shared", settings, seed=0, progress=False, executor=ex)
     shared_s = time.perf_counter() - t0
     for path in paths:
-        tables = [pq.read_table(trials_path(tmp / out, "ndt", path.stem)).drop(["wall_time_s"])
+        tables = [pq.read_table(trials_path(tmp / out, "ndt", path.stem))
                   for out in ("side", "shared")]
         assert tables[0].equals(tables[1]), f"{path.stem}: side by side changed the trials"
     return side_s, shared_s

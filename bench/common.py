@@ -1,5 +1,4 @@
-"""Shared pieces of the benchmark scripts: the Row type, timing, the table printer, the toy
-reproduction's fixed NDT parameters."""
+"""Shared pieces of the benchmark scripts: the Row type, timing, the table printer."""
 
 from __future__ import annotations
 
@@ -25,9 +24,6 @@ def smoke() -> bool:
 def size(full: T, tiny: T) -> T:
     """``full`` (a count, a length, a grid), or ``tiny`` in a smoke run."""
     return tiny if smoke() else full
-
-TOY_FIXED_NDT = {"resolution": 2.0202443098570972, "keyframe_interval": 7.758915470730103}
-"""NDT's joint-study parameters of the toy reproduction (docs/results/toy.md)."""
 
 
 @dataclass

@@ -17,8 +17,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
-sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE))  # the modules' own `common` and `reference`, when run.py is loaded
 
 from common import Row, format_table  # noqa: E402
 

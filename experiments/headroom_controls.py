@@ -1,5 +1,5 @@
-"""Is the in-distribution headroom per environment, or a better single set? (issue 29;
-docs/results/verdict.md, "Headroom")
+"""Is the in-distribution headroom per environment, or a better single set?
+(docs/results/selector-dev.md, "... and what the headroom is made of")
 
 Not a `make bench` module, and it runs nothing: ``python experiments/headroom_controls.py
 --headroom verdict/results/headroom [--metrics verdict/metrics/headroom.json]`` reads the
@@ -29,12 +29,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def read_worlds(headroom: Path) -> tuple[list[dict], list[dict[str, float]]]:
@@ -93,13 +90,13 @@ def controls(worlds: list[dict], sbs: int) -> dict[str, np.ndarray]:
     return {k: np.asarray(v) for k, v in out.items()}
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     from studies.suites.statistics import ratio_estimate
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--headroom", type=Path, default=Path("verdict/results/headroom"))
     parser.add_argument("--metrics", type=Path, default=Path("verdict/metrics/headroom.json"))
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     worlds, candidates = read_worlds(args.headroom)
     fixed = json.loads(args.metrics.read_text())["fixed"]
     sbs = next(i for i, c in enumerate(candidates)

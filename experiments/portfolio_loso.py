@@ -1,5 +1,5 @@
 """Leave one training sequence out: how well the portfolio selector's choice carries over
-(issue 29; docs/results/selector-dev.md).
+(docs/results/selector-dev.md).
 
 Not a `make bench` module: ``python experiments/portfolio_loso.py --db
 PROJECT/results/adaptune.duckdb [--k 20,100,350]``, after ``adaptune rte --portfolio`` built
@@ -25,12 +25,9 @@ schedule's run.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def frame_table(db: Path, portfolio: Path | None = None
@@ -181,7 +178,7 @@ def member_params(portfolio: Path) -> list[str]:
     return [params[i] for i in range(len(params))]
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--db", type=Path, required=True)
     parser.add_argument("--portfolio", type=Path, default=None,
@@ -196,7 +193,7 @@ def main() -> None:
                              "portfolio.fixed].")
     parser.add_argument("--first", type=int, default=None,
                         help="Only the sequences <world>_<i> with i < FIRST (a learning curve).")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     portfolio = args.portfolio or args.db.parent / "portfolio"
     E, y, seq, label = frame_table(args.db, portfolio)
     names = member_params(portfolio)

@@ -1,8 +1,10 @@
-"""Do the step errors add up? Real KITTI slices against simulated ones (issue 30;
-docs/results/kitti-sim.md, "What the simulated windows lack").
+"""Do the step errors add up? Real KITTI slices against simulated ones
+(docs/results/kitti-sim.md, "What the simulated windows lack").
 
-``python experiments/realism_drift.py [--params params.yaml] [--replicas 3]``: every kitti_mini
-slice (frames 0-9, ``ADAPTUNE_TEST_DATA`` or ../shared/data) and its simulated replicas (the
+``python experiments/realism_drift.py [--params params.yaml] [--replicas 3] [--data DIR]
+[--slice NN:FIRST:LAST ...] [--algorithms gicp,kiss_icp]``: every kitti_mini slice of the
+comparison (``studies.realism.compare.SLICES``: frames 0-9 of 01, 04, 06 and 10, under
+``--data``: ``ADAPTUNE_TEST_DATA`` or ../shared/data) and its simulated replicas (the
 ``simulate_kitti`` section of ``--params``, world seed ``replica_seed(r, SEQ)`` for replica r,
 as the comparison seeds them), run by GICP and KISS-ICP at their defaults. Per side, in
 percent of the distance travelled (the ground truth's path over the slice):
@@ -21,13 +23,10 @@ Slice 10 creeps (0.19 m a step): its percentages divide by under 2 m of road.
 from __future__ import annotations
 
 import argparse
-import sys
+import os
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 
 
 def drift_figures(T_gt: np.ndarray, T_est: np.ndarray) -> tuple[float, float, float]:
@@ -45,29 +44,40 @@ def drift_figures(T_gt: np.ndarray, T_est: np.ndarray) -> tuple[float, float, fl
     return 100.0 * step, 100.0 * bias, 100.0 * drift
 
 
-def main() -> None:
-    from common import data_root
+def data_root() -> Path:
+    """The real KITTI data (kitti_mini/, kitti_trajectories/): ``ADAPTUNE_TEST_DATA``, or
+    ../shared/data beside the repository."""
+    env = os.environ.get("ADAPTUNE_TEST_DATA")
+    return Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "data"
 
+
+def main(argv: list[str] | None = None) -> None:
     from pipeline.config import load_section
     from pipeline.sim.kitti_dataset import SimulateKittiSection
-    from studies.realism.compare import ALGORITHMS, SLICES
+    from studies.realism.compare import ALGORITHMS, SLICES, parse_slice
     from studies.realism.registration import odometry_trajectory
     from studies.realism.slices import real_slice, replica_seed, simulated_slice
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--params", type=Path, default=Path("params.yaml"))
     parser.add_argument("--replicas", type=int, default=3)
-    args = parser.parse_args()
+    parser.add_argument("--data", type=Path, default=None,
+                        help="the folder of kitti_mini/ and kitti_trajectories/")
+    parser.add_argument("--slice", dest="slices", action="append", metavar="NN:FIRST:LAST",
+                        help="a slice (repeatable) [default: the comparison's]")
+    parser.add_argument("--algorithms", default=",".join(ALGORITHMS))
+    args = parser.parse_args(argv)
     section = load_section(args.params, "simulate_kitti", SimulateKittiSection)
-    root = data_root()
+    root = args.data or data_root()
+    slices = [parse_slice(s) for s in args.slices] if args.slices else SLICES
     print("| slice | algorithm | side | step [%] | bias [%] | drift [%] |")
     print("|---|---|---|---|---|---|")
-    for seq, first, last in SLICES:
+    for seq, first, last in slices:
         sides = [("real", real_slice(root / "kitti_mini" / "dataset", seq, first, last))]
         sides += [(f"sim {r}", simulated_slice(root / "kitti_trajectories", seq, first, last,
                                                section, replica_seed(r, seq)))
                   for r in range(args.replicas)]
-        for algorithm in ALGORITHMS:
+        for algorithm in args.algorithms.split(","):
             for name, scans in sides:
                 step, bias, drift = drift_figures(
                     *odometry_trajectory(algorithm, scans, f"{name} {seq}"))

@@ -1,5 +1,5 @@
-"""Two runs of one verdict suite, paired by world (issue 33's gate on the verdict's dev suite;
-docs/results/verdict-protocol.md, "Two arms of one suite").
+"""Two runs of one verdict suite, paired by world (the gate of a change on the verdict's dev
+suite; docs/results/verdict-protocol.md, "Two arms of one suite").
 
 ``python experiments/verdict_arms.py REFERENCE.json CANDIDATE.json [--json OUT]``: both are a
 suite's metrics (``verdict/metrics/<family>.json``) on the same worlds, e.g. the id dev suite
@@ -16,8 +16,6 @@ import json
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 
 def _fmt(e: dict[str, float | None]) -> str:
     v, lo, hi = (e.get(k) for k in ("value" if "value" in e else "geomean", "low", "high"))
@@ -26,14 +24,14 @@ def _fmt(e: dict[str, float | None]) -> str:
     return f"{v:.2f}" + (f" ({lo:.2f}-{hi:.2f})" if lo is not None and hi is not None else "")
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     from pipeline.errors import AdaptuneError
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("reference", type=Path)
     parser.add_argument("candidate", type=Path)
     parser.add_argument("--json", type=Path, default=None, help="write the comparison here")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     try:
         compare(args.reference, args.candidate, args.json)
     except (AdaptuneError, OSError, ValueError) as exc:  # ValueError: a file that is not JSON

@@ -4,89 +4,33 @@ rte, query and export commands; bad input gives one line and exit code 1."""
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 
 import duckdb
 import numpy as np
-import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
-from helpers.evaluation_data import cli_fails, gt_path, write_sequence, write_study
+from helpers.evaluation_data import cli_fails
+from helpers.results_db import KITTI_LENGTHS, LENGTH_M, World, build_database, make_world
 
 from pipeline.database.store import frame_label_table
 from pipeline.errors import InputError
 from pipeline.metrics.kitti import kitti_errors
 from pipeline.metrics.rte import per_frame_rte
 from pipeline.posefile import read_kitti_poses, read_tum
-from pipeline.sequence import EnvLabel, SequenceReader
+from pipeline.sequence import SequenceReader
 from pipeline.surrogates.rows import read_training_rows
 from pipeline.trajectory import Trajectory, read_trajectory, write_trajectory
 from pipeline.tuning.layout import read_trials_tables, trajectory_path
 from schemas import SCHEMA_VERSION
 from stages.cli import main
 
-LENGTH_M = 10.0
-KITTI_LENGTHS = (15.0, 30.0)
-
-
-@dataclass
-class World:
-    root: Path
-    params: Path
-    gts: dict[str, np.ndarray]
-    estimates: dict[str, dict[tuple[str, int], np.ndarray]]  # study -> (sequence, trial) -> poses
-
-    def args(self, db: Path, *extra: str) -> list[str]:
-        return ["rte", "--params", str(self.params), "--sequences", str(self.root / "seq"),
-                "--trials", str(self.root / "trials"), "--fixed", str(self.root / "fixed"),
-                "--portfolio", str(self.root / "portfolio"), "--db", str(db), *extra]
-
-
-def make_world(root: Path) -> World:
-    gts, stamped = {}, {}
-    for name, n in (("cave_0", 60), ("street_0", 45)):
-        gt = gt_path(n, seed=n)
-        labels = [EnvLabel(0, 19, "cave"), EnvLabel(20, n - 1, "open")]
-        stamps = write_sequence(root / "seq" / f"{name}.mcap", gt, labels)
-        # what the store sees: the ground truth after the MCAP round trip
-        gts[name] = SequenceReader(root / "seq" / f"{name}.mcap").ground_truth()
-        stamped[name] = (stamps, gt)
-    (root / "seq" / "index.json").write_text(json.dumps({"train": ["cave_0"],
-                                                         "validation": ["street_0"]}))
-    estimates = {
-        "trials": write_study(root / "trials", "gicp", stamped, 4, ["max_corr_m", "kf_m"]),
-        "fixed": write_study(root / "fixed", "gicp", stamped, 3, ["max_corr_m", "kf_m"],
-                             seed=7, joint=True),
-        "portfolio": write_study(root / "portfolio", "gicp", stamped, 3,
-                                 ["max_corr_m", "kf_m"], seed=11),
-    }
-    write_study(root / "trials", "ndt", {"cave_0": stamped["cave_0"]}, 2, ["resolution_m"], seed=3)
-    params = root / "params.yaml"
-    params.write_text(f"base:\n  length_m: {LENGTH_M}\n"
-                      f"devkit:\n  lengths_m: {list(KITTI_LENGTHS)}\n")
-    return World(root, params, gts, estimates)
-
-
-def write_environment(path: Path, gts: dict[str, np.ndarray]) -> None:
-    rows = [(s, f) for s, gt in gts.items() for f in range(len(gt))]
-    cols = {"sequence": pa.array([r[0] for r in rows]),
-            "frame": pa.array([r[1] for r in rows], pa.int32())}
-    cols.update({f"e{i}": pa.array(np.full(len(rows), i, np.float32)) for i in range(10)})
-    pq.write_table(pa.table(cols), path)
-
 
 @pytest.fixture(scope="module")
 def world(tmp_path_factory: pytest.TempPathFactory) -> World:
-    w = make_world(tmp_path_factory.mktemp("world"))
-    write_environment(w.root / "environment.parquet", w.gts)
-    db = w.root / "adaptune.duckdb"
-    result = CliRunner().invoke(main, w.args(db, "--environment",
-                                             str(w.root / "environment.parquet")))
-    assert result.exit_code == 0, result.output
-    return w
+    return build_database(make_world(tmp_path_factory.mktemp("world")))
 
 
 def connect(world: World) -> duckdb.DuckDBPyConnection:

@@ -13,9 +13,11 @@ import pyarrow.parquet as pq
 
 from pipeline.geometry import rot_z
 from pipeline.io_utils import atomic_path
+from pipeline.odometry.base import ParameterSpace, ParamSpec
 from pipeline.sequence import EnvLabel, SequenceInfo, SequenceWriter
 from pipeline.trajectory import Trajectory, write_trajectory
 from pipeline.tuning.layout import trajectory_path, trials_table_path
+from pipeline.tuning.table import STUDY_KEY
 from schemas.arrow import trials_schema
 
 
@@ -72,8 +74,13 @@ def write_sequence(path: Path, gt: np.ndarray, labels: list[EnvLabel] | None = N
 
 def write_trials_table(out_dir: Path, algorithm: str, sequence: str,
                        rows: list[dict], param_names: list[str]) -> Path:
-    """One trials.parquet following schemas.arrow.trials_schema."""
+    """One trials.parquet following schemas.arrow.trials_schema, with a study fingerprint that
+    holds the parameter space searched (every parameter a float in [0, 100], default 1:
+    ``pipeline.tuning.table.read_space`` reads it)."""
+    space = ParameterSpace(tuple(ParamSpec(n, 0.0, 100.0, 1.0) for n in param_names))
     schema = trials_schema(param_names)
+    schema = schema.with_metadata({**schema.metadata,
+                                   STUDY_KEY: json.dumps({"space": space.to_json()}).encode()})
     cols = {f.name: [r[f.name] for r in rows] for f in schema}
     table = pa.Table.from_pydict(cols, schema=schema)
     path = trials_table_path(out_dir, algorithm, sequence)

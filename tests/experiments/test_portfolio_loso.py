@@ -1,15 +1,42 @@
-"""experiments/portfolio_loso.py's per-label headroom (``label_gains``), on a hand-computed
-portfolio: the in-sample best member and the member chosen leave one sequence out differ."""
+"""experiments/portfolio_loso.py: run on a small results database that the ``rte`` command
+built (helpers.results_db: a portfolio of 3 members on 2 sequences), its figures checked
+against the database's own rows; its per-label headroom (``label_gains``) on a hand-computed
+portfolio, where the in-sample best member and the member chosen leave one sequence out
+differ."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
+import duckdb
 import numpy as np
 import pytest
+from helpers.results_db import build_database, make_world
 from helpers.scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[2] / "experiments" / "portfolio_loso.py"
+
+
+def test_a_run_on_a_small_database(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    world = build_database(make_world(tmp_path))
+    load_script(SCRIPT).main(["--db", str(world.db), "--k", "2,5"])
+    lines = capsys.readouterr().out.splitlines()
+    assert "2 sequences, 85 frames, 3 members" in lines[0]
+    rows = {m[1]: tuple(map(float, m.groups()[1:])) for line in lines[1:]
+            if (m := re.fullmatch(r"  (\S+) +(\S+)  (\S+)  (\S+)", line))}
+    assert {"k2", "k5", "winners_k2", "sbs", "reference", "label", "frame_oracle"} <= set(rows)
+    con = duckdb.connect(str(world.db), read_only=True)
+    per_member = dict(con.execute("SELECT trial, avg(y) FROM portfolio_rows GROUP BY trial"
+                                  ).fetchall())
+    best_each_frame = con.execute("SELECT avg(m) FROM (SELECT min(y) AS m FROM portfolio_rows "
+                                  "GROUP BY sequence, frame)").fetchone()[0]
+    con.close()
+    # the reference: the last member (trial 2), against itself 1
+    assert rows["reference"][0] == pytest.approx(per_member[2], abs=5e-4)
+    assert rows["reference"][2] == 1.0 and rows["sbs"][1] == 1.0
+    assert rows["frame_oracle"][0] == pytest.approx(best_each_frame, abs=5e-4)
+    assert all(rows["frame_oracle"][0] <= mean for mean, _, _ in rows.values())
 
 
 def _portfolio() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
