@@ -1,5 +1,5 @@
 """The figure of `adaptune metric rte --plot`: what evo_traj --plot and evo_ape --plot show, in
-one PNG (matplotlib, Agg backend, written atomically by ``pipeline.report.outputs.figure``).
+one PNG (matplotlib, Agg backend, written atomically by ``pipeline.outputs.figure``).
 
 Three panels: a top view (x, y [m]) of the reference and of every estimate as aligned for the
 APE; the APE translation error [m] of every pose along the reference's path [m]; the
@@ -21,7 +21,7 @@ def plot_comparisons(reference_T: NDArray[np.float64], comparisons: Sequence[Com
                      names: Sequence[str], out_png: str | Path) -> Path:
     """Write the figure (module docstring) of ``comparisons`` of the estimates ``names``
     against the reference poses ``reference_T`` (N, 4, 4)."""
-    from pipeline.report.outputs import figure
+    from pipeline.outputs import figure
 
     out_png = Path(out_png)
     with figure(out_png, 1, 3, size=(12, 3.8)) as (_, axes):
