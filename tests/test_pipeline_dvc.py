@@ -216,11 +216,11 @@ def test_generalize_scores_every_world_of_the_suite(repro: tuple[Path, str]) -> 
         assert all(v > 0 for v in r.values())
         assert w["ratio"]["adaptive_vs_best"] == pytest.approx(
             r["adaptive"] / min(r["baseline"], r["fixed"]))
-        for setting in ("baseline", "fixed"):
-            path = root / f"results/generalization/runs/{name}/{setting}.parquet"
+        for setting in ("baseline", "fixed", "adaptive"):  # every nominal run's trajectory
+            path = root / f"results/generalization/{name}/{setting}.trajectory.parquet"
             assert len(read_trajectory(path)) == GENERALIZE_FRAMES
-        assert len(Schedule.read(root / f"results/generalization/adaptive/{name}/"
-                                 "schedule.parquet")) == GENERALIZE_FRAMES
+        assert len(Schedule.read(root / f"results/generalization/{name}/"
+                                 "adaptive.schedule.parquet")) == GENERALIZE_FRAMES
         # one replica of every setting (tiny_params), the ratio of the medians of the runs
         runs = {s: [r[s], *w["replicas_rte_pct"][s]] for s in r}
         assert all(len(v) == 2 and all(x > 0 for x in v) for v in runs.values())

@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,7 +26,7 @@ from pipeline.geometry import path_distances
 from pipeline.io_utils import atomic_path
 from pipeline.metrics.section import DevkitSection
 from pipeline.sequence_index import read_index
-from pipeline.tuning.layout import TRIALS_GLOB, read_trials_tables
+from pipeline.tuning.layout import JOINT_SEQUENCE, TRIALS_GLOB, read_trials_tables
 from schemas import read_text
 from schemas.arrow import POSE_COLUMNS
 
@@ -54,7 +54,8 @@ class DatabaseSummary:
 
 def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapping[str, Path],
                    length_m: float, devkit: DevkitSection, descriptors: Path | None = None,
-                   environment: Path | None = None) -> DatabaseSummary:
+                   environment: Path | None = None,
+                   sequences: Collection[str] | None = None) -> DatabaseSummary:
     """Build the results database at ``db_path`` atomically.
 
     sequences_dir: data/sequences (``*.mcap`` and optionally index.json with the splits);
@@ -62,7 +63,9 @@ def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapp
     rte_kitti segments (params ``devkit``);
     studies: study name ('trials' | 'fixed' | 'portfolio') -> its trials output folder
     (pipeline.tuning.layout);
-    descriptors / environment: the descriptor Parquet files, or None for empty tables.
+    descriptors / environment: the descriptor Parquet files, or None for empty tables;
+    sequences: the names of the sequences (and their trials) to hold, None: every one (a study
+    of a fold trains on some of a folder's sequences only).
     """
 
     unknown = sorted(set(studies) - set(STUDIES))
@@ -78,9 +81,9 @@ def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapp
         try:
             steps = [
                 ("tables", lambda: apply_sql(con, "tables.sql")),
-                ("sequences", lambda: load_sequences(con, Path(sequences_dir))),
-                ("trials", lambda: load_trials(con, studies)),
-                ("trajectories", lambda: load_trajectories(con, studies)),
+                ("sequences", lambda: load_sequences(con, Path(sequences_dir), sequences)),
+                ("trials", lambda: load_trials(con, studies, sequences)),
+                ("trajectories", lambda: load_trajectories(con, studies, sequences)),
                 ("rte_frames", lambda: score_frames(con, length_m)),
                 ("rte_kitti", lambda: score_kitti(con, devkit.lengths_m, devkit.step_frames)),
                 ("summary", lambda: apply_sql(con, "summary.sql")),
@@ -135,14 +138,16 @@ def sql_literal(text: str) -> str:
 # ---------------------------------------------------------------------------- sequences
 
 
-def load_sequences(con: duckdb.DuckDBPyConnection, sequences_dir: Path) -> None:
-    """Fill sequences, frame_labels and ground_truth from every ``*.mcap`` in ``sequences_dir``."""
+def load_sequences(con: duckdb.DuckDBPyConnection, sequences_dir: Path,
+                   names: Collection[str] | None = None) -> None:
+    """Fill sequences, frame_labels and ground_truth from every ``*.mcap`` in ``sequences_dir``
+    (``names``: of those only)."""
     from pipeline.sequence import SequenceReader
 
     if not sequences_dir.is_dir():
         raise InputError(f"{sequences_dir}: no such sequences directory")
     splits = read_index(sequences_dir, missing_ok=True).split_of()
-    paths = sorted(sequences_dir.glob("*.mcap"))
+    paths = [p for p in sorted(sequences_dir.glob("*.mcap")) if names is None or p.stem in names]
     if not paths:
         log.warning("%s: no sequence MCAP files", sequences_dir)
     for path in paths:
@@ -202,11 +207,14 @@ def insert_arrow(con: duckdb.DuckDBPyConnection, table: str, rows: pa.Table) -> 
 # ------------------------------------------------------------------------------- trials
 
 
-def load_trials(con: duckdb.DuckDBPyConnection, studies: Mapping[str, Path]) -> None:
-    """Fill ``trials`` from every study's trials tables; add p_<name> and summary columns.
-    InputError when a study's folder holds no trials table (its trials would be dropped from
-    the database without a word)."""
-    tables = {study: read_trials_tables(out) for study, out in studies.items()}
+def load_trials(con: duckdb.DuckDBPyConnection, studies: Mapping[str, Path],
+                names: Collection[str] | None = None) -> None:
+    """Fill ``trials`` from every study's trials tables (``names``: their rows of those
+    sequences and of joint studies only); add p_<name> and summary columns. InputError when a
+    study's folder holds no trials table (its trials would be dropped from the database
+    without a word)."""
+    tables = {study: of_sequences(read_trials_tables(out), names)
+              for study, out in studies.items()}
     for study, table in tables.items():
         if not table.num_rows:
             raise InputError(f"{studies[study]}: no trials in this {study} folder (no "
@@ -226,8 +234,20 @@ def load_trials(con: duckdb.DuckDBPyConnection, studies: Mapping[str, Path]) -> 
 # ------------------------------------------------------------------------- trajectories
 
 
-def load_trajectories(con: duckdb.DuckDBPyConnection, studies: Mapping[str, Path]) -> None:
-    """Temporary table ``est`` of every trajectory of every study, validated against the data."""
+def of_sequences(table: pa.Table, names: Collection[str] | None) -> pa.Table:
+    """The rows of a trials table of the sequences ``names`` and of joint studies (all: None)."""
+    if names is None:
+        return table
+    import pyarrow.compute as pc
+
+    keep = pc.is_in(table.column("sequence"), pa.array([*names, JOINT_SEQUENCE], pa.string()))
+    return table.filter(keep)
+
+
+def load_trajectories(con: duckdb.DuckDBPyConnection, studies: Mapping[str, Path],
+                      names: Collection[str] | None = None) -> None:
+    """Temporary table ``est`` of every trajectory of every study (``names``: of those
+    sequences and joint studies only), validated against the data."""
     parts = []
     for study, out in studies.items():
         traj_dir = Path(out) / "trajectories"
@@ -240,7 +260,9 @@ def load_trajectories(con: duckdb.DuckDBPyConnection, studies: Mapping[str, Path
             f"SELECT {sql_literal(study)} AS study, algorithm, sequence, trial, frame, "
             f"{', '.join(POSE_COLUMNS)}, filename "
             f"FROM read_parquet({glob}, hive_partitioning = true, filename = true, "
-            "hive_types = {'algorithm': VARCHAR, 'sequence': VARCHAR, 'trial': INTEGER})")
+            "hive_types = {'algorithm': VARCHAR, 'sequence': VARCHAR, 'trial': INTEGER})"
+            + ("" if names is None else " WHERE sequence IN ("
+               + ", ".join(sql_literal(n) for n in [*names, JOINT_SEQUENCE]) + ")"))
     if not parts:
         cols = ", ".join(f"{c} DOUBLE" for c in POSE_COLUMNS)
         con.execute(f"CREATE TEMP TABLE est (study VARCHAR, algorithm VARCHAR, sequence VARCHAR, "

@@ -43,16 +43,19 @@ from pipeline.trajectory import Trajectory, read_trajectory, write_trajectory
 log = logging.getLogger(__name__)
 
 
-def best_fixed_params(trials_dir: Path,
-                      algorithm: str | None = None) -> tuple[str, dict[str, float]]:
-    """(algorithm, parameters) of the best 'ok' trial of the joint SMBO under ``trials_dir``."""
+def best_fixed_params(trials_dir: Path, algorithm: str | None = None,
+                      study: str | None = None) -> tuple[str, dict[str, float]]:
+    """(algorithm, parameters) of the best 'ok' trial of the joint SMBO under ``trials_dir``
+    (``study``: of that sequence's own study instead)."""
     from pipeline.tuning.layout import JOINT_SEQUENCE, best_trial, read_trials_tables
 
     table = read_trials_tables(trials_dir)
-    rows = [r for r in table.to_pylist() if r["sequence"] == JOINT_SEQUENCE
+    sequence = JOINT_SEQUENCE if study is None else study
+    rows = [r for r in table.to_pylist() if r["sequence"] == sequence
             and (algorithm is None or r["algorithm"] == algorithm)]
     if not rows:
-        raise InputError(f"{trials_dir}: no joint trials table"
+        what = "joint trials table" if study is None else f"trials table of {study!r}"
+        raise InputError(f"{trials_dir}: no {what}"
                          f"{f' for {algorithm}' if algorithm else ''} (run the `fixed` stage)")
     tid = best_trial((r["trial"], r["status"], r["objective"]) for r in rows)
     if tid is None:

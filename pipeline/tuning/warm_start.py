@@ -17,7 +17,7 @@ that 256 joint trials find.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -33,10 +33,11 @@ K = 3
 
 
 def warm_start_params(out_dir: str | Path, algorithm: str, space: ParameterSpace,
-                      n: int) -> list[Params]:
+                      n: int, sequences: Collection[str] | None = None) -> list[Params]:
     """The ``n`` parameter sets measured by the per-sequence studies of ``algorithm`` in the
-    trials folder ``out_dir`` with the lowest predicted joint objective, best first. InputError
-    when there is no study, or one searched another parameter space than ``space``."""
+    trials folder ``out_dir`` (``sequences``: of those sequences only) with the lowest
+    predicted joint objective, best first. InputError when there is no study, or one searched
+    another parameter space than ``space``."""
     found = read_space(out_dir, algorithm)
     if found.to_json() != space.to_json():
         raise InputError(f"{out_dir}: its studies searched another parameter space than this "
@@ -44,7 +45,8 @@ def warm_start_params(out_dir: str | Path, algorithm: str, space: ParameterSpace
     folder = trials_path(out_dir, algorithm, JOINT).parent.parent
     studies, measured = [], []
     for table in sorted(folder.glob("sequence=*/trials.parquet")):
-        if table.parent.name == f"sequence={JOINT}":
+        name = table.parent.name.removeprefix("sequence=")
+        if name == JOINT or (sequences is not None and name not in sequences):
             continue
         results = [r for r in read_trials(table, space) if r.status != "lost"]
         if results:

@@ -66,7 +66,8 @@ def run_generalization(paths: GeneralizationPaths, section: GeneralizeSection,
     options = read_adapter_options(paths.fixed, algorithm)  # as the studies ran
     inputs = SuiteInputs(algorithm, space, space.defaults(), fixed, options,
                          section.length_m, section.replicas, section.replica_scale,
-                         penalty_pct=None, adaptive={"adaptive": adaptive})
+                         penalty_pct=None, adaptive={"adaptive": adaptive},
+                         keep_trajectories=True)
     results = run_suite(generalization_worlds(section), inputs, paths.runs, section.workers)
     scores = [world_score(r) for r in results]
     result = generalization_metrics(scores, section.suite, section.root, section.bootstrap,

@@ -58,7 +58,7 @@ class LoadedWorld:
 
     def __init__(self, name: str, scans: list[Scan], labels: list[str], algorithm: str,
                  adapter_options: Mapping[str, Any] | None, space: Any, length_m: float,
-                 penalty_pct: float | None) -> None:
+                 penalty_pct: float | None, jump_limit_m: float | None = None) -> None:
         from pipeline.odometry.registry import build_adapter
 
         if len(labels) != len(scans):
@@ -79,6 +79,7 @@ class LoadedWorld:
             warm(self.scans)
         self.length_m = length_m
         self.penalty_pct = penalty_pct
+        self.jump_limit_m = jump_limit_m
         self.scored = self._scored_frames()
 
     def __len__(self) -> int:
@@ -118,9 +119,17 @@ class LoadedWorld:
     def run(self, params_or_schedule: Mapping[str, float] | Schedule, replica: int,
             replica_scale: float) -> tuple[F64, bool]:
         """(per-start-frame RTE (N,) [%], failed) of one run on replica ``replica``."""
+        t_err, failed, _ = self.run_trajectory(params_or_schedule, replica, replica_scale)
+        return t_err, failed
+
+    def run_trajectory(self, params_or_schedule: Mapping[str, float] | Schedule, replica: int,
+                       replica_scale: float) -> tuple[F64, bool, Any]:
+        """``run`` and the run's Trajectory (None when it failed: an error, or a step above
+        the jump limit where the world has one)."""
         from pipeline.evaluate.replicas import factors, perturbed, sequence_seed
         from pipeline.metrics.rte import per_frame_rte
         from pipeline.odometry import run_scans
+        from pipeline.tuning.job import check_jump
 
         setting = params_or_schedule
         if replica > 0:
@@ -129,12 +138,14 @@ class LoadedWorld:
             setting = perturbed(params_or_schedule, self.adapter.space, f)
         try:
             traj = run_scans(self.adapter, self.scans, self.stamps_ns, setting, self.name)
+            if self.jump_limit_m is not None:
+                check_jump(traj, self.jump_limit_m)
         except OdometryError as exc:
             log.info("%s replica %d: %s", self.name, replica, exc)
             penalty = np.nan if self.penalty_pct is None else self.penalty_pct
-            return np.where(self.scored, penalty, np.nan), True
+            return np.where(self.scored, penalty, np.nan), True, None
         t_err, _ = per_frame_rte(self.gt, traj.T_world_lidar, self.length_m)
-        return t_err, False
+        return t_err, False, traj
 
 
 def edge_share(values: F64, space: list[dict[str, Any]]) -> float:

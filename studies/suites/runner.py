@@ -90,8 +90,8 @@ class SuiteInputs:
     subject's own ``length_m`` overrides it), the replicas, the failure penalty [%] (None: a
     failed run has no score), the adaptive settings to run by name (the stage runs one,
     ``adaptive``; a dev study of selector variants several; the headroom study none) and more
-    constant settings by name (``constant``: one parameter set, or one per sensor, where a
-    sensor without its own runs the fixed set)."""
+    constant settings by name (``constant``: one parameter set, or one per subject or sensor,
+    by the subject's name first, then its sensor, the fixed set for a subject with neither)."""
 
     algorithm: str
     space: Any
@@ -104,15 +104,19 @@ class SuiteInputs:
     penalty_pct: float | None
     adaptive: dict[str, AdaptiveSetting] = field(default_factory=dict)
     constant: dict[str, Params | dict[str, Params]] = field(default_factory=dict)
+    keep_trajectories: bool = False
+    """Write every setting's nominal trajectory beside the subject's runs (a figure's)."""
 
-    def constants_for(self, sensor: str) -> dict[str, Params]:
-        """Every constant setting a subject of ``sensor`` runs, by name: baseline, fixed and
-        ``constant``'s (a per-sensor one resolved for ``sensor``)."""
+    def constants_for(self, subject: str, sensor: str) -> dict[str, Params]:
+        """Every constant setting the subject ``subject`` (of ``sensor``) runs, by name:
+        baseline, fixed and ``constant``'s (one per subject or sensor resolved for it)."""
         out = {"baseline": self.baseline, "fixed": self.fixed}
         for name, value in self.constant.items():
-            per_sensor = all(isinstance(v, Mapping) for v in value.values())
-            out[name] = (dict(value.get(sensor, self.fixed)) if per_sensor  # type: ignore[arg-type]
-                         else dict(value))  # type: ignore[arg-type]
+            if all(isinstance(v, Mapping) for v in value.values()):  # per subject or sensor
+                chosen = value.get(subject, value.get(sensor, self.fixed))
+                out[name] = dict(chosen)  # type: ignore[arg-type]
+            else:
+                out[name] = dict(value)  # type: ignore[arg-type]
         return out
 
 
@@ -199,7 +203,7 @@ def score_world(world: Subject, inputs: SuiteInputs, out_dir: Path) -> WorldResu
     loaded = load_world(world, inputs)
     from pipeline.adaptive import loaded_model
 
-    nominal: dict[str, Any] = dict(inputs.constants_for(world.sensor))
+    nominal: dict[str, Any] = dict(inputs.constants_for(world.name, world.sensor))
     selection, as_fixed = {}, []
     for name, adaptive in inputs.adaptive.items():
         model_dir = adaptive.model_for(world.sensor)
@@ -215,9 +219,15 @@ def score_world(world: Subject, inputs: SuiteInputs, out_dir: Path) -> WorldResu
         chosen.schedule.write(out_dir / world.name / f"{name}.schedule.parquet")
     t_err, failed = {}, {}
     for name, setting in nominal.items():
-        runs = [loaded.run(setting, r, inputs.replica_scale) for r in range(inputs.replicas + 1)]
-        t_err[name] = np.stack([t for t, _ in runs])
-        failed[name] = [f for _, f in runs]
+        runs = [loaded.run_trajectory(setting, r, inputs.replica_scale)
+                for r in range(inputs.replicas + 1)]
+        t_err[name] = np.stack([t for t, _, _ in runs])
+        failed[name] = [f for _, f, _ in runs]
+        if inputs.keep_trajectories and runs[0][2] is not None:
+            from pipeline.trajectory import write_trajectory
+
+            write_trajectory(out_dir / world.name / f"{name}.trajectory.parquet", runs[0][2],
+                             {"setting": name, "sequence": world.name})
     for name in as_fixed:
         t_err[name], failed[name] = t_err["fixed"], failed["fixed"]
     result = WorldResult(world.name, world.family, world.segments, world.sensor,
@@ -237,13 +247,13 @@ def _edge_share(params: Mapping[str, float], space: Any) -> float:
 
 def load_world(world: Subject, inputs: SuiteInputs) -> Any:
     """``world`` loaded into memory, the adapter warmed over its scans (``LoadedWorld``), at
-    its own L where it has one."""
+    its own L where it has one, with its jump limit."""
     from studies.suites.loaded import LoadedWorld
 
     scans, labels = world.load()
     length_m = world.length_m or inputs.length_m
     return LoadedWorld(world.name, scans, labels, inputs.algorithm, inputs.adapter_options,
-                       inputs.space, length_m, inputs.penalty_pct)
+                       inputs.space, length_m, inputs.penalty_pct, world.jump_limit_m)
 
 
 def write_runs(folder: Path, result: WorldResult) -> None:

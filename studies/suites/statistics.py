@@ -14,6 +14,11 @@
   share of those sub-trajectories whose RTE exceeds the frozen threshold.
 - The **closed gap** (ASlib's): log(SBS / adaptive) / log(SBS / oracle) over the suite's geometric
   means, with a paired bootstrap interval (worlds resampled with both logs).
+- Within one recorded run, a ratio of two settings is the ratio of their mean RTE over the
+  run's start frames (each frame: the median over the runs of a setting), with a **moving-block
+  bootstrap** interval over the start frames (``block_ratio``): blocks of consecutive start
+  frames, as long as the frames one sub-trajectory spans, so that the overlap of neighbouring
+  sub-trajectories stays in every resample (scipy resamples independent observations only).
 - The **power analysis**: from the spread (sample standard deviation) s of the per-world log
   ratios, the smallest effect n worlds detect and the worlds an effect needs (Student t,
   two-sided 95 % interval, 80 % power: |log effect| >= (t_0.975 + t_0.80) s / sqrt(n)).
@@ -146,6 +151,36 @@ def worlds_needed(spread: float, true_ratio: float, bound: float = 1.0,
         if true_ratio <= bound * detectable_ratio(spread, n, confidence, power):
             return n
     return None
+
+
+def block_ratio(num: ArrayLike, den: ArrayLike, block: int, resamples: int = 10000,
+                confidence: float = CONFIDENCE, seed: int = 0) -> Estimate:
+    """mean(num) / mean(den) over start frames (``num``, ``den`` (N,) paired per frame: two
+    settings' RTE [%] of the same sub-trajectories) with its moving-block bootstrap interval:
+    each resample draws ceil(N / block) blocks of ``block`` consecutive frames, every one of
+    the N - block + 1 starts equally likely, joins them and keeps the first N frames; the
+    interval is the percentile one of ``resamples`` resamples (seeded). No interval (None
+    ends) below two frames; a block longer than the run is the run."""
+    a, b = np.asarray(num, np.float64), np.asarray(den, np.float64)
+    if a.shape != b.shape or a.ndim != 1:
+        raise ValueError(f"num and den must be (N,) alike, got {a.shape} and {b.shape}")
+    n = len(a)
+    if n == 0 or b.sum() <= 0:
+        return Estimate(None, None, None)
+    value = float(a.mean() / b.mean())
+    if n < 2:
+        return Estimate(value, None, None)
+    block = max(1, min(int(block), n))
+    starts = np.random.default_rng(seed).integers(0, n - block + 1,
+                                                  (resamples, -(-n // block)))
+    idx = (starts[:, :, None] + np.arange(block)).reshape(resamples, -1)[:, :n]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        stats = a[idx].mean(axis=1) / b[idx].mean(axis=1)
+    stats = stats[np.isfinite(stats)]
+    if not len(stats):
+        return Estimate(value, None, None)
+    low, high = np.quantile(stats, [(1 - confidence) / 2, (1 + confidence) / 2])
+    return Estimate(value, float(low), float(high))
 
 
 def _positive(values: ArrayLike) -> NDArray[np.float64]:

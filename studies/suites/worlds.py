@@ -63,6 +63,12 @@ class Subject(Protocol):
         """Its own L [m], or None: the suite's."""
         ...
 
+    @property
+    def jump_limit_m(self) -> float | None:
+        """A frame-to-frame translation above this [m] fails a run, as a trial's
+        (``pipeline.tuning.job.check_jump``); None: no such check."""
+        ...
+
     def load(self) -> tuple[list[Scan], list[str]]: ...
 
 
@@ -75,6 +81,7 @@ class SimulatedWorld:
     family: str
     spec: SimSpec
     length_m: float | None = None
+    jump_limit_m: float | None = None
 
     @property
     def sensor(self) -> str:
@@ -114,8 +121,8 @@ class SimulatedWorld:
 @dataclass(frozen=True)
 class RecordedRun:
     """A recorded run (a sequence MCAP with ground truth, e.g. a piece of a real recording):
-    its name, family (the fold it is tested in), sensor, frames and its own L [m] (None: the
-    suite's)."""
+    its name, family (the fold it is tested in), sensor, frames, its own L [m] (None: the
+    suite's) and jump limit [m] (None: none)."""
 
     name: str
     family: str
@@ -123,6 +130,7 @@ class RecordedRun:
     sensor: str
     frames: int
     length_m: float | None = None
+    jump_limit_m: float | None = None
     segments: tuple[str, ...] = ()
     seed: int = 0
 

@@ -306,3 +306,35 @@ def test_frame_labels_keep_the_later_label_at_overlaps_and_clip_to_the_sequence(
     assert table["frame"].to_pylist() == sorted(expected)
     assert set(table["sequence"].to_pylist()) == {"w"}
     assert frame_label_table("w", 5, []).num_rows == 0
+
+
+def test_a_database_of_some_sequences_holds_them_and_the_joint_study_only(
+        world: World, tmp_path: Path) -> None:
+    """``build_database(sequences=...)`` (a fold of the real-data study trains on some of a
+    folder's units): the sequences, trials and trajectories of those and of the joint study;
+    the others' rows are not there."""
+    from pipeline.database.store import build_database as build
+    from pipeline.metrics.section import DevkitSection
+    from pipeline.tuning.layout import JOINT_SEQUENCE
+
+    db = tmp_path / "some.duckdb"
+    build(db, world.root / "seq", {"trials": world.root / "trials",
+                                   "fixed": world.root / "fixed"},
+          LENGTH_M, DevkitSection.model_validate({"lengths_m": list(KITTI_LENGTHS)}),
+          sequences=["cave_0"])
+    con = duckdb.connect(str(db), read_only=True)
+    try:
+        def names(sql: str) -> set[str]:
+            return {r[0] for r in con.execute(sql).fetchall()}
+
+        assert names("SELECT sequence FROM sequences") == {"cave_0"}
+        assert names("SELECT DISTINCT sequence FROM trials") == {"cave_0", JOINT_SEQUENCE}
+        assert names("SELECT DISTINCT sequence FROM rte_frames") == {"cave_0"}
+        every = connect(world)
+        try:
+            assert every.execute("SELECT count(DISTINCT sequence) FROM rte_frames").fetchone() \
+                == (2,)
+        finally:
+            every.close()
+    finally:
+        con.close()

@@ -202,7 +202,7 @@ def generated(dvc_yaml: str, prefix: str = "") -> str:
     roots = tuple(prefix + root for root in CODE_ROOTS)
     for stage, module in commands.items():
         data = [str(d) for d in stage_spec(specs[stage]).get("deps", [])
-                if not str(d).startswith(roots)]
+                if not f"{str(d).rstrip('/')}/".startswith(roots)]  # a package whole, too
         deps = data + [prefix + path for path in cover(files_of_command(module))]
         indent = "      " if "foreach" in specs[stage] else "    "  # a do: block is indented
         block = re.compile(rf"(\n  {re.escape(stage)}:[^\n]*\n(?:    [^\n]*\n)*?{indent}deps: )"

@@ -65,3 +65,20 @@ def test_a_world_without_ground_truth_or_labels_is_refused() -> None:
     sim.scans[1] = replace(sim.scans[1], T_world_lidar=None)
     with pytest.raises(InputError, match="frame 1 needs a ground-truth pose"):
         _loaded(world.name, sim.scans, sim.labels)
+
+
+def test_a_run_that_jumps_further_than_the_worlds_limit_fails_at_the_penalty() -> None:
+    """A recorded run's jump limit (a real run's own) fails a run as a trial fails: every
+    scored start frame at the penalty. Without a limit the same run finishes."""
+    world = _world("hdl32")
+    sim = simulate_scans(replace(world.spec, frames=20))
+    params = {"resolution": 1.5, "keyframe_interval": 4.0}
+    free = LoadedWorld(world.name, sim.scans, sim.labels, "ndt", None, SPACE, 5.0, 100.0)
+    t_err, failed = free.run(params, 0, 0.005)
+    assert not failed and np.nanmax(t_err) < 100.0
+    steps_m = np.linalg.norm(np.diff(free.gt[:, :3, 3], axis=0), axis=1)
+    tight = LoadedWorld(world.name, sim.scans, sim.labels, "ndt", None, SPACE, 5.0, 100.0,
+                        jump_limit_m=float(steps_m.max()) / 2)
+    t_err, failed = tight.run(params, 0, 0.005)
+    assert failed
+    assert set(t_err[np.isfinite(t_err)]) == {100.0}
