@@ -118,9 +118,9 @@ def _sequence_of(traj_path: str | Path, sequence: str | Path | None) -> Path:
 
     meta = pq.read_schema(traj_path).metadata or {}
     named = meta.get(b"adaptune.sequence")
-    # `adaptune run` stores the sequence's absolute path, trials and adaptive runs a path
-    # relative to the trajectory's folder; files written before that stored the path as given,
-    # relative to the working directory then: tried from the trajectory's folder, then from here
+    # runs, trials and adaptive runs store a path relative to the trajectory's folder (older
+    # `adaptune run` files an absolute one, and older files yet the path as given, relative to
+    # the working directory then): tried from the trajectory's folder, then from here
     found = [p for p in ([Path(traj_path).parent / named.decode(), Path(named.decode())]
                          if named is not None else []) if p.is_file()]
     if not found:

@@ -9,6 +9,7 @@ the sequence (and schedule) by absolute path, so ``adaptune export`` finds them 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -101,6 +102,12 @@ def parse_options(pairs: tuple[str, ...]) -> dict[str, Any]:
     return out
 
 
+def relative_to_output(path: Path, out_path: Path) -> str:
+    """``path`` relative to the output's folder, as the pipeline's trajectories name their
+    inputs: the file's bytes do not depend on where the project lies."""
+    return os.path.relpath(Path(path).resolve(), Path(out_path).resolve().parent)
+
+
 @click.command("run")
 @algorithm_option("Adapter name (ndt, gicp, kiss_icp, command) [trials.algorithm].")
 @click.option("--params", "params_arg", default=None, callback=_params_arg,
@@ -146,9 +153,9 @@ def run(algorithm: str | None, params_arg: str | None, values_json: str | None,
     given = (Schedule.read(schedule_path) if schedule_path
              else parse_params(values_json, values_flag))
     traj = run_sequence(adapter, sequence, given, time_limit_s=time_limit_s, show_progress=True)
-    meta = {"algorithm": adapter.name, "sequence": str(Path(sequence).resolve())}
+    meta = {"algorithm": adapter.name, "sequence": relative_to_output(sequence, out_path)}
     if schedule_path:
-        meta["schedule"] = str(Path(schedule_path).resolve())
+        meta["schedule"] = relative_to_output(schedule_path, out_path)
     else:
         meta["params_json"] = json.dumps(adapter.space.validate(given))  # type: ignore[arg-type]
     write_trajectory(out_path, traj, meta)
