@@ -6,7 +6,8 @@ Layout (docs/design.md, "Formats"):
 - ``/tf``: tf2_msgs/msg/TFMessage, ``world`` -> ``lidar`` from the same ground truth (so a
   viewer such as Foxglove places the scans in the world), and any transform added with
   ``add_tf`` (e.g. an estimate's frame);
-- metadata ``adaptune.sequence``: name, sensor, source, frame_count, labels, schema_version;
+- metadata ``adaptune.sequence``: name, sensor, source, frame_count, labels, schema_version,
+  and length_m where the sequence has an RTE length of its own (``SequenceInfo``);
 - metadata ``adaptune.frames``: the log times of the frames, so frame k is one seek away.
 Log time = sensor stamp [ns]; frames are 0..N-1 in log-time order. Chunked, indexed, zstd by
 default (``Compression``: ``none`` for scratch data read again at once, such as the verdict's
@@ -20,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -98,7 +100,11 @@ class EnvLabel:
 
 @dataclass
 class SequenceInfo:
-    """What the ``adaptune.sequence`` metadata record says about a sequence."""
+    """What the ``adaptune.sequence`` metadata record says about a sequence.
+
+    ``length_m``: the RTE length L [m] this sequence is scored at (a ``data`` source's
+    ``length_m``), which wins over the stages' ``base.length_m`` (``scored_length_m``); None:
+    it has none of its own (the record then has no such key, as before it existed)."""
 
     name: str
     sensor: str = "unknown"
@@ -107,6 +113,7 @@ class SequenceInfo:
     frame_count: int = 0
     schema_version: str = SCHEMA_VERSION
     extra: dict[str, str] = field(default_factory=dict)
+    length_m: float | None = None
 
     def to_record(self) -> dict[str, str]:
         rec = {
@@ -114,6 +121,8 @@ class SequenceInfo:
             "frame_count": str(self.frame_count), "schema_version": self.schema_version,
             "labels": json.dumps([[x.start, x.end, x.label] for x in self.labels]),
         }
+        if self.length_m is not None:
+            rec["length_m"] = repr(float(self.length_m))
         rec.update({f"x.{k}": v for k, v in self.extra.items()})
         return rec
 
@@ -121,13 +130,24 @@ class SequenceInfo:
     def from_record(cls, rec: dict[str, str], what: str) -> SequenceInfo:
         try:
             labels = [EnvLabel(int(a), int(b), str(c)) for a, b, c in json.loads(rec["labels"])]
-            return cls(
+            info = cls(
                 name=rec["name"], sensor=rec["sensor"], source=rec["source"], labels=labels,
                 frame_count=int(rec["frame_count"]), schema_version=rec["schema_version"],
                 extra={k[2:]: v for k, v in rec.items() if k.startswith("x.")},
+                length_m=float(rec["length_m"]) if "length_m" in rec else None,
             )
         except (KeyError, ValueError, TypeError) as exc:
             raise SchemaError(f"{what}: malformed '{META_SEQUENCE}' metadata ({exc})") from exc
+        if info.length_m is not None and not (math.isfinite(info.length_m)
+                                              and info.length_m > 0):
+            raise SchemaError(f"{what}: malformed '{META_SEQUENCE}' metadata (length_m must be "
+                              f"a finite number > 0 m, got {rec['length_m']!r})")
+        return info
+
+    def scored_length_m(self, default_m: float) -> float:
+        """The RTE length L [m] this sequence is scored at: its own (``length_m``), else
+        ``default_m`` (base.length_m, or a command's ``--length``): docs/design.md, "Stages"."""
+        return default_m if self.length_m is None else self.length_m
 
     def label_of(self, frame: int) -> str | None:
         """Environment label of ``frame``, or None."""
@@ -511,6 +531,13 @@ def as_recorded(T_world_lidar: NDArray[np.float64]) -> NDArray[np.float64]:
     """(4, 4) the ground-truth pose a sequence MCAP gives back for ``T_world_lidar``: its
     PoseStamped (a quaternion) decoded again, whose rotation may differ in its last bit."""
     return decode_pose_stamped(encode_pose_stamped(0, T_world_lidar), "a pose")[1]
+
+
+def scored_length_m(path: str | Path, default_m: float) -> float:
+    """The RTE length L [m] the sequence MCAP at ``path`` is scored at: its own, else
+    ``default_m`` (``SequenceInfo.scored_length_m``); its metadata read, not its scans."""
+    with SequenceReader(path) as reader:
+        return reader.info.scored_length_m(default_m)
 
 
 def read_ground_truth(path: str | Path, purpose: str) -> NDArray[np.float64]:
