@@ -131,14 +131,16 @@ def intensity_scale(first_points: NDArray[np.float32], what: str) -> tuple[float
 
 
 def write_sequence(source: Source, out: str | Path, intensity: IntensityMode = "auto",
-                   length_m: float | None = None) -> IngestReport:
+                   length_m: float | None = None,
+                   jump_limit_m: float | None = None) -> IngestReport:
     """Stream every frame of ``source`` into the sequence MCAP ``out`` (atomically).
 
     ``intensity``: "auto" scales 0-255 or 0-65535 intensities to 0-1 (``intensity_scale``,
     decided on the first scan), "keep" writes them as recorded; the metadata says which
     (``x.intensity``), and whether the scans carry per-point time (``x.point_time``).
     ``length_m``: the RTE length the sequence is scored at (``SequenceInfo.length_m``; None:
-    none of its own, the stages' base.length_m).
+    none of its own, the stages' base.length_m); ``jump_limit_m``: the trials' jump limit on
+    it (``SequenceInfo.jump_limit_m``; None: trials.jump_limit_m).
     """
     t0 = time.perf_counter()
     out = Path(out)
@@ -150,6 +152,8 @@ def write_sequence(source: Source, out: str | Path, intensity: IntensityMode = "
     info = source.sequence_info()
     if length_m is not None:
         info.length_m = length_m
+    if jump_limit_m is not None:
+        info.jump_limit_m = jump_limit_m
     scale, note = (intensity_scale(_as_points(first), first.what) if intensity == "auto"
                    else (1.0, "kept as recorded (--intensity keep)"))
     info.extra["intensity"] = note

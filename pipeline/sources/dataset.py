@@ -14,7 +14,10 @@ options, one to one those of ``adaptune ingest <kind>`` (with underscores for da
 
 Every kind also takes ``length_m``, the RTE length L [m] its sequences are scored at, recorded
 in each (``SequenceInfo.length_m``) and winning over ``base.length_m`` in every stage that
-scores them (docs/design.md, "Stages"), and ``pieces`` (``pipeline.sources.pieces``): its run
+scores them (docs/design.md, "Stages"), ``jump_limit_m``, likewise recorded
+(``SequenceInfo.jump_limit_m``) and winning over ``trials.jump_limit_m`` when a trial's
+trajectory is checked for jumps (a drive whose keyframes are 6 m apart needs more than 5 m),
+and ``pieces`` (``pipeline.sources.pieces``): its run
 cut where a time step or a reference step exceeds a limit, each piece a sequence
 ``<name>_p<k>`` of its own, the pieces no longer than L dropped.
 
@@ -59,12 +62,14 @@ NAME_PATTERN = r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$"
 
 class _Entry(Section):
     """What every source of ``data.sources`` has: its input, its split, its name, its own RTE
-    length (None: base.length_m) and where its run is cut into pieces (None: nowhere)."""
+    length (None: base.length_m), its own jump limit (None: trials.jump_limit_m) and where its
+    run is cut into pieces (None: nowhere)."""
 
     path: str = Field(min_length=1)
     split: Split = "train"
     name: str | None = Field(None, pattern=NAME_PATTERN)
     length_m: float | None = Field(None, gt=0)
+    jump_limit_m: float | None = Field(None, gt=0)
     pieces: PiecesSection | None = None
 
     PATHS: ClassVar[tuple[str, ...]] = ("path",)
@@ -249,6 +254,8 @@ def plan_source(entry: Any, source: Source, length_m: float | None, what: str) -
     scored_m = entry.length_m if own else length_m
     record: dict[str, Any] = {"path": entry.path, "kind": entry.kind, "split": entry.split,
                               "length_m": scored_m, "sequences": [], "dropped": []}
+    if entry.jump_limit_m is not None:  # no key without one: the records stay as they were
+        record["jump_limit_m"] = entry.jump_limit_m
     gt = source.ground_truth_poses()
     if entry.pieces is None:
         if scored_m is not None and gt is not None:
@@ -311,7 +318,7 @@ def ingest_data_set(section: DataSection, out_dir: str | Path, base_dir: str | P
                 log.info("ingest [%d/%d] %s: %s", len(done.reports) + 1, count, name,
                          plan.entry.path)
                 done.reports.append(write_sequence(source, out_dir / f"{name}.mcap", intensity,
-                                                   plan.entry.length_m))
+                                                   plan.entry.length_m, plan.entry.jump_limit_m))
                 splits.setdefault(plan.entry.split, []).append(name)
         finally:
             if plan.run is not None:

@@ -138,6 +138,7 @@ def test_the_sources_own_length_wins_over_base_length_m(
     ({"pieces": {"max_time_step_s": float("inf")}}, "pieces.max_time_step_s"),
     ({"pieces": {"max_gap_m": 3}}, "pieces.max_gap_m: unknown parameter"),
     ({"length_m": -2}, "length_m: Input should be greater than 0, got -2"),
+    ({"jump_limit_m": 0}, "jump_limit_m: Input should be greater than 0, got 0"),
 ])
 def test_bad_pieces_and_lengths_are_one_line(tmp_path: Path, run: dict[str, Any],
                                              options: dict[str, Any], message: str) -> None:
