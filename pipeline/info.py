@@ -31,7 +31,9 @@ class SequenceSummary:
     labels: list[list[Any]] = field(default_factory=list)
     schema_version: str = ""
     details: dict[str, str] = field(default_factory=dict)
-    """The source's own records: intensity scaling, per-point time, stamps, simulation."""
+    """The source's own records: intensity scaling, per-point time, stamps, simulation, the
+    run a piece comes from, an RTE length and a jump limit of its own (``rte_length``,
+    ``jump_limit``)."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -60,7 +62,9 @@ def summarize_sequence(path: str | Path) -> SequenceSummary:
             sensor=info.sensor,
             source=info.source,
             labels=[[lab.start, lab.end, lab.label] for lab in info.labels],
-            details=dict(info.extra),
+            details={**info.extra, **{what: f"{value:g} m (its own)" for what, value in
+                                      (("rte_length", info.length_m),
+                                       ("jump_limit", info.jump_limit_m)) if value is not None}},
             schema_version=info.schema_version,
         )
 

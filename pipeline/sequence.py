@@ -6,7 +6,8 @@ Layout (docs/design.md, "Formats"):
 - ``/tf``: tf2_msgs/msg/TFMessage, ``world`` -> ``lidar`` from the same ground truth (so a
   viewer such as Foxglove places the scans in the world), and any transform added with
   ``add_tf`` (e.g. an estimate's frame);
-- metadata ``adaptune.sequence``: name, sensor, source, frame_count, labels, schema_version;
+- metadata ``adaptune.sequence``: name, sensor, source, frame_count, labels, schema_version,
+  and length_m, jump_limit_m where the sequence has them of its own (``SequenceInfo``);
 - metadata ``adaptune.frames``: the log times of the frames, so frame k is one seek away.
 Log time = sensor stamp [ns]; frames are 0..N-1 in log-time order. Chunked, indexed, zstd by
 default (``Compression``: ``none`` for scratch data read again at once, such as the verdict's
@@ -20,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -96,9 +98,21 @@ class EnvLabel:
     label: str
 
 
+OWN_SETTINGS = ("length_m", "jump_limit_m")
+"""The settings [m] a sequence may have of its own (``SequenceInfo``), each winning over the
+stages' (base.length_m, trials.jump_limit_m) and recorded only where given."""
+
+
 @dataclass
 class SequenceInfo:
-    """What the ``adaptune.sequence`` metadata record says about a sequence."""
+    """What the ``adaptune.sequence`` metadata record says about a sequence.
+
+    ``length_m``: the RTE length L [m] this sequence is scored at (a ``data`` source's
+    ``length_m``), which wins over the stages' ``base.length_m`` (``scored_length_m``); None:
+    it has none of its own (the record then has no such key, as before it existed).
+    ``jump_limit_m``: likewise the frame-to-frame translation [m] above which a trial's
+    odometry on this sequence has failed (a ``data`` source's ``jump_limit_m``), which wins
+    over ``trials.jump_limit_m``; None: none of its own, no key."""
 
     name: str
     sensor: str = "unknown"
@@ -107,6 +121,8 @@ class SequenceInfo:
     frame_count: int = 0
     schema_version: str = SCHEMA_VERSION
     extra: dict[str, str] = field(default_factory=dict)
+    length_m: float | None = None
+    jump_limit_m: float | None = None
 
     def to_record(self) -> dict[str, str]:
         rec = {
@@ -114,6 +130,9 @@ class SequenceInfo:
             "frame_count": str(self.frame_count), "schema_version": self.schema_version,
             "labels": json.dumps([[x.start, x.end, x.label] for x in self.labels]),
         }
+        for key in OWN_SETTINGS:
+            if getattr(self, key) is not None:
+                rec[key] = repr(float(getattr(self, key)))
         rec.update({f"x.{k}": v for k, v in self.extra.items()})
         return rec
 
@@ -121,13 +140,24 @@ class SequenceInfo:
     def from_record(cls, rec: dict[str, str], what: str) -> SequenceInfo:
         try:
             labels = [EnvLabel(int(a), int(b), str(c)) for a, b, c in json.loads(rec["labels"])]
-            return cls(
+            info = cls(
                 name=rec["name"], sensor=rec["sensor"], source=rec["source"], labels=labels,
                 frame_count=int(rec["frame_count"]), schema_version=rec["schema_version"],
                 extra={k[2:]: v for k, v in rec.items() if k.startswith("x.")},
+                **{key: float(rec[key]) for key in OWN_SETTINGS if key in rec},
             )
         except (KeyError, ValueError, TypeError) as exc:
             raise SchemaError(f"{what}: malformed '{META_SEQUENCE}' metadata ({exc})") from exc
+        for key in OWN_SETTINGS:
+            value = getattr(info, key)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise SchemaError(f"{what}: malformed '{META_SEQUENCE}' metadata ({key} must be "
+                                  f"a finite number > 0 m, got {rec[key]!r})")
+        return info
+
+    def scored_length_m(self, default_m: float) -> float:
+        """The RTE length L [m] this sequence is scored at (``scored_length_m``)."""
+        return scored_length_m(self.length_m, default_m)
 
     def label_of(self, frame: int) -> str | None:
         """Environment label of ``frame``, or None."""
@@ -135,6 +165,13 @@ class SequenceInfo:
             if lab.start <= frame <= lab.end:
                 return lab.label
         return None
+
+
+def scored_length_m(own_m: float | None, default_m: float) -> float:
+    """The RTE length L [m] a sequence is scored at: its own (``own_m``,
+    ``SequenceInfo.length_m``), else ``default_m`` (base.length_m, or a command's
+    ``--length``): docs/design.md, "Stages"."""
+    return default_m if own_m is None else own_m
 
 
 MAX_COORDINATE_M = 10_000.0
@@ -511,6 +548,13 @@ def as_recorded(T_world_lidar: NDArray[np.float64]) -> NDArray[np.float64]:
     """(4, 4) the ground-truth pose a sequence MCAP gives back for ``T_world_lidar``: its
     PoseStamped (a quaternion) decoded again, whose rotation may differ in its last bit."""
     return decode_pose_stamped(encode_pose_stamped(0, T_world_lidar), "a pose")[1]
+
+
+def read_info(path: str | Path) -> SequenceInfo:
+    """The ``SequenceInfo`` of the sequence MCAP at ``path`` (its own RTE length and jump
+    limit among them); its metadata read, not its scans."""
+    with SequenceReader(path) as reader:
+        return reader.info
 
 
 def read_ground_truth(path: str | Path, purpose: str) -> NDArray[np.float64]:

@@ -8,7 +8,16 @@ from typing import Any
 
 import click
 
-from stages.common import DIR, FILE, PATH, compose, dir_option, out_option, params_option
+from stages.common import (
+    DIR,
+    FILE,
+    PATH,
+    compose,
+    dir_option,
+    file_option,
+    out_option,
+    params_option,
+)
 
 mcap_out_option = out_option(help="The sequence MCAP to write (atomically)")
 name_option = click.option("--name", default=None, help="Sequence name (default: from the input).")
@@ -153,10 +162,15 @@ def mcap(path: Path, **options: Any) -> None:
 @params_option
 @dir_option("--out", "out_dir",
             help="Folder for <name>.mcap and index.json (data/recordings).")
-def ingest_set(params_path: Path | None, out_dir: Path) -> None:
+@file_option("--record", "record_path", required=False,
+             help="Write what each source became here (records/ingest.json): its sequences, "
+                  "their frames and path lengths, its RTE length, the pieces dropped.")
+def ingest_set(params_path: Path | None, out_dir: Path, record_path: Path | None) -> None:
     """Ingest the recordings of the params section ``data`` (dvc stage); relative paths in it
     are relative to the params file's folder. A recording whose ground truth runs no longer
-    than base.length_m is refused before any is written."""
+    than its RTE length (its own length_m, else base.length_m) is refused before any is
+    written; with pieces, a piece that does not is dropped (one line here and in the record),
+    and the recording is refused when none is left."""
     from pipeline.config import BaseSection, load_section
     from pipeline.sequence_index import read_index
     from pipeline.sources.dataset import DataSection, ingest_data_set
@@ -164,8 +178,15 @@ def ingest_set(params_path: Path | None, out_dir: Path) -> None:
     section = load_section(params_path, "data", DataSection)
     length_m = load_section(params_path, "base", BaseSection).length_m
     base_dir = params_path.parent if params_path is not None else Path.cwd()
-    for report in ingest_data_set(section, out_dir, base_dir, length_m):
+    done = ingest_data_set(section, out_dir, base_dir, length_m)
+    for report in done.reports:
         _done(report)
+    for line in done.dropped:
+        click.echo(line, err=True)
+    if record_path is not None:
+        from pipeline.outputs import write_json
+
+        write_json(record_path, done.record)
     splits = read_index(out_dir).splits
     click.echo(f"{out_dir / 'index.json'}: "
                f"{', '.join(f'{len(v)} {k}' for k, v in splits.items())} sequences", err=True)

@@ -71,9 +71,10 @@ def kitti(gt_poses: Path, est_poses: Path, lengths_m: str | None, step_frames: i
 @metric.command()
 @click.argument("ground_truth", type=FILE)
 @click.argument("estimates", nargs=-1, required=True, type=FILE)
-@click.option("--length", "length_m", type=float, required=True,
+@click.option("--length", "length_m", type=float, default=None,
               help="L [m]: the sub-trajectory length of the RTE (any length; KITTI's 100-800 m "
-              "are `metric kitti`).")
+              "are `metric kitti`) [a GROUND_TRUTH sequence's own, where it has one; else "
+              "required].")
 @click.option("--align", "alignment", type=click.Choice(ALIGNMENTS), default="se3",
               show_default=True,
               help="How the estimate is aligned before APE and RPE: none; origin (first poses "
@@ -100,13 +101,14 @@ def kitti(gt_poses: Path, est_poses: Path, lengths_m: str | None, step_frames: i
 @click.option("--json", "as_json", is_flag=True,
               help="Print JSON (rte, alignment, ape, rpe; a list of them for several "
               "estimates).")
-def rte(ground_truth: Path, estimates: tuple[Path, ...], length_m: float, alignment: str,
+def rte(ground_truth: Path, estimates: tuple[Path, ...], length_m: float | None, alignment: str,
         align_first: int | None, delta: float, delta_unit: str, all_pairs: bool,
         pairs_from_reference: bool, gt_format: str, est_format: str, plot_png: Path | None,
         as_json: bool) -> None:
     """RTE over --length L (the pipeline's per-start-frame error), and evo's APE and RPE
     (translation [m] and rotation angle [deg]) of each of ESTIMATES against GROUND_TRUTH;
-    several estimates give one table, as evo_res does.
+    several estimates give one table, as evo_res does. Without --length, L is the
+    GROUND_TRUTH sequence's own (a `data` source's length_m).
 
     Each is a sequence MCAP (its ground truth), a trajectory Parquet (`adaptune run`) or a pose
     file (KITTI, TUM, EuRoC CSV, 4x4 blocks). Stamped poses pair by time (10 ms), others by

@@ -59,7 +59,8 @@ def build_database(db_path: str | Path, sequences_dir: str | Path, studies: Mapp
     """Build the results database at ``db_path`` atomically.
 
     sequences_dir: data/sequences (``*.mcap`` and optionally index.json with the splits);
-    length_m: L of the rte_frames segments [m] (params ``base.length_m``); devkit: the
+    length_m: L of the rte_frames segments [m] (params ``base.length_m``) of every sequence
+    without an L of its own (``SequenceInfo.length_m``, which wins); devkit: the
     rte_kitti segments (params ``devkit``);
     studies: study name ('trials' | 'fixed' | 'portfolio') -> its trials output folder
     (pipeline.tuning.layout);
@@ -141,9 +142,11 @@ def sql_literal(text: str) -> str:
 def load_sequences(con: duckdb.DuckDBPyConnection, sequences_dir: Path,
                    names: Collection[str] | None = None) -> None:
     """Fill sequences, frame_labels and ground_truth from every ``*.mcap`` in ``sequences_dir``
-    (``names``: of those only)."""
+    (``names``: of those only), and the temporary table ``own_lengths`` (sequence, length_m)
+    with the RTE length of every sequence that has one of its own (``score_frames``)."""
     from pipeline.sequence import SequenceReader
 
+    con.execute("CREATE OR REPLACE TEMP TABLE own_lengths (sequence VARCHAR, length_m DOUBLE)")
     if not sequences_dir.is_dir():
         raise InputError(f"{sequences_dir}: no such sequences directory")
     splits = read_index(sequences_dir, missing_ok=True).split_of()
@@ -159,6 +162,8 @@ def load_sequences(con: duckdb.DuckDBPyConnection, sequences_dir: Path,
                     [name, str(path), len(stamps_ns), info.sensor, info.source,
                      splits.get(name), json.dumps(labels)])
         insert_arrow(con, "frame_labels", frame_label_table(name, len(stamps_ns), labels))
+        if info.length_m is not None:
+            con.execute("INSERT INTO own_lengths VALUES (?, ?)", [name, info.length_m])
         if gt is None:
             log.warning("%s: no ground truth; its trials cannot be scored", path)
             continue
@@ -316,9 +321,12 @@ def check_trajectories(con: duckdb.DuckDBPyConnection) -> None:
 
 
 def score_frames(con: duckdb.DuckDBPyConnection, length_m: float) -> None:
-    """Fill ``rte_frames``: the segment of ``length_m`` metres from every frame of every trial."""
+    """Fill ``rte_frames``: the segment of L metres from every frame of every trial, L the
+    sequence's own (``own_lengths``, from ``load_sequences``) or else ``length_m``."""
     con.execute("CREATE OR REPLACE TEMP TABLE seg_starts AS "
-                "SELECT sequence, frame, ?::DOUBLE AS length_m FROM ground_truth", [length_m])
+                "SELECT g.sequence, g.frame, coalesce(o.length_m, ?::DOUBLE) AS length_m "
+                "FROM ground_truth AS g LEFT JOIN own_lengths AS o USING (sequence)",
+                [length_m])
     con.execute(f"""
         INSERT INTO rte_frames
         SELECT study, algorithm, sequence, trial, frame, end_frame, length_m,

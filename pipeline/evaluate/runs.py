@@ -3,7 +3,8 @@ paper's Tables I and II).
 
 ``evaluate`` runs the baseline (the adapter's defaults) and the fixed parameters (the best trial
 of the joint SMBO), reads the adaptive trajectory and schedule written by the ``adaptive``
-stage, and scores all three with the same per-start-frame RTE (``length_m``), overall and per
+stage, and scores all three with the same per-start-frame RTE (``length_m``; a sequence with
+an RTE length of its own, ``SequenceInfo.length_m``, at that one), overall and per
 environment label (a segment counts for the label of its start frame), plus the KITTI devkit
 metric with the devkit lengths that fit into the sequence. Several splits can be evaluated
 (``evaluate.splits``, e.g. the training and the test sequences of the KITTI protocol): every
@@ -80,7 +81,8 @@ def evaluate(sequences: list[Path], algorithm: str, fixed_params: Mapping[str, f
     from pipeline.executor import map_in_processes
 
     for path in sequences:  # one too short would drop out of its split's figures unseen
-        check_scorable(_ground_truth(path)[0], settings.length_m, str(path))
+        gt, info = _ground_truth(path)
+        check_scorable(gt, info.scored_length_m(settings.length_m), str(path))
     adapter = evaluated_adapter(algorithm, fixed_dir)
     result = Evaluation(algorithm, settings.length_m, adapter.space.validate(fixed_params),
                         adapter.space.defaults(), settings.devkit.lengths_m,
@@ -131,20 +133,22 @@ def _score_sequence(path: Path, algorithm: str,
     adapter = evaluated_adapter(algorithm, fixed_dir)
     name = path.stem
     gt, info = _ground_truth(path)
+    length_m = info.scored_length_m(settings.length_m)
     labels = [info.label_of(i) for i in range(len(gt))]
     runs = {"baseline": _run_fixed(adapter, path, baseline_params, out_dir, "baseline"),
             "fixed": _run_fixed(adapter, path, fixed_params, out_dir, "fixed"),
             "adaptive": _read_adaptive(adaptive_dir / name, algorithm)}
     scores = []
     for setting, (traj, wall) in runs.items():
-        t_err, _ = per_frame_rte(gt, traj.T_world_lidar, settings.length_m)
+        t_err, _ = per_frame_rte(gt, traj.T_world_lidar, length_m)
         scores.append(SettingScore(setting, name, t_err, labels, wall, traj))
         log.info("%s %s: %.3f %% RTE (%.1f s)", name, setting, scores[-1].rte_pct, wall)
     schedule = Schedule.read(adaptive_dir / name / "schedule.parquet")
     nominal: dict[str, Mapping[str, float] | Schedule] = {
         "baseline": baseline_params, "fixed": fixed_params, "adaptive": schedule}
     for score in scores if settings.replicas else []:
-        score.replicas = run_replicas(adapter, path, gt, nominal[score.setting], settings)
+        score.replicas = run_replicas(adapter, path, gt, nominal[score.setting], settings,
+                                      length_m)
     return _SequenceResult(
         info, gt, scores, schedule,
         _kitti_segments(gt, {s: t for s, (t, _) in runs.items()}, settings.devkit))
@@ -152,9 +156,11 @@ def _score_sequence(path: Path, algorithm: str,
 
 def run_replicas(adapter: Any, path: Path, gt: NDArray[np.float64],
                  params_or_schedule: Mapping[str, float] | Schedule,
-                 settings: EvaluateSection) -> list[Replica]:
+                 settings: EvaluateSection, length_m: float | None = None) -> list[Replica]:
     """``settings.replicas`` runs of one setting on ``path`` with its parameters moved by the
-    replicas' factors (``pipeline.evaluate.replicas``), scored like the nominal run."""
+    replicas' factors (``pipeline.evaluate.replicas``), scored like the nominal run (at
+    ``length_m``, the sequence's L; None: ``settings.length_m``)."""
+    length_m = settings.length_m if length_m is None else length_m
     from pipeline.evaluate.replicas import factors, perturbed, sequence_seed
     from pipeline.metrics.kitti import kitti_errors
     from pipeline.odometry import run_sequence
@@ -167,7 +173,7 @@ def run_replicas(adapter: Any, path: Path, gt: NDArray[np.float64],
         except OdometryError:
             out.append(Replica(None, None))
             continue
-        t_err, _ = per_frame_rte(gt, traj.T_world_lidar, settings.length_m)
+        t_err, _ = per_frame_rte(gt, traj.T_world_lidar, length_m)
         out.append(Replica(t_err, kitti_errors(gt, traj.T_world_lidar, settings.devkit.lengths_m,
                                                settings.devkit.step_frames)))
     return out

@@ -63,13 +63,14 @@ REL_DELTA_TOL = 0.1
 class Poses:
     """(N, 4, 4) poses and their (N,) stamps [ns] where the source has them; a trajectory
     Parquet's frame numbers (``frames``); ``sequence``: the poses are a sequence MCAP's, one
-    per frame."""
+    per frame; ``length_m``: that sequence's own RTE length (``SequenceInfo.length_m``)."""
 
     what: str
     T: F64
     stamps_ns: NDArray[np.int64] | None
     frames: NDArray[np.int32] | None = None
     sequence: bool = False
+    length_m: float | None = None
 
 
 @dataclass(frozen=True)
@@ -106,7 +107,8 @@ def load_poses(path: str | Path, fmt: PoseFormat = "auto") -> Poses:
 
         with SequenceReader(path) as reader:
             gt = reader.require_ground_truth("to compare with")
-            return Poses(str(path), gt, reader.stamps_ns.copy(), sequence=True)
+            return Poses(str(path), gt, reader.stamps_ns.copy(), sequence=True,
+                         length_m=reader.info.length_m)
     if suffix == ".parquet":
         from pipeline.trajectory import read_trajectory
 
@@ -340,15 +342,23 @@ def compare(gt: F64, est: F64, length_m: float, alignment: Alignment = "se3",
     return Comparison(summary, gt, aligned, path, ape_t, t_err)
 
 
-def compare_files(gt_path: str | Path, est_paths: Sequence[str | Path], length_m: float,
-                  alignment: Alignment = "se3", rpe: RpeSettings | None = None,
-                  gt_format: PoseFormat = "auto", est_format: PoseFormat = "auto",
+def compare_files(gt_path: str | Path, est_paths: Sequence[str | Path],
+                  length_m: float | None, alignment: Alignment = "se3",
+                  rpe: RpeSettings | None = None, gt_format: PoseFormat = "auto",
+                  est_format: PoseFormat = "auto",
                   align_first: int | None = None) -> tuple[Poses, list[Comparison]]:
     """(the ground truth, ``compare`` of each estimate against it) for files (module
-    docstring: which files); every summary names its ground truth and estimate."""
-    if not length_m > 0:
+    docstring: which files); every summary names its ground truth and estimate. The RTE's
+    ``length_m``: as given (``--length``), else the ground truth's own, a sequence MCAP's
+    (``SequenceInfo.length_m``); InputError with neither."""
+    if length_m is not None and not length_m > 0:
         raise InputError(f"--length must be > 0 m, got {length_m}")
     truth = load_poses(gt_path, gt_format)
+    if length_m is None:
+        if truth.length_m is None:
+            raise InputError(f"{gt_path}: no RTE length of its own (only a sequence MCAP "
+                             "ingested with one has it): give --length")
+        length_m = truth.length_m
     out = []
     for est_path in est_paths:
         gt, est = associate(truth, load_poses(est_path, est_format))

@@ -74,6 +74,8 @@ def metrics(ev: Evaluation, trials: Mapping[str, Mapping[str, float]]) -> dict[s
             "kitti": ev.kitti[name],
             "wall_time_s": {s: ev.score(s, name).wall_time_s for s in SETTINGS},
             "parameter_changes": ev.schedules[name].n_changes,
+            **({"length_m": ev.infos[name].length_m}  # its own RTE length (the record's)
+               if ev.infos[name].length_m is not None else {}),
             **({"replicas_rte_pct": {s: ev.score(s, name).replica_rte_pct for s in SETTINGS}}
                if ev.replicas else {}),
         } for name in ev.sequences},

@@ -138,6 +138,12 @@ def _fmt(v: float | None, digits: int = 3) -> str:
     return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}f}"
 
 
+def _own_lengths(ev: Evaluation) -> str:
+    """" (seq_a: 10 m, ...)": the sequences scored at an RTE length of their own ("": none)."""
+    own = [f"{n}: {i.length_m:g} m" for n, i in ev.infos.items() if i.length_m is not None]
+    return f" (those of a length of their own at it: {', '.join(own)})" if own else ""
+
+
 def _params(p: Mapping[str, float]) -> str:
     return ", ".join(f"{k} = {v:.3g}" for k, v in p.items())
 
@@ -153,8 +159,9 @@ def report_markdown(ev: Evaluation, m: Mapping[str, Any], pngs: Mapping[str, lis
         "",
         *[part for line in warned for part in (line, "")],
         f"Split {head_split!r}: {', '.join(ev.in_split(head_split))}. Mean translational RTE "
-        f"[%] of {ev.length_m:g} m sub-trajectories, one starting at every frame; a segment "
-        "counts for the environment of its start frame; all sequences of the split pooled.",
+        f"[%] of {ev.length_m:g} m sub-trajectories{_own_lengths(ev)}, one starting at every "
+        "frame; a segment counts for the environment of its start frame; all sequences of the "
+        "split pooled.",
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),

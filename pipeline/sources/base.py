@@ -73,6 +73,12 @@ class Source(Protocol):
         before anything is written."""
         ...
 
+    def frame_stamps_ns(self) -> NDArray[np.int64]:
+        """(N,) the stamps [ns] of the N scans ``frames`` yields (their ``stamp_ns``), without
+        decoding the scans' points: where a run is cut into pieces
+        (``pipeline.sources.pieces``) is decided before anything is written."""
+        ...
+
 
 def input_files(*items: str | Path | None) -> tuple[Path, ...]:
     """The items that name existing files or folders (an ``--extrinsic`` may be numbers)."""
@@ -124,13 +130,17 @@ def intensity_scale(first_points: NDArray[np.float32], what: str) -> tuple[float
     return 1.0, f"kept as recorded (up to {top:.3g}, not a known range)"
 
 
-def write_sequence(source: Source, out: str | Path,
-                   intensity: IntensityMode = "auto") -> IngestReport:
+def write_sequence(source: Source, out: str | Path, intensity: IntensityMode = "auto",
+                   length_m: float | None = None,
+                   jump_limit_m: float | None = None) -> IngestReport:
     """Stream every frame of ``source`` into the sequence MCAP ``out`` (atomically).
 
     ``intensity``: "auto" scales 0-255 or 0-65535 intensities to 0-1 (``intensity_scale``,
     decided on the first scan), "keep" writes them as recorded; the metadata says which
     (``x.intensity``), and whether the scans carry per-point time (``x.point_time``).
+    ``length_m``: the RTE length the sequence is scored at (``SequenceInfo.length_m``; None:
+    none of its own, the stages' base.length_m); ``jump_limit_m``: the trials' jump limit on
+    it (``SequenceInfo.jump_limit_m``; None: trials.jump_limit_m).
     """
     t0 = time.perf_counter()
     out = Path(out)
@@ -140,6 +150,10 @@ def write_sequence(source: Source, out: str | Path,
     if first is None:
         raise InputError(f"{source.sequence_info().name}: no frames to write")
     info = source.sequence_info()
+    if length_m is not None:
+        info.length_m = length_m
+    if jump_limit_m is not None:
+        info.jump_limit_m = jump_limit_m
     scale, note = (intensity_scale(_as_points(first), first.what) if intensity == "auto"
                    else (1.0, "kept as recorded (--intensity keep)"))
     info.extra["intensity"] = note

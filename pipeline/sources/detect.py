@@ -13,8 +13,10 @@ everything ambiguous or missing is one error now, naming what to give:
   ``ROOT/poses/NN.txt``); a KITTI root (``ROOT`` with ``sequences/`` and ``poses/``) is its
   sequences that have ground truth (``recordings_of``), each a recording.
 
-Every recording must have ground truth that runs longer than ``length_m`` (base.length_m, the
-RTE's length; ``pipeline.sources.dataset.check_length``), read without decoding its scans. A
+Every recording must have ground truth that runs longer than its RTE length, its own
+``length_m`` (a list file's option) or else ``length_m`` (base.length_m), or with ``pieces``
+one piece that does (``pipeline.sources.dataset.plan_source``), read without decoding its
+scans. A
 text file beside a folder's scans that is not a pose file of any format is named with the
 reason when the folder has no other (not dropped, to end in "no ground truth found").
 Options in ``given`` (the keys of a ``data`` source) win over what is found.
@@ -84,7 +86,7 @@ def recording_entry(path: str | Path, given: Mapping[str, Any] | None = None,
     from pydantic import TypeAdapter, ValidationError
 
     from pipeline.config import format_validation_error
-    from pipeline.sources.dataset import SourceEntry, check_length
+    from pipeline.sources.dataset import SourceEntry, plan_source
 
     path = Path(path)
     given = dict(given or {})
@@ -103,9 +105,7 @@ def recording_entry(path: str | Path, given: Mapping[str, Any] | None = None,
         raise ConfigError(f"{path}: {format_validation_error('', exc)}") from None
     sources = checked.open()
     for source in sources:
-        has_truth = (source.ground_truth_poses() is not None if length_m is None
-                     else check_length(source, length_m, str(path)))
-        if not has_truth:
+        if not plan_source(checked, source, length_m, str(path)).has_ground_truth:
             raise ConfigError(f"{path}: no ground truth found (tuning needs it): give its "
                               "gt_topic (with gt_child_frame for TF) or a pose file (poses)")
     found = {key: getattr(sources[0], attr, None)

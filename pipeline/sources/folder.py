@@ -125,6 +125,9 @@ class FolderSource:
     def ground_truth_poses(self) -> NDArray[np.float64] | None:
         return None if self.T_world_lidar is None else self.T_world_lidar.copy()
 
+    def frame_stamps_ns(self) -> NDArray[np.int64]:
+        return self.stamps_ns.copy()
+
     def frames(self) -> Iterator[Frame]:
         for k, path in enumerate(self.files):
             scan = read_scan(path)

@@ -108,6 +108,9 @@ class KittiSource:
     def ground_truth_poses(self) -> NDArray[np.float64] | None:
         return None if self.T_world_lidar is None else self.T_world_lidar.copy()
 
+    def frame_stamps_ns(self) -> NDArray[np.int64]:
+        return np.asarray(self.stamps_ns, np.int64).copy()
+
     def frames(self) -> Iterator[Frame]:
         for k, path in enumerate(self.bins):
             yield Frame(

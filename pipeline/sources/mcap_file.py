@@ -160,12 +160,16 @@ class McapSource:
         """The ground truth at the scans' stamps (their headers read, their points not)."""
         if self.gt is None:
             return None
+        return self.gt.all_at(self.frame_stamps_ns())
+
+    def frame_stamps_ns(self) -> NDArray[np.int64]:
+        """The scans' header stamps (their headers read, their points not)."""
         dec = _Decoder(self.schema, self.channel.message_encoding, f"{self.path} {self.topic}")
         with open_mcap(self.path) as (reader, _):
             stamps = [stamp_ns(dec.checked(msg.data, f"{self.path} {self.topic} message {k}"),
                                msg.log_time)
                       for k, (_, _, msg) in enumerate(reader.iter_messages(topics=[self.topic]))]
-        return self.gt.all_at(np.array(stamps, np.int64))
+        return np.array(stamps, np.int64)
 
     def frames(self) -> Iterator[Frame]:
         dec = _Decoder(self.schema, self.channel.message_encoding, f"{self.path} {self.topic}")

@@ -205,11 +205,15 @@ class RosbagSource:
         """The ground truth at the scans' stamps (their headers read, their points not)."""
         if self.gt is None:
             return None
+        return self.gt.all_at(self.frame_stamps_ns())
+
+    def frame_stamps_ns(self) -> NDArray[np.int64]:
+        """The scans' header stamps (their headers read, their points not)."""
         with open_bag(self.bag) as reader:
             conns = [c for c in reader.connections if c.topic == self.topic]
             stamps = [stamp_ns(reader.deserialize(raw, conn.msgtype), log_ns)
                       for conn, log_ns, raw in reader.messages(connections=conns)]
-        return self.gt.all_at(np.array(stamps, np.int64))
+        return np.array(stamps, np.int64)
 
     def frames(self) -> Iterator[Frame]:
         with open_bag(self.bag) as reader:

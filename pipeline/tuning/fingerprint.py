@@ -12,14 +12,18 @@ difference. What may change on a resume: ``iterations`` (a study can be extended
 
 Sequences are identified by the SHA-256 of their file (``pipeline.file_digest``: a resume of
 an untouched sequence takes it from the user cache instead of hashing again); the fingerprint
-keeps no modification time, so that the table's bytes follow from the sequences' alone.
+keeps no modification time, so that the table's bytes follow from the sequences' alone. A
+sequence with an RTE length or a jump limit of its own (``SequenceInfo.length_m``,
+``jump_limit_m``, which win over ``length_m``, ``jump_limit_m``) has it recorded with its
+digest; one without has no such key, so that a study of such sequences has the fingerprint it
+had before sequences had settings of their own.
 """
 
 from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -40,12 +44,18 @@ def study_fingerprint(*, adapter: str, adapter_options: Mapping[str, Any],
                       startup_trials: int, told_lag: int, pruning: Mapping[str, Any],
                       sequences: list[tuple[str, str]],
                       fidelity: Mapping[str, Any] | None = None,
-                      warm_start: list[dict[str, float]] | None = None) -> dict[str, Any]:
+                      warm_start: list[dict[str, float]] | None = None,
+                      own_lengths_m: Sequence[float | None] = (),
+                      own_jump_limits_m: Sequence[float | None] = ()) -> dict[str, Any]:
     """The fingerprint (plain JSON data) of a study over ``sequences`` ((name, MCAP path)).
 
     ``fidelity``: the rungs of successive halving (``trials.halving``), None for whole trials
-    (a study stored before the rungs existed has none: whole).
+    (a study stored before the rungs existed has none: whole). ``own_lengths_m``,
+    ``own_jump_limits_m``: each sequence's own RTE length and jump limit, None (or () for all)
+    where it has none.
     """
+    lengths = list(own_lengths_m) or [None] * len(sequences)
+    jumps = list(own_jump_limits_m) or [None] * len(sequences)
     return {
         "version": VERSION,
         "adapter": adapter,
@@ -62,15 +72,21 @@ def study_fingerprint(*, adapter: str, adapter_options: Mapping[str, Any],
         "pruning": dict(pruning),
         "fidelity": None if fidelity is None else dict(fidelity),
         "warm_start": list(warm_start or []),
-        "sequences": [sequence_digest(name, path) for name, path in sequences],
+        "sequences": [sequence_digest(name, path, length_m, jump_m) for (name, path), length_m,
+                      jump_m in zip(sequences, lengths, jumps, strict=True)],
     }
 
 
-def sequence_digest(name: str, path: str | Path) -> dict[str, Any]:
-    """{"name", "sha256", "size"} of a sequence file."""
+def sequence_digest(name: str, path: str | Path, own_length_m: float | None = None,
+                    own_jump_limit_m: float | None = None) -> dict[str, Any]:
+    """{"name", "sha256", "size"} of a sequence file, and "length_m", "jump_limit_m", its own
+    RTE length and jump limit, where it has them."""
     from pipeline.file_digest import sha256_file
 
-    return {"name": name, "sha256": sha256_file(path), "size": os.stat(path).st_size}
+    digest: dict[str, Any] = {"name": name, "sha256": sha256_file(path),
+                              "size": os.stat(path).st_size}
+    own = {"length_m": own_length_m, "jump_limit_m": own_jump_limit_m}
+    return digest | {key: float(v) for key, v in own.items() if v is not None}
 
 
 def check_fingerprint(stored: Mapping[str, Any] | None, current: Mapping[str, Any],
@@ -88,21 +104,37 @@ def check_fingerprint(stored: Mapping[str, Any] | None, current: Mapping[str, An
                           "start over")
 
 
+OWN = {"length_m": "RTE length", "jump_limit_m": "jump limit"}
+"""A sequence's own settings in its digest, and how a resume's refusal names them."""
+
+
 def _comparable(key: str, value: Any) -> Any:
-    """The part of a value that defines the study (sequences: names and digests only)."""
+    """The part of a value that defines the study (sequences: names, digests and own settings
+    only)."""
     if key == "sequences" and isinstance(value, list):
-        return [(s.get("name"), s.get("sha256")) for s in value if isinstance(s, dict)]
+        return [(s.get("name"), s.get("sha256"), *(s.get(k) for k in OWN)) for s in value
+                if isinstance(s, dict)]
     return json.dumps(value, sort_keys=True)
+
+
+def _own(value_m: float | None) -> str:
+    """A sequence's own setting as a resume's refusal names it."""
+    return "none of its own" if value_m is None else f"{value_m:g} m"
 
 
 def _describe(key: str, now: Any, stored: Any) -> str:
     if key == "sequences":
-        a, b = dict(_comparable(key, now)), dict(_comparable(key, stored))
+        a = {n: rest for n, *rest in _comparable(key, now)}
+        b = {n: rest for n, *rest in _comparable(key, stored)}
         if set(a) != set(b):
             return f"sequences {sorted(a)}, stored {sorted(b)}"
-        changed = sorted(n for n in a if a[n] != b[n])
-        return f"content of sequence {changed[0]} changed (sha256 {a[changed[0]][:12]}, " \
-               f"stored {b[changed[0]][:12]})"
+        changed = sorted(n for n in a if a[n] != b[n])[0]
+        if a[changed][0] == b[changed][0]:
+            return "; ".join(f"{what} of sequence {changed} {_own(x)}, stored {_own(y)}"
+                             for what, x, y in zip(OWN.values(), a[changed][1:],
+                                                   b[changed][1:], strict=True) if x != y)
+        return f"content of sequence {changed} changed (sha256 {a[changed][0][:12]}, " \
+               f"stored {b[changed][0][:12]})"
     if key == "space":
         return "parameter space differs"
     return f"{key} {json.dumps(now)}, stored {json.dumps(stored)}"

@@ -55,6 +55,11 @@ class TrialJob:
     at each rung from the earlier trials' posts there (``pipeline.tuning.rung_board``).
     algorithm: the name used in output paths (the adapter's ``name``).
     sequences: ((sequence name, MCAP path), ...); more than one for a joint trial.
+    length_m: the RTE length L [m] (base.length_m); lengths_m: each sequence's L, in the order
+    of ``sequences`` (its own where it has one: ``SequenceInfo.length_m``), () for
+    ``length_m`` everywhere (``sequence_lengths_m``). jump_limit_m, jump_limits_m: likewise
+    the jump limit [m] (trials.jump_limit_m; ``SequenceInfo.jump_limit_m``) a sequence's
+    trajectory is checked at (``check_jump``).
     """
 
     adapter: str
@@ -75,6 +80,25 @@ class TrialJob:
     scored_only: bool = False  # values average the sequences scored so far (pruning.value_at)
     rungs: RungBoard | None = None  # successive halving: thresholds from the board, at the rung
     eta: int = 0  # successive halving's eta (with ``rungs``)
+    lengths_m: tuple[float, ...] = ()  # per sequence; (): length_m for every one
+    jump_limits_m: tuple[float, ...] = ()  # per sequence; (): jump_limit_m for every one
+
+    @property
+    def sequence_lengths_m(self) -> tuple[float, ...]:
+        """The RTE length L [m] of every sequence, in the order of ``sequences``."""
+        return self.lengths_m or (self.length_m,) * len(self.sequences)
+
+    def length_of(self, sequence: str) -> float:
+        """The RTE length L [m] of the sequence named ``sequence``."""
+        return self.sequence_lengths_m[self._index(sequence)]
+
+    def jump_limit_of(self, sequence: str) -> float:
+        """The jump limit [m] of the sequence named ``sequence``."""
+        limits = self.jump_limits_m or (self.jump_limit_m,) * len(self.sequences)
+        return limits[self._index(sequence)]
+
+    def _index(self, sequence: str) -> int:
+        return [name for name, _ in self.sequences].index(sequence)
 
     @property
     def limit_s(self) -> float | None:
@@ -156,7 +180,7 @@ def _run_whole(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]],
         ests.append(traj.T_world_lidar)
     return {"status": "ok", "objective": float(np.mean(list(rte.values()))), "rte_pct": rte,
             "odometry_s": odometry_s, "error": "",
-            "curve": curve_of(points, gts, ests, job.length_m, job.scored_only)}
+            "curve": curve_of(points, gts, ests, job.sequence_lengths_m, job.scored_only)}
 
 
 def _score(job: TrialJob, name: str, gt: NDArray[np.float64], traj: Trajectory) -> float:
@@ -165,10 +189,11 @@ def _score(job: TrialJob, name: str, gt: NDArray[np.float64], traj: Trajectory) 
     from pipeline.metrics.rte import mean_rte_pct
     from pipeline.trajectory import write_trajectory
 
-    check_jump(traj, job.jump_limit_m)
-    rte = mean_rte_pct(gt, traj.T_world_lidar, job.length_m)
+    check_jump(traj, job.jump_limit_of(name))
+    length_m = job.length_of(name)
+    rte = mean_rte_pct(gt, traj.T_world_lidar, length_m)
     if not np.isfinite(rte):
-        raise OdometryError(f"{name}: no segment of {job.length_m} m to score")
+        raise OdometryError(f"{name}: no segment of {length_m} m to score")
     out = trajectory_path(job.out_dir, job.algorithm, name, job.trial)
     write_trajectory(out, traj, _metadata(job, name, out))
     return rte
@@ -260,8 +285,8 @@ def _run_stepped(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]
         try:
             for index, point in enumerate(points):
                 reach(point.frames)
-                value = value_at(point, gts, [r.estimate() for r in runs], job.length_m,
-                                 scored_only=job.scored_only)
+                value = value_at(point, gts, [r.estimate() for r in runs],
+                                 job.sequence_lengths_m, scored_only=job.scored_only)
                 posted.append(value)
                 limit = _threshold(job, index, posted, on_wait)
                 if limit is not None and value > limit:  # a NaN value never is
@@ -278,14 +303,14 @@ def _run_stepped(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]
                     write_trajectory(out, run.trajectory(), _metadata(job, name, out))
             return {"status": "pruned", "objective": stop.value, "rte_pct": rte,
                     "odometry_s": sum(r.seconds for r in runs),
-                    "curve": curve_of(points, gts, ests, job.length_m, job.scored_only),
+                    "curve": curve_of(points, gts, ests, job.sequence_lengths_m, job.scored_only),
                     "error": f"pruned at {_where(job, runs, points[stop.index])}: running RTE "
                              f"{stop.value:.4g} % above {stop.threshold:.4g} %"}
         ests = [r.estimate() for r in runs]
         odometry_s = sum(r.seconds for r in runs)
     return {"status": "ok", "objective": float(np.mean(list(rte.values()))), "rte_pct": rte,
             "odometry_s": odometry_s, "error": "",
-            "curve": curve_of(points, gts, ests, job.length_m, job.scored_only)}
+            "curve": curve_of(points, gts, ests, job.sequence_lengths_m, job.scored_only)}
 
 
 def _threshold(job: TrialJob, index: int, posted: list[float],

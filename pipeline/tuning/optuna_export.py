@@ -123,6 +123,12 @@ def _export_study(storage: Any, name: str, folder: Path, path: Path) -> Exported
                        ("penalty_pct", study_info.get("penalty_pct")),
                        ("sequences", sequences), ("trials_table", str(path.resolve()))):
         study.set_user_attr(key, value)
+    for key, attr in (("length_m", "sequence_lengths_m"),
+                      ("jump_limit_m", "sequence_jump_limits_m")):  # their own, over the study's
+        own = {str(s["name"]): s[key] for s in study_info.get("sequences", [])
+               if isinstance(s, dict) and key in s}
+        if own:
+            study.set_user_attr(attr, own)
     rows = pq.read_table(path).to_pylist()
     trials: list[Any] = []
     states: dict[str, int] = {}

@@ -7,7 +7,8 @@ A study's trial runs its sequences (one, or all of a joint study) and passes *ch
 order. A checkpoint says how far every sequence has run by then: ``Checkpoint.frames[s]`` is
 the last frame of sequence s run (-1: not started). A trial's *value* there is the mean over
 the started sequences of their *running* RTE: the mean translational RTE [%] over the segments
-of length L that end at or before that frame (a finished sequence: its whole RTE); NaN as long
+of length L that end at or before that frame (a finished sequence: its whole RTE), each
+sequence at its own L (``Lengths``: one for all, or one a sequence); NaN as long
 as a started sequence has no such segment, except at the rungs, where the mean is over the
 sequences that have one (a short sequence of a joint study does not blank a rung). Its *curve*
 is its values at every checkpoint it reached.
@@ -52,6 +53,8 @@ from pipeline.config import Section
 from pipeline.tuning.rung_board import RungBoard
 
 F64 = NDArray[np.float64]
+Lengths = float | Sequence[float]
+"""The RTE length L [m] of a study's sequences: one for all of them, or one a sequence."""
 Fidelity = Literal["whole", "halving"]
 """How long a study's trials run: ``whole`` (every frame of every sequence, the paper; the
 percentile pruner may stop them) or ``halving`` (rungs: successive halving)."""
@@ -268,14 +271,24 @@ def running_rte(gt: F64, est: F64, frame: int, length_m: float) -> float:
     return float(valid.mean()) if len(valid) else math.nan
 
 
+def per_sequence(length_m: Lengths, count: int) -> list[float]:
+    """``length_m`` as one L [m] a sequence, for ``count`` sequences."""
+    if isinstance(length_m, int | float):
+        return [float(length_m)] * count
+    if len(length_m) != count:
+        raise ValueError(f"{len(length_m)} RTE lengths for {count} sequences")
+    return [float(x) for x in length_m]
+
+
 def value_at(point: Checkpoint, gts: Sequence[F64], ests: Sequence[F64 | None],
-             length_m: float, known: dict[int, float] | None = None,
+             length_m: Lengths, known: dict[int, float] | None = None,
              scored_only: bool = False) -> float:
     """A trial's value at ``point``: the mean of the running RTE of every started sequence
-    (``ests[s]`` has run at least to ``point.frames[s]``); NaN when one is NaN, or with
-    ``scored_only`` (the rungs) the mean of those on which a segment has ended (NaN when
-    none has). ``known``: values of finished sequences already computed, by sequence, filled
-    in."""
+    (``ests[s]`` has run at least to ``point.frames[s]``) at its L (``length_m``: one for all,
+    or one a sequence); NaN when one is NaN, or with ``scored_only`` (the rungs) the mean of
+    those on which a segment has ended (NaN when none has). ``known``: values of finished
+    sequences already computed, by sequence, filled in."""
+    lengths = per_sequence(length_m, len(point.frames))
     values = []
     for s, frame in enumerate(point.frames):
         if frame < 0:
@@ -286,7 +299,7 @@ def value_at(point: Checkpoint, gts: Sequence[F64], ests: Sequence[F64 | None],
             continue
         est = ests[s]
         assert est is not None, "the trial did not run this far"
-        values.append(running_rte(gts[s], est, frame, length_m))
+        values.append(running_rte(gts[s], est, frame, lengths[s]))
         if known is not None and finished:
             known[s] = values[-1]
     if scored_only:
@@ -302,7 +315,7 @@ def reached(point: Checkpoint, ests: Sequence[F64 | None]) -> bool:
 
 
 def curve_of(points: Sequence[Checkpoint], gts: Sequence[F64], ests: Sequence[F64 | None],
-             length_m: float, scored_only: bool = False) -> tuple[float, ...]:
+             length_m: Lengths, scored_only: bool = False) -> tuple[float, ...]:
     """Values at ``points`` of a trial whose trajectory of sequence s is ``ests[s]`` (possibly
     partial: frames 0..len-1; None when not run); stops at the first point not reached.
     ``scored_only``: as ``value_at``."""
@@ -328,10 +341,10 @@ class Pruned(Exception):  # noqa: N818 - control flow inside a trial, never show
 class StudyPruner:
     """The stopping rule of one study: its checkpoints over the study's sequences (ground
     truths ``gts``), the curves of trials an earlier run finished, and each new trial's
-    thresholds. It reads and writes nothing: the study hands it the ground truths and the
-    stored trajectories."""
+    thresholds. It reads and writes nothing: the study hands it the ground truths, their L
+    (``length_m``: one for all, or one a sequence) and the stored trajectories."""
 
-    def __init__(self, gts: Sequence[F64], rule: StoppingRule, length_m: float) -> None:
+    def __init__(self, gts: Sequence[F64], rule: StoppingRule, length_m: Lengths) -> None:
         self.rule = rule
         self.length_m = length_m
         self.gts = list(gts) if rule.kind != "whole" else []

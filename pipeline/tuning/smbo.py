@@ -86,10 +86,29 @@ class StudySummary:
 
 @dataclass(frozen=True)
 class Study:
-    """One SMBO: a name (sequence or ``__joint__``) and the sequences its objective averages."""
+    """One SMBO: a name (sequence or ``__joint__``), the sequences its objective averages,
+    their own RTE lengths [m] (``SequenceInfo.length_m``: None, or () for all, where a
+    sequence has none and is scored at the settings' ``length_m``) and their own jump limits
+    [m] (``SequenceInfo.jump_limit_m``, likewise over the settings' ``jump_limit_m``)."""
 
     name: str
     sequences: tuple[tuple[str, str], ...]
+    own_lengths_m: tuple[float | None, ...] = ()
+    own_jump_limits_m: tuple[float | None, ...] = ()
+
+    def lengths_m(self, default_m: float) -> tuple[float, ...]:
+        """The L [m] every sequence is scored at: its own, else ``default_m``
+        (base.length_m: docs/design.md, "Stages")."""
+        from pipeline.sequence import scored_length_m
+
+        own = self.own_lengths_m or (None,) * len(self.sequences)
+        return tuple(scored_length_m(x, default_m) for x in own)
+
+    def jump_limits_m(self, default_m: float) -> tuple[float, ...]:
+        """The jump limit [m] a trial's trajectory of every sequence is checked at: its own,
+        else ``default_m`` (trials.jump_limit_m)."""
+        own = self.own_jump_limits_m or (None,) * len(self.sequences)
+        return tuple(default_m if x is None else x for x in own)
 
 
 def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settings: TrialsSection,
@@ -109,8 +128,9 @@ def run_trials(sequence_paths: Sequence[str | Path], out_dir: str | Path, settin
     adapter = study_adapter(settings)
     studies = make_studies(sequence_paths, joint)
     for study in studies:
-        for _, path in study.sequences:
-            check_scorable(path, settings.length_m)
+        for (_, path), length_m in zip(study.sequences, study.lengths_m(settings.length_m),
+                                       strict=True):
+            check_scorable(path, length_m)
     lanes = side_by_side(settings, len(studies), executor)
     order = costliest_studies(studies) if lanes > 1 else studies
     with exclusive_folder(out_dir, "another adaptune trials"), contextlib.ExitStack() as stack:
@@ -352,7 +372,8 @@ def study_adapter(settings: TrialsSection) -> Adapter:
 
 
 def make_studies(sequence_paths: Sequence[str | Path], joint: bool) -> list[Study]:
-    """One study per sequence (named by file stem), or one joint study over all of them."""
+    """One study per sequence (named by file stem), or one joint study over all of them, each
+    with its sequences' own RTE lengths and jump limits (their metadata read)."""
     if not sequence_paths:
         raise ConfigError("no sequences given")
     named = [(Path(p).stem, str(p)) for p in sequence_paths]
@@ -362,9 +383,13 @@ def make_studies(sequence_paths: Sequence[str | Path], joint: bool) -> list[Stud
         raise ConfigError(f"sequence names must be unique (file stems), {dup[0]!r} is given twice")
     if JOINT in stems:
         raise ConfigError(f"{JOINT!r} is reserved for the joint study")
-    if joint:
-        return [Study(JOINT, tuple(named))]
-    return [Study(n, ((n, p),)) for n, p in named]
+    from pipeline.sequence import read_info
+
+    infos = {p: read_info(p) for _, p in named}
+    groups = [named] if joint else [[one] for one in named]
+    return [Study(JOINT if joint else group[0][0], tuple(group),
+                  tuple(infos[p].length_m for _, p in group),
+                  tuple(infos[p].jump_limit_m for _, p in group)) for group in groups]
 
 
 def study_pruner(study: Study, settings: TrialsSection) -> StudyPruner:
@@ -375,7 +400,7 @@ def study_pruner(study: Study, settings: TrialsSection) -> StudyPruner:
     rule = settings.stopping
     on = rule.kind != "whole"
     gts = [read_ground_truth(path, TRIALS_PURPOSE) for _, path in study.sequences] if on else []
-    return StudyPruner(gts, rule, settings.length_m)
+    return StudyPruner(gts, rule, study.lengths_m(settings.length_m))
 
 
 def check_scorable(path: str | Path, length_m: float) -> None:
@@ -410,7 +435,9 @@ def study_of(study: Study, adapter: Adapter, settings: TrialsSection, seed: int,
         told_lag=told_lag(settings.workers), pruning=settings.pruning.model_dump(),
         fidelity=(settings.halving.model_dump() | {"thresholds": RULE}
                   if settings.fidelity == "halving" else None),
-        warm_start=[dict(p) for p in warm_start], sequences=list(study.sequences))
+        warm_start=[dict(p) for p in warm_start], sequences=list(study.sequences),
+        own_lengths_m=list(study.own_lengths_m),
+        own_jump_limits_m=list(study.own_jump_limits_m))
 
 
 def told_lag(workers: int) -> int:
@@ -446,7 +473,9 @@ def make_job(study: Study, adapter: Adapter, tid: int, seed: int, params: Params
                     length_m=settings.length_m, penalty_pct=settings.penalty_pct,
                     jump_limit_m=settings.jump_limit_m, time_limit_s=settings.time_limit_s,
                     adapter_options=dict(settings.adapter_options),
-                    space=adapter.space.to_json() if settings.space else None, **pruning)
+                    space=adapter.space.to_json() if settings.space else None,
+                    lengths_m=study.lengths_m(settings.length_m),
+                    jump_limits_m=study.jump_limits_m(settings.jump_limit_m), **pruning)
 
 
 def summarize(algorithm: str, sequence: str, done: dict[int, TrialResult], ran: int,

@@ -218,6 +218,15 @@ class TestSourceContract:
         frames = np.stack([f.T_world_lidar for f in case.source.frames()])
         np.testing.assert_array_equal(poses, frames)
 
+    def test_stamps_without_the_scans(self, ingested: tuple[Case, Path, Any]) -> None:
+        """``frame_stamps_ns`` (where a run is cut into pieces, before ingesting) is the stamps
+        ``frames`` gives the scans."""
+        case, _, _ = ingested
+        stamps = case.source.frame_stamps_ns()
+        assert stamps.dtype == np.int64
+        np.testing.assert_array_equal(stamps, [f.stamp_ns for f in case.source.frames()])
+        np.testing.assert_array_equal(stamps, case.stamps_ns)
+
     def test_info_summary(self, ingested: tuple[Case, Path, Any]) -> None:
         case, out, _ = ingested
         s = summarize_sequence(out)
