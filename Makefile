@@ -4,7 +4,7 @@ PY := $(VENV)/bin/python
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: constraints setup test fuzz lint deps bench repro verdict verdict-headroom docs kitti clean
+.PHONY: constraints setup test fuzz lint deps bench repro verdict verdict-headroom real docs kitti clean
 
 setup: $(STAMP)
 
@@ -84,6 +84,16 @@ verdict: setup
 verdict-headroom: setup
 	$(DVC_CONFIG)
 	PATH="$(abspath $(BIN)):$$PATH" $(BIN)/dvc repro verdict/dvc.yaml:headroom
+
+# The real-data study (docs/results/real.md): the third pipeline, real/dvc.yaml with
+# real/params.yaml (frozen before any test fold ran), on the four recorded runs of
+# ../shared/data/real: every unit's studies, the folds' fixed, adaptive and in-sample best, the
+# report. It resumes through the DVC cache (studies and folds persist). `make real` runs it
+# all; a part with REAL_STAGES, e.g. NDT's folds: make real REAL_STAGES=real/dvc.yaml:folds@ndt
+REAL_STAGES ?= real/dvc.yaml:report
+real: setup
+	$(DVC_CONFIG)
+	PATH="$(abspath $(BIN)):$$PATH" $(BIN)/dvc repro $(REAL_STAGES)
 
 # the docs pages that quote metrics/*.json (docs/results/toy.md, the README's result), rendered
 # from the committed metrics, dvc.lock and docs/results/runs.yaml; a test checks they are current

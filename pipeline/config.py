@@ -132,6 +132,7 @@ SECTIONS: dict[str, str] = {
     "evaluate": "pipeline.evaluate.section:EvaluateSection",
     "generalize": "studies.generalization.suite:GeneralizeSection",
     "verdict": "studies.verdict.section:VerdictSection",
+    "real": "studies.real.section:RealSection",
 }
 """Every params.yaml section: name -> ``module:Model``, in the order of params.yaml."""
 

@@ -40,10 +40,23 @@ def _data_root() -> Path:
 
 @pytest.fixture(scope="session")
 def test_data() -> Path:
-    """Root of the real test data (kitti_mini/, kitti_trajectories/)."""
+    """Root of the real test data (kitti_mini/, kitti_trajectories/, real/)."""
     root = _data_root()
     if not (root / "kitti_mini").is_dir():
         msg = f"real test data not found at {root} (set ADAPTUNE_TEST_DATA)"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return root
+
+
+@pytest.fixture(scope="session")
+def real_runs(test_data: Path) -> Path:
+    """Folder of the four real runs with a SLAM reference (hku_1, hku_mb, quick_shack,
+    riverside02: scans/, poses.txt, odom_poses.txt, times.txt; its README.md)."""
+    root = test_data / "real"
+    if not (root / "hku_1" / "poses.txt").is_file():
+        msg = f"real runs not found at {root} (set ADAPTUNE_TEST_DATA)"
         if os.environ.get("CI", "").lower() == "true":
             pytest.fail(msg)
         pytest.skip(msg)

@@ -48,6 +48,26 @@ STUDY_COMMANDS: dict[str, tuple[str, str]] = {
         "stages.study.realism:realism",
         "Real KITTI slices against simulated KITTI: scan statistics, odometry errors.",
     ),
+    "real-units": (
+        "stages.study.real.units:real_units",
+        "Cut the real runs into their halves by distance (real/dvc.yaml stage).",
+    ),
+    "real-studies": (
+        "stages.study.real.studies:real_studies",
+        "Every real unit's own study of an algorithm (real/dvc.yaml stage).",
+    ),
+    "real-folds": (
+        "stages.study.real.folds:real_folds",
+        "Every fold of the real-data study for an algorithm (real/dvc.yaml stage).",
+    ),
+    "real-models": (
+        "stages.study.real.models:real_models",
+        "The real-data deploy models, one per sensor (real/dvc.yaml stage).",
+    ),
+    "real-report": (
+        "stages.study.real.report:real_report",
+        "The real-data study's figures and the reference's floor (real/dvc.yaml stage).",
+    ),
     "docs": ("stages.study.docs:docs", "Render the docs pages that quote the committed metrics."),
 }
 

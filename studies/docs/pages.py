@@ -1,15 +1,15 @@
 """The pages of docs/ that quote the committed metrics, rendered from them (``make docs``).
 
 A page that quotes figures of a run is generated, never typed, so it cannot drift from what the
-pipeline measured: docs/results/toy.md from the summaries of the evaluate, surrogate and
-generalize stages (each its metrics/NAME.json and records/NAME.json,
-``pipeline.outputs.write_metrics``), the README's result between its two markers, and,
-once a run of the coverage pipeline is recorded, docs/results/verdict.md from
-verdict/metrics/*.json (``studies.docs.verdict_page``). Provenance comes from two files:
-dvc.lock (the md5 of every output file and the params of every stage that led to them) and
-docs/results/runs.yaml (the commit, date and command of the run, and the md5s of the files it
-wrote). Pages are rendered only when those files, dvc.lock and the run record agree, so a new
-run cannot leave an old commit on a page.
+pipeline measured: docs/results/toy.md from the summaries of the evaluate, surrogate and generalize
+stages (each its metrics/NAME.json and records/NAME.json, ``pipeline.outputs.write_metrics``), the
+README's result between its two markers, and, once a run of the coverage pipeline is recorded,
+docs/results/verdict.md from verdict/metrics/*.json (``studies.docs.verdict_page``), and once a run
+of the real-data pipeline is, docs/results/real.md from real/metrics/real.json
+(``studies.docs.real_page``). Provenance comes from two files: dvc.lock (the md5 of every output
+file and the params of every stage that led to them) and docs/results/runs.yaml (the commit, date
+and command of the run, and the md5s of the files it wrote). Pages are rendered only when those
+files, dvc.lock and the run record agree, so a new run cannot leave an old commit on a page.
 """
 
 from __future__ import annotations
@@ -46,6 +46,8 @@ README = Path("README.md")
 TOY_PAGE = Path("docs/results/toy.md")
 VERDICT_PAGE = Path("docs/results/verdict.md")
 VERDICT_LOCK = Path("verdict/dvc.lock")
+REAL_PAGE = Path("docs/results/real.md")
+REAL_LOCK = Path("real/dvc.lock")
 EVALUATION = "metrics/evaluation.json"
 SURROGATE = "metrics/surrogate.json"
 GENERALIZATION = "metrics/generalization.json"
@@ -82,8 +84,11 @@ def render_docs(repo: Path) -> dict[Path, str]:
     readme = (repo / README).read_text(encoding="utf-8")
     pages = {TOY_PAGE: toy_page(metrics, run, params),
              README: with_block(readme, readme_block(metrics, run))}
-    if "verdict" in (_load_yaml(repo / RUNS) or {}):
+    recorded = _load_yaml(repo / RUNS) or {}
+    if "verdict" in recorded:
         pages[VERDICT_PAGE] = verdict_docs(repo)
+    if "real" in recorded:
+        pages[REAL_PAGE] = real_docs(repo)
     return pages
 
 
@@ -104,6 +109,19 @@ def verdict_docs(repo: Path) -> str:
         metrics[name] = merge_leaves(metrics[name], read_metrics(repo, record, run, lock, folder))
     params = stage_params(lock, {n.removeprefix(folder + "/"): m for n, m in metrics.items()})
     return verdict_page(metrics, _provenance(run, list(metrics)), params)
+
+
+def real_docs(repo: Path) -> str:
+    """docs/results/real.md from the real-data pipeline's metrics (``real_page``), once a run
+    of it is recorded in docs/results/runs.yaml (``real``; real/metrics/real.json)."""
+    from studies.docs.real_page import METRICS, real_page
+
+    run = read_run(repo, "real")
+    lock = _load_yaml(repo / REAL_LOCK)
+    folder = REAL_LOCK.parent.as_posix()
+    metrics = read_metrics(repo, METRICS, run, lock, folder)
+    params = stage_params(lock, {METRICS.removeprefix(folder + "/"): metrics})
+    return real_page(metrics, _provenance(run, [METRICS]), params)
 
 
 def stale_files(repo: Path) -> list[Path]:

@@ -8,10 +8,10 @@ schema file a module names (``"tables.sql"``, or a folder of them: ``f"ros2/{nam
 counts too. A folder whose every file is needed is listed as the folder.
 
 A ``foreach`` stage has its command and deps in its ``do:`` block (``stage_spec``).
-``python tests/helpers/dvc_deps.py`` rewrites the ``deps:`` of every stage in dvc.yaml and
-verdict/dvc.yaml (``DVC_FILES``; its data dependencies first, as written, then the code);
-``--check`` exits 1 when one differs
-(``make deps`` / ``make lint``; tests/test_dvc_deps.py checks it in the suite).
+``python tests/helpers/dvc_deps.py`` rewrites the ``deps:`` of every stage in dvc.yaml,
+verdict/dvc.yaml and real/dvc.yaml (``DVC_FILES``; its data dependencies first, as written,
+then the code); ``--check`` exits 1 when one differs (``make deps`` / ``make lint``;
+tests/test_dvc_deps.py checks it in the suite).
 """
 
 from __future__ import annotations
@@ -214,7 +214,7 @@ def generated(dvc_yaml: str, prefix: str = "") -> str:
     return dvc_yaml
 
 
-DVC_FILES = {"dvc.yaml": "", "verdict/dvc.yaml": "../"}
+DVC_FILES = {"dvc.yaml": "", "verdict/dvc.yaml": "../", "real/dvc.yaml": "../"}
 """Every pipeline of the repository: its dvc.yaml -> the prefix of a repository path seen from
 its stages' folder."""
 
