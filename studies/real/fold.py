@@ -2,7 +2,8 @@
 contents.
 
 1. The fixed set: a joint study over the fold's training units (``fixed``: 64 trials,
-   warm-started from the units' own studies, pruned), from the training units' studies only.
+   warm-started from the units' own studies, pruned), from the training units' studies only;
+   the defaults where none of its trials finished on every training unit.
 2. The environment: the PCA of the descriptors fitted on the training units' frames only.
 3. The model: the results database of the training units' studies and the joint study, the
    surrogate fitted on it with the k its cross-validation over the training units chooses
@@ -146,12 +147,17 @@ def fold_model(fold: Fold, paths: FoldPaths, fixed_dir: Path | None, pca_dir: Pa
     return out
 
 
+NO_CROSS_VALIDATION = "the default: no cross-validation (fewer than two training units with a "\
+    "finished trial)"
+"""``choice.json``'s ``chosen_by`` where the fold's k is the surrogate section's own."""
+
+
 def choose_k(db: Path, pca_dir: Path, fold: Fold, paths: FoldPaths,
              settings: FoldSettings) -> Any:
     """The surrogate section with the k of ``settings.candidates_k`` whose leave-one-unit-out
     cross-validation over the fold's training units has the least regret (the smallest k of
-    a tie); the section's own k with a single training unit (no cross-validation to choose
-    by). Written to ``<out>/choice.json``."""
+    a tie); the section's own k where no cross-validation gave a regret (a single training
+    unit, or but one with a finished trial). Written to ``<out>/choice.json``."""
     from pipeline.pca import Pca
     from pipeline.surrogates.fit import fit_surrogate
     from pipeline.surrogates.rows import read_training_rows
@@ -172,7 +178,7 @@ def choose_k(db: Path, pca_dir: Path, fold: Fold, paths: FoldPaths,
     k = min(scored, key=lambda k: (scored[k], k)) if scored else section.k
     (paths.out / "choice.json").write_text(json.dumps(
         {"k": k, "regret_mean": regrets, "training_units": len(fold.train),
-         "chosen_by": "cross-validation" if scored else "the default (one training unit)"},
+         "chosen_by": "cross-validation" if scored else NO_CROSS_VALIDATION},
         indent=2) + "\n")
     return section.model_copy(update={"k": k})
 
@@ -181,28 +187,65 @@ def in_sample_best(run: str, units: Sequence[str], paths: FoldPaths,
                    settings: FoldSettings) -> Mapping[str, dict[str, float]]:
     """Per test unit of ``run``, the best set of a study on the run's test units themselves:
     the unit's own study where the run is one unit here, else a joint study over them
-    (``<out>/in_sample/<run>``, warm-started from their own studies)."""
-    from pipeline.evaluate.runs import best_fixed_params
+    (``<out>/in_sample/<run>``, warm-started from their own studies); the defaults where none
+    of its trials finished (``best_or_defaults``; ``<out>/in_sample/<run>.json`` says which)."""
     from pipeline.tuning.layout import JOINT_SEQUENCE
 
+    algorithm = settings.trials.algorithm
     if len(units) == 1:
-        _, best = best_fixed_params(paths.studies, settings.trials.algorithm, units[0])
+        study_dir, study = paths.studies, units[0]
     else:
-        out = joint_study([paths.units / f"{u}.mcap" for u in units], paths.studies,
-                          paths.out / "in_sample" / run, settings)
-        _, best = best_fixed_params(out, settings.trials.algorithm, JOINT_SEQUENCE)
+        study_dir, study = paths.out / "in_sample" / run, JOINT_SEQUENCE
+        joint_study([paths.units / f"{u}.mcap" for u in units], paths.studies, study_dir,
+                    settings)
+    best = best_or_defaults(study_dir, study, paths, algorithm,
+                            paths.out / "in_sample" / f"{run}.json")
     return {u: best for u in units}
+
+
+def best_or_defaults(study_dir: Path, study: str, paths: FoldPaths, algorithm: str,
+                     record: Path) -> dict[str, float]:
+    """The parameters of ``study``'s best finished trial, or the defaults where none of its
+    trials finished (no set is known to do better); ``record`` (JSON) says which."""
+    from pipeline.io_utils import atomic_write_text
+    from pipeline.tuning.table import read_space
+
+    best = study_best(study_dir, algorithm, study)
+    source = f"the best finished trial of {study_dir.name}/{study}"
+    if best is None:
+        log.warning("%s: no trial of %s finished: the defaults stand in", study_dir, study)
+        best = read_space(paths.studies, algorithm).defaults()
+        source = "the defaults: no trial finished"
+    record.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(record, json.dumps({"params": best, "from": source}, indent=2) + "\n")
+    return best
+
+
+def study_best(trials_dir: Path, algorithm: str, study: str) -> dict[str, float] | None:
+    """The parameters of ``study``'s best finished trial under ``trials_dir``
+    (``pipeline.tuning.layout.best_trial``); None when none finished."""
+    from pipeline.tuning.layout import best_trial, read_trials_tables
+
+    rows = [r for r in read_trials_tables(trials_dir).to_pylist()
+            if r["sequence"] == study and r["algorithm"] == algorithm]
+    tid = best_trial((r["trial"], r["status"], r["objective"]) for r in rows)
+    if tid is None:
+        return None
+    best = next(r for r in rows if r["trial"] == tid)
+    return {k: float(v) for k, v in json.loads(best["params_json"]).items()}
 
 
 def fold_suite(fold: Fold, paths: FoldPaths, fixed_dir: Path, model: Path,
                in_sample: Mapping[str, dict[str, float]], settings: FoldSettings) -> list[Any]:
-    """Baseline, fixed, adaptive and the in-sample best on every test unit, with replicas."""
-    from pipeline.evaluate.runs import best_fixed_params
+    """Baseline, fixed (the defaults where no joint trial finished: ``fixed.json`` says which),
+    adaptive and the in-sample best on every test unit, with replicas."""
+    from pipeline.tuning.layout import JOINT_SEQUENCE
     from pipeline.tuning.table import read_adapter_options, read_space
     from studies.suites.runner import AdaptiveSetting, SuiteInputs, run_suite
 
     algorithm = settings.trials.algorithm
-    _, fixed = best_fixed_params(fixed_dir, algorithm)
+    fixed = best_or_defaults(fixed_dir, JOINT_SEQUENCE, paths, algorithm,
+                             paths.out / "fixed.json")
     space = read_space(paths.studies, algorithm)
     inputs = SuiteInputs(algorithm, space, space.defaults(), fixed,
                          read_adapter_options(paths.studies, algorithm),

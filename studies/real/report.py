@@ -127,9 +127,8 @@ def selector_use(results: Sequence[Any]) -> dict[str, Any]:
 def halves_apart(units_dir: Path, records: Sequence[Any]) -> dict[str, Any]:
     """Per run, how close its second half's reference comes to its first half's, away from
     where they meet (positions more than the run's L apart along the path): the least
-    distance [m] and the share of second-half frames within 10 m of the first half."""
-    from scipy.spatial import cKDTree
-
+    distance [m] (None: no such pair) and the share of second-half frames within 10 m of the
+    first half. Every pair is measured (a run has a few hundred keyframes)."""
     from pipeline.geometry import path_distances
     from pipeline.sequence import SequenceReader
 
@@ -147,15 +146,11 @@ def halves_apart(units_dir: Path, records: Sequence[Any]) -> dict[str, Any]:
         first, second = h == "h1", h == "h2"
         if not first.any() or not second.any():
             continue
-        near = cKDTree(p[first]).query_ball_point(p[second], r=max(10.0, length_m))
-        d1, gaps = d[first], []
-        for i, js in zip(np.flatnonzero(second), near, strict=True):
-            far = [j for j in js if abs(d[i] - d1[j]) > length_m]
-            gaps.append(min((float(np.linalg.norm(p[i] - p[first][j])) for j in far),
-                            default=np.inf))
-        g = np.array(gaps)
-        out[run] = {"closest_m": None if not np.isfinite(g).any() else float(g.min()),
-                    "second_within_10m": float(np.mean(g <= 10.0)), "length_m": length_m}
+        apart_m = np.linalg.norm(p[second][:, None] - p[first][None], axis=2)  # (S, F)
+        apart_m[np.abs(d[second][:, None] - d[first][None]) <= length_m] = np.inf
+        gaps = apart_m.min(axis=1)
+        out[run] = {"closest_m": float(gaps.min()) if np.isfinite(gaps).any() else None,
+                    "second_within_10m": float(np.mean(gaps <= 10.0)), "length_m": length_m}
     return out
 
 
