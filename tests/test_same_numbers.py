@@ -77,14 +77,16 @@ def clean_env(**extra: str) -> dict[str, str]:
 
 
 def run_pipeline(folder: Path, env: dict[str, str], steps: list[list[str]] = STEPS) -> str:
-    """The steps in ``folder`` (its params.yaml: ``tiny_params``); SHA-256 of every output's
-    path and bytes."""
+    """The steps in ``folder`` (its params.yaml: ``tiny_params``), one process started by
+    ``adaptune exec`` (pinned as every ``adaptune`` process is: helpers/run_steps.py); SHA-256
+    of every output's path and bytes."""
     folder.mkdir(parents=True)
     (folder / "params.yaml").write_text(yaml.safe_dump(tiny_params(), sort_keys=False))
-    for step in steps:
-        done = subprocess.run([ADAPTUNE, *step], cwd=folder, env=env, capture_output=True,
-                              text=True, timeout=900)
-        assert done.returncode == 0, f"{step}: {done.stderr}"
+    done = subprocess.run(
+        [ADAPTUNE, "exec", "--", sys.executable, "-m", "helpers.run_steps", json.dumps(steps)],
+        cwd=folder, env={**env, "PYTHONPATH": str(Path(__file__).parent)}, capture_output=True,
+        text=True, timeout=900)
+    assert done.returncode == 0, f"{steps}: {done.stderr}"
     digest = hashlib.sha256()
     for f in sorted(p for p in folder.rglob("*") if p.is_file() and p.name != "params.yaml"):
         digest.update(f"{f.relative_to(folder).as_posix()}\0".encode())
