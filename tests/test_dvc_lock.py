@@ -21,7 +21,10 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 DVC = Path(sys.executable).with_name("dvc")
-PIPELINES = ["dvc.yaml", "verdict/dvc.yaml"]
+PIPELINES = {"dvc.yaml": False, "verdict/dvc.yaml": False, "real/dvc.yaml": True}
+"""Each pipeline, and whether a stage that has not run yet (none in its lock) is left out:
+the real-data study runs on recordings beside the clone, part by part (its stages that ran
+must be current; the others wait for `make real`)."""
 
 
 def stage_outputs(dvc_yaml: Path) -> set[str]:
@@ -61,14 +64,20 @@ def stale(status: dict[str, Any], outputs: set[str]) -> dict[str, Any]:
     return out
 
 
-@pytest.mark.parametrize("pipeline", PIPELINES)
+@pytest.mark.parametrize("pipeline", list(PIPELINES))
 def test_no_stage_has_changed_code_params_or_command_since_its_lock(pipeline: str) -> None:
     dvc_yaml = REPO / pipeline
-    done = subprocess.run([str(DVC), "status", "--json"], cwd=dvc_yaml.parent,
+    if not dvc_yaml.with_name("dvc.lock").exists():
+        pytest.skip(f"{pipeline} has no lock: none of its stages has run yet")
+    done = subprocess.run([str(DVC), "status", "--json", dvc_yaml.name], cwd=dvc_yaml.parent,
                           capture_output=True, text=True, timeout=600,
                           env={**os.environ, "DVC_NO_ANALYTICS": "1"})
     assert done.returncode == 0, done.stderr
     status = json.loads(done.stdout or "{}")
+    if PIPELINES[pipeline]:
+        ran = yaml.safe_load(dvc_yaml.with_name("dvc.lock").read_text())["stages"]
+        status = {stage: changes for stage, changes in status.items()
+                  if stage.split(":")[-1] in ran}
     assert stale(status, stage_outputs(dvc_yaml)) == {}, (
         f"{pipeline}: stages whose code, params or command changed since dvc.lock: run "
         "`make repro` (or the verdict's) and commit the lock, metrics and docs with the change")
