@@ -102,15 +102,19 @@ def trial_counts(folder: Path) -> dict[str, int]:
 
 
 def fold_cost(folder: Path, results: Any) -> dict[str, Any]:
-    """A fold's cost: trials of its joint study and its in-sample studies, the suite's runs
-    (settings x replicas + 1, per test unit) and the frames those ran."""
+    """A fold's cost: trials of its joint study and its in-sample studies (one a test run of
+    several units: ``in_sample/<run>/``), the suite's runs (settings x replicas + 1, per test
+    unit) and the frames those ran."""
     runs = frames = 0
     for r in results:
         for t in r.t_err_pct.values():
             runs += len(t)
             frames += len(t) * r.frames
+    in_sample = [trial_counts(d) for d in sorted((folder / "in_sample").glob("*/"))]
     return {"joint_trials": trial_counts(folder / "fixed"),
-            "in_sample_trials": trial_counts(folder / "in_sample"),
+            "in_sample_trials": {k: sum(c.get(k, 0) for c in in_sample)
+                                 for k in dict.fromkeys(["all", *(k for c in in_sample
+                                                                  for k in c)])},
             "suite_runs": runs, "suite_frames": frames}
 
 

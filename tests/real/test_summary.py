@@ -64,3 +64,16 @@ def test_the_targets_read_the_finished_ratios() -> None:
     assert not t["adapting_pays_in_distribution"]["met"]  # adaptive = fixed: 1.0 > 0.85
     assert t["worst_run"]["met"]
     assert t["out_of_environment"]["per_algorithm"] == {"gicp": None, "ndt": None}
+    assert not t["out_of_environment"]["met"]  # nothing measured is not a target met
+
+
+def test_a_run_without_a_finished_pair_is_no_worst_case() -> None:
+    measured = run_metrics(one_run([1.0] * 4, [4.0] * 4), 100, 0.95, 0)
+    failed = run_metrics(one_run([PENALTY] * 4, [4.0] * 4, "r2"), 100, 0.95, 0)
+    assert failed["ratios"]["adaptive_vs_fixed"]["finished"]["value"] is None
+    goals = {"fixed_vs_baseline": 0.5, "adaptive_vs_fixed_in": 0.85,
+             "adaptive_vs_fixed_out": 1.0, "worst_run": 1.1}
+    t = targets({"ndt": {"runs": [measured, failed], "families": {}}}, goals)
+    assert t["worst_run"]["per_algorithm"] == {"ndt": 1.0} and t["worst_run"]["met"]
+    t = targets({"ndt": {"runs": [failed], "families": {}}}, goals)
+    assert t["worst_run"]["per_algorithm"] == {"ndt": None} and not t["worst_run"]["met"]
