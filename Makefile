@@ -46,8 +46,8 @@ fuzz: setup
 		--hypothesis-show-statistics --durations=0
 
 lint: setup
-	$(BIN)/ruff check pipeline stages schemas tests bench experiments examples
-	$(BIN)/mypy pipeline stages
+	$(BIN)/ruff check pipeline stages studies schemas tests bench experiments examples
+	$(BIN)/mypy pipeline stages studies
 	$(PY) tests/helpers/dvc_deps.py --check
 
 # dvc.yaml's code deps, generated from the import graph of each stage's command (checked by
