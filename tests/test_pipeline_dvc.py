@@ -266,7 +266,8 @@ def test_base_length_makes_the_stages_that_read_it_stale(repro: tuple[Path, str]
     changed = {stage: change["changed deps"]["params.yaml"] for stage, changes in status.items()
                for change in changes if "params.yaml" in change.get("changed deps", {})}
     assert changed == {stage: {"base.length_m": "modified"}
-                       for stage in ("trials", "fixed", "rte", "evaluate", "generalize")}
+                       for stage in ("ingest", "trials", "fixed", "rte", "evaluate",
+                                     "generalize")}  # ingest: a piece not longer than L is dropped
 
 
 def test_metrics_and_plots_commands_read_the_outputs(repro: tuple[Path, str]) -> None:
