@@ -1,11 +1,13 @@
 """Markdown for the generated docs pages (``studies.docs.pages``,
-``studies.docs.verdict_page``): numbers, tables, prose wrapped at 96 columns."""
+``studies.docs.verdict_page``, ``studies.docs.real_page``): numbers, tables, prose wrapped at
+96 columns, the params a page's run used."""
 
 from __future__ import annotations
 
 import math
 import textwrap
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 
 def number(v: float | None, digits: int = 3) -> str:
@@ -49,3 +51,14 @@ def row(cells: Sequence[object]) -> str:
 def table(head: Sequence[str], rows: Sequence[Sequence[object]]) -> list[str]:
     """A table's lines: the head, the rule, the rows."""
     return [row(head), "|" + "---|" * len(head), *(row(r) for r in rows)]
+
+
+def params_section(params: Mapping[str, Any], params_file: str) -> list[str]:
+    """A page's closing section: the values of ``params_file`` every stage behind its figures
+    ran with (``params``, as dvc.lock records them), as YAML in a folded block."""
+    import yaml
+
+    return ["## Params", "", f"<details><summary>{params_file} values of every stage behind "
+            "these figures</summary>", "", "```yaml",
+            yaml.safe_dump(dict(params), sort_keys=False, default_flow_style=None,
+                           width=80).rstrip(), "```", "", "</details>"]

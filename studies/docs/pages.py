@@ -30,6 +30,7 @@ from pipeline.outputs import merge_leaves, record_beside
 from pipeline.report.table2 import table2_json, table2_markdown
 from studies.docs.markdown import fill as _fill
 from studies.docs.markdown import number as _f
+from studies.docs.markdown import params_section
 from studies.docs.markdown import percent as _pct
 from studies.docs.markdown import row as _row
 from studies.docs.markdown import table as _table
@@ -222,10 +223,7 @@ def toy_page(metrics: Mapping[str, Mapping[str, Any]], run: RunRecord,
     files = [f for name in metrics for f in (name, SUMMARIES[name])]
     lines = ["# The toy reproduction (`make repro`)", "", *_provenance(run, files), "",
              *_validation(ev), "", *_cross_validation(cv), "", *_suite(gen), "",
-             "## Params", "", "<details><summary>params.yaml values of every stage behind these "
-             "figures</summary>", "", "```yaml",
-             yaml.safe_dump(dict(params), sort_keys=False, default_flow_style=None,
-                            width=80).rstrip(), "```", "", "</details>"]
+             *params_section(params, "params.yaml")]
     return _fill("\n".join(lines)) + "\n"
 
 

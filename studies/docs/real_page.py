@@ -13,10 +13,9 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import yaml
-
 from studies.docs.markdown import fill as _fill
 from studies.docs.markdown import number as _f
+from studies.docs.markdown import params_section
 from studies.docs.markdown import percent as _pct
 from studies.docs.markdown import table as _table
 
@@ -47,10 +46,7 @@ def real_page(m: Mapping[str, Any], provenance: Sequence[str],
     for algorithm in m["algorithms"]:
         lines += [*_algorithm(algorithm, m["by_algorithm"][algorithm]), ""]
     lines += [*_units(m), "", *_figure(m), "",
-              "## Params", "", "<details><summary>real/params.yaml values of every stage behind "
-              "these figures</summary>", "", "```yaml",
-              yaml.safe_dump(dict(params), sort_keys=False, default_flow_style=None,
-                             width=80).rstrip(), "```", "", "</details>"]
+              *params_section(params, "real/params.yaml")]
     return _fill("\n".join(lines)) + "\n"
 
 

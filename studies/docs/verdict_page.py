@@ -13,10 +13,10 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-import yaml
 
 from studies.docs.markdown import fill as _fill
 from studies.docs.markdown import number as _f
+from studies.docs.markdown import params_section
 from studies.docs.markdown import percent as _pct
 from studies.docs.markdown import table as _table
 from studies.docs.markdown import values as _values
@@ -66,10 +66,7 @@ def verdict_page(metrics: Mapping[str, Mapping[str, Any]], provenance: Sequence[
         lines += [*_models(models), ""]
     for m in suites:
         lines += [*_worlds(m), ""]
-    lines += ["## Params", "", "<details><summary>verdict/params.yaml values of every stage behind "
-              "these figures</summary>", "", "```yaml",
-              yaml.safe_dump(dict(params), sort_keys=False, default_flow_style=None,
-                             width=80).rstrip(), "```", "", "</details>"]
+    lines += params_section(params, "verdict/params.yaml")
     return _fill("\n".join(lines)) + "\n"
 
 

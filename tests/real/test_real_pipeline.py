@@ -162,3 +162,13 @@ def test_the_deploy_models_load_in_select(repro: tuple[Path, str], tmp_path: Pat
         run(folder, "adaptune", "select", f"models/{sensor}/ndt", f"data/units/{unit}.mcap",
             "--out", str(out), "-a", "ndt")
         assert len(out.read_text().splitlines()) > 1
+
+
+def test_the_docs_page_renders_from_the_reports_metrics(repro: tuple[Path, str]) -> None:
+    from studies.docs.real_page import real_page
+
+    folder, _ = repro
+    m = json.loads((folder / "metrics/real.json").read_text())
+    page = real_page(m, ["> provenance"], {"real": {"algorithms": ["ndt"]}})
+    assert "\n## ndt\n" in page and "> provenance" in page
+    assert page.endswith("```yaml\nreal:\n  algorithms: [ndt]\n```\n\n</details>\n")
