@@ -29,6 +29,7 @@ from studies.docs.pages import (
     render_docs,
     stale_files,
 )
+from studies.docs.verdict_history import HISTORY
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
@@ -46,9 +47,9 @@ def test_the_generated_pages_are_what_the_committed_metrics_give() -> None:
 
 def _copy(tmp: Path) -> Path:
     """What the generator reads, in a scratch repository ``tmp``: the toy's run and, once one
-    is recorded, the verdict's."""
+    is recorded, the verdict's with the history of its test suites."""
     verdict = (yaml.safe_load((REPO / RUNS).read_text()) or {}).get("verdict")
-    verdict_files = ["verdict/dvc.lock", *verdict["outputs"]] if verdict else []
+    verdict_files = ["verdict/dvc.lock", *verdict["outputs"], str(HISTORY)] if verdict else []
     for name in ("README.md", "dvc.lock", str(RUNS), EVALUATION, SURROGATE, GENERALIZATION,
                  *SUMMARIES.values(), *verdict_files):
         (tmp / name).parent.mkdir(parents=True, exist_ok=True)

@@ -31,6 +31,12 @@ def wrap(text: str, prefix: str = "") -> str:
                          break_long_words=False, break_on_hyphens=False)
 
 
+def bullet(text: str) -> str:
+    """``text`` as a list item of lines of at most 96 characters, continued under its text."""
+    return textwrap.fill(text, 96, initial_indent="- ", subsequent_indent="  ",
+                         break_long_words=False, break_on_hyphens=False)
+
+
 def fill(text: str) -> str:
     """``text`` with its prose lines wrapped by ``wrap``: tables, headings, quotes, HTML and
     fenced code as they are."""

@@ -9,7 +9,9 @@ of the real-data pipeline is, docs/results/real.md from real/metrics/real.json
 (``studies.docs.real_page``). Provenance comes from two files: dvc.lock (the md5 of every output
 file and the params of every stage that led to them) and docs/results/runs.yaml (the commit, date
 and command of the run, and the md5s of the files it wrote). Pages are rendered only when those
-files, dvc.lock and the run record agree, so a new run cannot leave an old commit on a page.
+files, dvc.lock and the run record agree, so a new run cannot leave an old commit on a page. The
+verdict page's history of the earlier runs on its test suites comes from a third,
+docs/results/verdict-history.yaml (``studies.docs.verdict_history``).
 """
 
 from __future__ import annotations
@@ -96,7 +98,9 @@ def render_docs(repo: Path) -> dict[Path, str]:
 def verdict_docs(repo: Path) -> str:
     """docs/results/verdict.md from the coverage pipeline's metrics (``verdict_page``), once a
     run of it is recorded in docs/results/runs.yaml (``verdict``; its metrics named from the
-    repository root, e.g. verdict/metrics/id.json)."""
+    repository root, e.g. verdict/metrics/id.json), with the history of the runs on the test
+    suites from docs/results/verdict-history.yaml."""
+    from studies.docs.verdict_history import HISTORY, read_history
     from studies.docs.verdict_page import HEADROOM, METRICS, surrogate_sensor, verdict_page
 
     run = read_run(repo, "verdict")
@@ -109,7 +113,9 @@ def verdict_docs(repo: Path) -> str:
         record = record_beside(Path(name)).as_posix()  # the surrogate stage's text and counts
         metrics[name] = merge_leaves(metrics[name], read_metrics(repo, record, run, lock, folder))
     params = stage_params(lock, {n.removeprefix(folder + "/"): m for n, m in metrics.items()})
-    return verdict_page(metrics, _provenance(run, list(metrics)), params)
+    history = read_history(_load_yaml(repo / HISTORY), HISTORY.as_posix())
+    return verdict_page(metrics, _provenance(run, [*metrics, HISTORY.as_posix()]), params,
+                        history)
 
 
 def real_docs(repo: Path) -> str:

@@ -5,7 +5,8 @@ model; ``make docs``, ``studies.docs.pages``).
 The page gives every target of the protocol with its figure and interval, then per suite the ratios
 (geometric mean, interval, win rate and its Wilson interval, worst world), the pooled RTE and
 failure rate of every setting, what the selector did, the power analysis from the suite's own
-spread, the headroom and the closed gap, every world, and the params of the run."""
+spread, the headroom and the closed gap, the history of every earlier run on the test suites
+(docs/results/verdict-history.yaml), every world, and the params of the run."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from studies.docs.markdown import params_section
 from studies.docs.markdown import percent as _pct
 from studies.docs.markdown import table as _table
 from studies.docs.markdown import values as _values
+from studies.docs.verdict_history import History, history_section
 from studies.suites.statistics import geometric_mean, worlds_needed
 
 ID, OOD, HEADROOM = ("verdict/metrics/id.json", "verdict/metrics/ood.json",
@@ -48,8 +50,9 @@ FAMILY_TITLES = {"id": "in distribution (trained environments and sensors)",
 
 
 def verdict_page(metrics: Mapping[str, Mapping[str, Any]], provenance: Sequence[str],
-                 params: Mapping[str, Any]) -> str:
-    """The page's text (module docstring); ``provenance``: its quoted header lines."""
+                 params: Mapping[str, Any], history: History | None = None) -> str:
+    """The page's text (module docstring); ``provenance``: its quoted header lines;
+    ``history``: every earlier run on the test suites (``studies.docs.verdict_history``)."""
     suites = [metrics[name] for name in (ID, OOD) if name in metrics]
     head = metrics.get(HEADROOM)
     lines = ["# The verdict: adaptive against the best fixed parameters on unseen worlds", "",
@@ -64,6 +67,8 @@ def verdict_page(metrics: Mapping[str, Mapping[str, Any]], provenance: Sequence[
     models = {sensor: m for n, m in metrics.items() if (sensor := surrogate_sensor(n))}
     if models:
         lines += [*_models(models), ""]
+    if history is not None:
+        lines += [*history_section(history), ""]
     for m in suites:
         lines += [*_worlds(m), ""]
     lines += params_section(params, "verdict/params.yaml")
