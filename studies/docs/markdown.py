@@ -25,16 +25,17 @@ def values(p: Mapping[str, float]) -> str:
     return ", ".join(f"{k} {v:.3g}" for k, v in p.items())
 
 
-def wrap(text: str, prefix: str = "") -> str:
-    """``text`` as lines of at most 96 characters, each starting with ``prefix``."""
-    return textwrap.fill(text, 96, initial_indent=prefix, subsequent_indent=prefix,
+def wrap(text: str, prefix: str = "", indent: str | None = None) -> str:
+    """``text`` as lines of at most 96 characters, the first starting with ``prefix``, the
+    others with ``indent`` (``prefix`` if None)."""
+    return textwrap.fill(text, 96, initial_indent=prefix,
+                         subsequent_indent=prefix if indent is None else indent,
                          break_long_words=False, break_on_hyphens=False)
 
 
 def bullet(text: str) -> str:
     """``text`` as a list item of lines of at most 96 characters, continued under its text."""
-    return textwrap.fill(text, 96, initial_indent="- ", subsequent_indent="  ",
-                         break_long_words=False, break_on_hyphens=False)
+    return wrap(text, "- ", "  ")
 
 
 def fill(text: str) -> str:
