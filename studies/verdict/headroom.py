@@ -20,11 +20,12 @@ environment can do, and which share of that gap adaptive closes.
 Two passes over the worlds (``workers`` at a time): the first simulates every world, runs every
 candidate on the selection replica and the cross-fitted oracle on the suite's replicas; the
 second, which needs every world's candidates, simulates them again and runs the class oracle.
+Each world's passes are kept as they finish (``studies.suites.journal``): a stopped run resumes
+at the worlds it had not finished.
 """
 
 from __future__ import annotations
 
-import itertools
 import json
 import logging
 import math
@@ -178,29 +179,31 @@ def run_headroom(worlds: Sequence[SimulatedWorld], inputs: SuiteInputs,
                  workers: int) -> tuple[list[CandidateRuns], list[WorldResult]]:
     """Both passes over ``worlds`` (module docstring), the costliest worlds started first;
     ``out_dir`` written atomically: every world's oracle runs (``<world>/rte.parquet`` and
-    ``world.json``, as the suite's)."""
-    from pipeline.executor import costliest_first, map_in_processes
+    ``world.json``, as the suite's). Each world's passes are kept as they finish in a journal
+    beside ``out_dir`` (``studies.suites.journal``), so that a stopped run resumes."""
     from pipeline.io_utils import atomic_dir, atomic_write_text
+    from studies.suites.journal import Journal, fingerprint
     from studies.suites.runner import write_runs
 
     PROGRESS.info("headroom: %d worlds, %d candidates", len(worlds), len(candidates))
+    journal = Journal.open(out_dir, fingerprint((list(worlds), inputs, candidates, period_s)))
     t0 = time.monotonic()
-    order = costliest_first([w.cost for w in worlds])
-    firsts, seconds = itertools.count(1), itertools.count(1)
+    names, costs = [w.name for w in worlds], [w.cost for w in worlds]
+    first = journal.run(
+        "cross_fitted", first_pass, [(w, inputs, candidates, period_s) for w in worlds], names,
+        workers, costs=costs,
+        keep=lambda r: (r.oracle, {"label_rte": r.label_rte, "choice": r.choice}),
+        restore=lambda oracle, extra: CandidateRuns(oracle.name, extra["label_rte"],
+                                                    extra["choice"], oracle),
+        on_done=lambda r, k: _pass_logged("cross-fitted", r.oracle, k, len(worlds), t0))
+    label_rte = {r.name: r.label_rte for r in first}
+    second = journal.run(
+        "class", second_pass, [(w, inputs, candidates, class_choice(w.name, label_rte),
+                                period_s) for w in worlds], names, workers, costs=costs,
+        keep=lambda r: (r, None), restore=lambda r, _: r,
+        on_done=lambda r, k: _pass_logged("class", r, k, len(worlds), t0))
+    merged = []
     with atomic_dir(out_dir) as tmp:
-        first = map_in_processes(first_pass, [(w, inputs, candidates, period_s)
-                                              for w in worlds], workers,
-                                 on_done=lambda _, r: _pass_logged("cross-fitted", r.oracle,
-                                                              next(firsts), len(worlds), t0),
-                                 order=order)
-        label_rte = {r.name: r.label_rte for r in first}
-        second = map_in_processes(second_pass, [(w, inputs, candidates,
-                                                 class_choice(w.name, label_rte), period_s)
-                                                for w in worlds], workers,
-                                  on_done=lambda _, r: _pass_logged("class", r, next(seconds),
-                                                               len(worlds), t0),
-                                  order=order)
-        merged = []
         for a, b in zip(first, second, strict=True):
             both = a.oracle
             both.t_err_pct.update(b.t_err_pct)
@@ -212,6 +215,7 @@ def run_headroom(worlds: Sequence[SimulatedWorld], inputs: SuiteInputs,
                 {"candidates": candidates, "selection_replica_rte_pct": a.label_rte,
                  "choice": a.choice}, indent=2) + "\n")
             merged.append(both)
+    journal.close()
     return first, merged
 
 
