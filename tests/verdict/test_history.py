@@ -123,9 +123,12 @@ def _git(*args: str) -> subprocess.CompletedProcess[str]:
 @pytest.fixture(scope="module")
 def history_git() -> None:
     """The repository's git history (the record's commits are in it); skip in a copy of the
-    tree without one."""
+    tree without one, or in a shallow clone."""
     if _git("rev-parse", "--git-dir").returncode != 0:
         pytest.skip("not a git checkout: the record's commits cannot be looked up")
+    if _git("rev-parse", "--is-shallow-repository").stdout.strip() == "true":
+        pytest.skip("a shallow clone: the record's older commits are not in it "
+                    "(git fetch --unshallow)")
 
 
 def test_the_committed_record_validates_and_covers_both_suites() -> None:
