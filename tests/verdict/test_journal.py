@@ -81,6 +81,7 @@ def test_a_stopped_headroom_resumes_where_it_stopped(tmp_path: Path,
     stopped_at = calls[-1][1]
 
     calls.clear()
+
     def counted_second(w, *args):  # type: ignore[no-untyped-def]
         calls.append(("second", w.name))
         return second(w, *args)
