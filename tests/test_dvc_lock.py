@@ -41,8 +41,12 @@ def stage_outputs(dvc_yaml: Path) -> set[str]:
 
 
 def is_output(path: str, outputs: set[str]) -> bool:
-    return any(path == o or (o.endswith(("/", "_")) and path.startswith(o))
-               or path.startswith(o.rstrip("/") + "/") for o in outputs if o)
+    """Whether ``path`` is a stage's output, lies inside one, or is a folder that holds them
+    (``models`` holding ``models/${item}``: in a fresh clone it exists with only its
+    ``.gitignore``, so DVC calls it modified, not deleted)."""
+    return any(path == o.rstrip("/") or (o.endswith(("/", "_")) and path.startswith(o))
+               or path.startswith(o.rstrip("/") + "/") or o.startswith(path + "/")
+               for o in outputs if o)
 
 
 def stale(status: dict[str, Any], outputs: set[str]) -> dict[str, Any]:
@@ -81,3 +85,12 @@ def test_no_stage_has_changed_code_params_or_command_since_its_lock(pipeline: st
     assert stale(status, stage_outputs(dvc_yaml)) == {}, (
         f"{pipeline}: stages whose code, params or command changed since dvc.lock: run "
         "`make repro` (or the verdict's) and commit the lock, metrics and docs with the change")
+
+
+def test_a_folder_holding_outputs_is_left_to_them_but_code_is_not() -> None:
+    """A fresh clone's ``models`` (only its ``.gitignore``, the models not pulled) is not
+    stale; a changed source file beside it is."""
+    status = {"verdict_id": [{"changed deps": {"models": "modified",
+                                               "../pipeline/odometry/ndt.py": "modified"}}]}
+    assert stale(status, {"models/", "results/fixed"}) == {
+        "verdict_id": [{"../pipeline/odometry/ndt.py": "modified"}]}
