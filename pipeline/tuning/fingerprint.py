@@ -5,7 +5,8 @@ A study's proposals and scores depend on the adapter and its options, the parame
 the seed, L (``length_m``), the penalty, the jump limit, the time limit (a trial past it
 fails), TPE's start-up count, how far the proposals lag the results (``told_lag``, from the
 workers), the pruner's settings, the rungs of successive halving, the parameters it tries
-first (a warm start) and the sequences' content. Resuming with any of them changed would
+first (a warm start), what a failed sequence does to a trial (``failures``) and the sequences'
+content. Resuming with any of them changed would
 silently mix two studies, so ``check_fingerprint`` refuses it in one line naming every
 difference. What may change on a resume: ``iterations`` (a study can be extended),
 ``retries``, ``dask``.
@@ -16,7 +17,8 @@ keeps no modification time, so that the table's bytes follow from the sequences'
 sequence with an RTE length or a jump limit of its own (``SequenceInfo.length_m``,
 ``jump_limit_m``, which win over ``length_m``, ``jump_limit_m``) has it recorded with its
 digest; one without has no such key, so that a study of such sequences has the fingerprint it
-had before sequences had settings of their own.
+had before sequences had settings of their own. Likewise ``failures`` is recorded only where
+it is not ``trial``, the rule every study had before there was another.
 """
 
 from __future__ import annotations
@@ -34,8 +36,12 @@ VERSION = 1
 
 COMPARED = ("adapter", "adapter_options", "space", "seed", "length_m", "penalty_pct",
             "jump_limit_m", "time_limit_s", "startup_trials", "told_lag", "pruning", "fidelity",
-            "warm_start", "sequences")
+            "warm_start", "failures", "sequences")
 """Keys that define a study, in the order differences are named."""
+
+UNRECORDED = {"failures": "trial"}
+"""Keys a fingerprint holds only where they differ from this value (a study stored before the
+key existed has it)."""
 
 
 def study_fingerprint(*, adapter: str, adapter_options: Mapping[str, Any],
@@ -46,17 +52,19 @@ def study_fingerprint(*, adapter: str, adapter_options: Mapping[str, Any],
                       fidelity: Mapping[str, Any] | None = None,
                       warm_start: list[dict[str, float]] | None = None,
                       own_lengths_m: Sequence[float | None] = (),
-                      own_jump_limits_m: Sequence[float | None] = ()) -> dict[str, Any]:
+                      own_jump_limits_m: Sequence[float | None] = (),
+                      failures: str = "trial") -> dict[str, Any]:
     """The fingerprint (plain JSON data) of a study over ``sequences`` ((name, MCAP path)).
 
     ``fidelity``: the rungs of successive halving (``trials.halving``), None for whole trials
     (a study stored before the rungs existed has none: whole). ``own_lengths_m``,
     ``own_jump_limits_m``: each sequence's own RTE length and jump limit, None (or () for all)
-    where it has none.
+    where it has none. ``failures``: the rule for a failed sequence (``trials.failures``),
+    recorded only where it is not ``trial`` (``UNRECORDED``).
     """
     lengths = list(own_lengths_m) or [None] * len(sequences)
     jumps = list(own_jump_limits_m) or [None] * len(sequences)
-    return {
+    out = {
         "version": VERSION,
         "adapter": adapter,
         "adapter_options": json.loads(json.dumps(dict(adapter_options), sort_keys=True,
@@ -75,6 +83,7 @@ def study_fingerprint(*, adapter: str, adapter_options: Mapping[str, Any],
         "sequences": [sequence_digest(name, path, length_m, jump_m) for (name, path), length_m,
                       jump_m in zip(sequences, lengths, jumps, strict=True)],
     }
+    return out if failures == UNRECORDED["failures"] else out | {"failures": failures}
 
 
 def sequence_digest(name: str, path: str | Path, own_length_m: float | None = None,
@@ -96,8 +105,10 @@ def check_fingerprint(stored: Mapping[str, Any] | None, current: Mapping[str, An
     if stored is None or stored.get("version") != VERSION:
         raise ConfigError(f"{where}: holds trials without a study fingerprint of this adaptune "
                           "version; delete it (or use another --out) to start over")
-    diffs = [_describe(key, current.get(key), stored.get(key)) for key in COMPARED
-             if _comparable(key, current.get(key)) != _comparable(key, stored.get(key))]
+    now = {key: current.get(key, UNRECORDED.get(key)) for key in COMPARED}
+    then = {key: stored.get(key, UNRECORDED.get(key)) for key in COMPARED}
+    diffs = [_describe(key, now[key], then[key]) for key in COMPARED
+             if _comparable(key, now[key]) != _comparable(key, then[key])]
     if diffs:
         raise ConfigError(f"{where}: holds a study with other settings ({'; '.join(diffs)}); "
                           "resume with the same ones, or delete it (or use another --out) to "

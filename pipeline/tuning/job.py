@@ -6,10 +6,18 @@ failure. Who runs it where (in the worker process, or in a trial server process 
 time limit) is ``pipeline.tuning.worker``'s business.
 
 A failing odometry (an exception, a non-finite pose, lost frames, an implausible jump: a
-frame-to-frame translation above ``jump_limit_m``, or a run past its time limit) makes a
-*failed* result whose objective is ``penalty_pct`` (a fixed number, so that a resumed or repeated
-run sees the same history) and whose ``error`` is one line of text. A trial the machinery lost
-(its process killed from outside, e.g. by the OOM killer) is *lost*: never scored, retried.
+frame-to-frame translation above ``jump_limit_m``, no segment to score, or a run past its time
+limit) makes a *failed* result whose objective is ``penalty_pct`` (a fixed number, so that a
+resumed or repeated run sees the same history) and whose ``error`` is one line of text. A trial
+the machinery lost (its process killed from outside, e.g. by the OOM killer) is *lost*: never
+scored, retried.
+
+That is the rule ``failures: trial`` (the default). Under ``failures: sequence`` (a joint
+study's ``fixed.failures``: ``SequenceFailures``) a sequence whose odometry fails counts alone:
+it runs no further, writes no trajectory and counts at ``penalty_pct`` in the mean over the
+sequences; the trial is ok when at least one sequence finished (else failed, as under the other
+rule), and its ``error`` names every failed sequence and why. A time limit (the trial's, or a
+sequence's ``TrialTimeout``) and the machinery's failures still end the whole trial.
 """
 
 from __future__ import annotations
@@ -19,7 +27,7 @@ import json
 import logging
 import math
 import os
-from collections.abc import Callable, Iterable, Mapping, MutableMapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, MutableMapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -27,7 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.errors import AdaptuneError, OdometryError
+from pipeline.errors import AdaptuneError, InfrastructureError, OdometryError, TrialTimeout
 from pipeline.odometry.base import Adapter
 from pipeline.sequence import read_ground_truth
 from pipeline.trajectory import Trajectory
@@ -36,6 +44,7 @@ from pipeline.tuning.rung_board import RungBoard
 
 if TYPE_CHECKING:
     from pipeline.sequence import Scan
+    from pipeline.tuning.section import FailureRule
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +69,8 @@ class TrialJob:
     ``length_m`` everywhere (``sequence_lengths_m``). jump_limit_m, jump_limits_m: likewise
     the jump limit [m] (trials.jump_limit_m; ``SequenceInfo.jump_limit_m``) a sequence's
     trajectory is checked at (``check_jump``).
+    failures: what a sequence whose odometry fails does to the trial (``trial``: fails it;
+    ``sequence``: counts at the penalty on its own; module docstring).
     """
 
     adapter: str
@@ -82,6 +93,7 @@ class TrialJob:
     eta: int = 0  # successive halving's eta (with ``rungs``)
     lengths_m: tuple[float, ...] = ()  # per sequence; (): length_m for every one
     jump_limits_m: tuple[float, ...] = ()  # per sequence; (): jump_limit_m for every one
+    failures: FailureRule = "trial"  # trials.failures (fixed.failures for the joint study)
 
     @property
     def sequence_lengths_m(self) -> tuple[float, ...]:
@@ -160,27 +172,113 @@ def _run_whole(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]],
     """Every sequence of ``job`` run whole, one after the other (no checkpoint checked)."""
     import time
 
-    from pipeline.odometry import check_trajectory, make_schedule, run_sequence
-    from pipeline.tuning.pruning import curve_of
-
     rte: dict[str, float] = {}
     ests: list[NDArray[np.float64] | None] = []
+    failed = SequenceFailures(job)
     odometry_s = 0.0
-    for (name, path), gt in zip(job.sequences, gts, strict=True):
-        t0 = time.perf_counter()
-        cached = scans.get(path)
-        if cached is None or getattr(adapter, "accepts_time_limit", False):
-            traj = run_sequence(adapter, path, job.params, job.time_limit_s)
-        else:
-            traj = adapter.run(cached, make_schedule(adapter, job.params, len(cached), path))
-            check_trajectory(traj, np.array([sc.stamp_ns for sc in cached]),
-                             f"{adapter.name} on {path}")
-        odometry_s += time.perf_counter() - t0
-        rte[name] = _score(job, name, gt, traj)
+    for s, ((name, path), gt) in enumerate(zip(job.sequences, gts, strict=True)):
+        try:
+            t0 = time.perf_counter()
+            try:
+                traj = _run_one(job, adapter, path, scans.get(path))
+            finally:
+                odometry_s += time.perf_counter() - t0
+            rte[name] = _score(job, name, gt, traj)
+        except Exception as exc:
+            if not failed.absorb(s, exc):
+                raise
+            ests.append(None)
+            continue
         ests.append(traj.T_world_lidar)
-    return {"status": "ok", "objective": float(np.mean(list(rte.values()))), "rte_pct": rte,
-            "odometry_s": odometry_s, "error": "",
-            "curve": curve_of(points, gts, ests, job.sequence_lengths_m, job.scored_only)}
+    return {"status": "ok", "objective": failed.objective(rte), "rte_pct": rte,
+            "odometry_s": odometry_s, "error": failed.text(),
+            "curve": _curve(job, points, gts, ests, failed, ok=True)}
+
+
+def _run_one(job: TrialJob, adapter: Adapter, path: str, cached: list[Scan] | None
+             ) -> Trajectory:
+    """One sequence of ``job`` run whole and checked: over its decoded scans ``cached``, or
+    from its MCAP (``run_sequence``, with the time limit) when they are not cached or the
+    adapter takes the time limit itself."""
+    from pipeline.odometry import check_trajectory, make_schedule, run_sequence
+
+    if cached is None or getattr(adapter, "accepts_time_limit", False):
+        return run_sequence(adapter, path, job.params, job.time_limit_s)
+    traj = adapter.run(cached, make_schedule(adapter, job.params, len(cached), path))
+    check_trajectory(traj, np.array([sc.stamp_ns for sc in cached]), f"{adapter.name} on {path}")
+    return traj
+
+
+@dataclass
+class SequenceFailures:
+    """The sequences of a trial that failed on their own (``failures: sequence``): ``why``,
+    by index in ``job.sequences``, in one line each. Under ``failures: trial`` it stays empty:
+    ``absorb`` refuses every failure, which the caller raises on (the trial fails)."""
+
+    job: TrialJob
+    why: dict[int, str] = field(default_factory=dict)
+
+    def absorb(self, index: int, exc: Exception) -> bool:
+        """Under ``failures: sequence``, record that sequence ``index`` failed with ``exc``
+        (a trajectory file an earlier, killed run of the trial left for it goes) and return
+        True: the trial goes on without it. False (the caller re-raises) under ``failures:
+        trial``, for a time limit (``TrialTimeout``) and for the machinery's failure."""
+        if self.job.failures != "sequence" or isinstance(exc, TrialTimeout | InfrastructureError):
+            return False
+        name = self.job.sequences[index][0]
+        self.why[index] = one_line(exc)
+        trajectory_path(self.job.out_dir, self.job.algorithm, name, self.job.trial).unlink(
+            missing_ok=True)
+        return True
+
+    def objective(self, rte: Mapping[str, float]) -> float:
+        """The trial's objective [%]: the mean of the finished sequences' ``rte`` when none
+        failed (the rule ``failures: trial`` computes), else the mean over every sequence with
+        each failed one at ``penalty_pct``. OdometryError naming them when none finished."""
+        if not self.why:
+            return float(np.mean(list(rte.values())))
+        if not rte:
+            raise OdometryError(f"every sequence failed ({self._names()}): {self._details()}")
+        return float(np.mean([*rte.values(), *(self.job.penalty_pct for _ in self.why)]))
+
+    def text(self, before: str = "") -> str:
+        """``before`` (a pruned trial's reason) and the failed sequences, names first, then why
+        each failed: the trial's one-line ``error`` (at most MAX_ERROR_CHARS); ``before`` alone
+        when none failed."""
+        if not self.why:
+            return before
+        text = (f"{len(self.why)} of {len(self.job.sequences)} sequences failed, each at the "
+                f"penalty {self.job.penalty_pct:g} % ({self._names()}): {self._details()}")
+        return " ".join(f"{before}; {text}".split() if before else text.split())[
+            :MAX_ERROR_CHARS]
+
+    def _names(self) -> str:
+        return ", ".join(self.job.sequences[s][0] for s in sorted(self.why))
+
+    def _details(self) -> str:
+        return "; ".join(f"{self.job.sequences[s][0]}: {self.why[s]}" for s in sorted(self.why))
+
+
+def _curve(job: TrialJob, points: list[Any], gts: list[NDArray[np.float64]],
+           ests: Sequence[NDArray[np.float64] | None], failed: SequenceFailures, ok: bool,
+           posted: Sequence[float] | None = None) -> tuple[float, ...]:
+    """The values at the checkpoints the trial records (``TrialResult.curve``: the percentile
+    pruner's reference for later trials, and what a resume restores from the stored
+    trajectories, ``StudyPruner.restore``). With no failed sequence: its values, as it ran.
+    With some (``failures: sequence``), what the stored trajectories give, which hold none of
+    a failed sequence: an ok trial counts each failed sequence at the penalty at every
+    checkpoint where it had started, a pruned one's curve ends before the first such
+    checkpoint; but successive halving keeps the values the trial ``posted`` at its rungs
+    (the rung board, which later trials read, is never rewritten)."""
+    from pipeline.tuning.pruning import curve_of
+
+    if not failed.why:
+        return curve_of(points, gts, ests, job.sequence_lengths_m, job.scored_only)
+    if posted is not None and job.rungs is not None:
+        return tuple(posted)
+    kept = [None if s in failed.why else est for s, est in enumerate(ests)]
+    return curve_of(points, gts, kept, job.sequence_lengths_m, job.scored_only,
+                    failed.why if ok else (), job.penalty_pct)
 
 
 def _score(job: TrialJob, name: str, gt: NDArray[np.float64], traj: Trajectory) -> float:
@@ -237,11 +335,13 @@ class SequenceRun:
         import time
 
         t0 = time.perf_counter()
-        while len(self.poses) <= frame:
-            scan, pose = next(self._steps)
-            self.frames.append(scan.frame)
-            self.poses.append(pose)
-        self.seconds += time.perf_counter() - t0
+        try:
+            while len(self.poses) <= frame:
+                scan, pose = next(self._steps)
+                self.frames.append(scan.frame)
+                self.poses.append(pose)
+        finally:
+            self.seconds += time.perf_counter() - t0
 
     def estimate(self) -> NDArray[np.float64] | None:
         """T_world_lidar (n, 4, 4) of the frames run so far; None before the first."""
@@ -259,34 +359,48 @@ def _run_stepped(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]
                  on_wait: Callable[[float], None] | None = None) -> dict[str, Any]:
     """``job`` run checkpoint by checkpoint: every sequence to the checkpoint's frame, then
     the check (``_threshold``); a sequence that has run its last frame is checked and scored
-    at once. Pruned: the trajectories run so far are written."""
+    at once. Pruned: the trajectories run so far are written. Under ``failures: sequence`` a
+    sequence that fails (while it runs, or at its check) runs no further and counts at the
+    penalty in the trial's value from the next checkpoint on (``value_at``'s ``failed``)."""
     from pipeline.odometry import check_trajectory
     from pipeline.trajectory import write_trajectory
-    from pipeline.tuning.pruning import Pruned, curve_of, value_at
+    from pipeline.tuning.pruning import Pruned, value_at
 
     rte: dict[str, float] = {}
+    failed = SequenceFailures(job)
     with contextlib.ExitStack() as stack:
         runs = [SequenceRun(adapter, job.params, path, scans.get(path), stack)
                 for _, path in job.sequences]
         ends = [len(gt) - 1 for gt in gts]
 
         def reach(frames: Sequence[int]) -> None:
-            for run, frame in zip(runs, frames, strict=True):
-                run.advance(frame)
+            for s, (run, frame) in enumerate(zip(runs, frames, strict=True)):
+                if s in failed.why:
+                    continue
+                try:
+                    run.advance(frame)
+                except Exception as exc:
+                    if not failed.absorb(s, exc):
+                        raise
 
         def finish() -> None:
-            for (name, _), run, gt in zip(job.sequences, runs, gts, strict=True):
-                if run.finished and name not in rte:
-                    traj = run.trajectory()
-                    check_trajectory(traj, run.stamps_ns, f"{adapter.name} on {run.path}")
-                    rte[name] = _score(job, name, gt, traj)
+            for s, ((name, _), run, gt) in enumerate(zip(job.sequences, runs, gts, strict=True)):
+                if run.finished and name not in rte and s not in failed.why:
+                    try:
+                        traj = run.trajectory()
+                        check_trajectory(traj, run.stamps_ns, f"{adapter.name} on {run.path}")
+                        rte[name] = _score(job, name, gt, traj)
+                    except Exception as exc:
+                        if not failed.absorb(s, exc):
+                            raise
 
         posted: list[float] = []
         try:
             for index, point in enumerate(points):
                 reach(point.frames)
                 value = value_at(point, gts, [r.estimate() for r in runs],
-                                 job.sequence_lengths_m, scored_only=job.scored_only)
+                                 job.sequence_lengths_m, scored_only=job.scored_only,
+                                 failed=failed.why, penalty_pct=job.penalty_pct)
                 posted.append(value)
                 limit = _threshold(job, index, posted, on_wait)
                 if limit is not None and value > limit:  # a NaN value never is
@@ -297,20 +411,21 @@ def _run_stepped(job: TrialJob, adapter: Adapter, scans: Mapping[str, list[Scan]
                 finish()
         except Pruned as stop:
             ests = [r.estimate() for r in runs]
-            for (name, _), run in zip(job.sequences, runs, strict=True):
-                if len(run) and name not in rte:
+            for s, ((name, _), run) in enumerate(zip(job.sequences, runs, strict=True)):
+                if len(run) and name not in rte and s not in failed.why:
                     out = trajectory_path(job.out_dir, job.algorithm, name, job.trial)
                     write_trajectory(out, run.trajectory(), _metadata(job, name, out))
+            why = (f"pruned at {_where(job, runs, points[stop.index], failed.why)}: running "
+                   f"RTE {stop.value:.4g} % above {stop.threshold:.4g} %")
             return {"status": "pruned", "objective": stop.value, "rte_pct": rte,
                     "odometry_s": sum(r.seconds for r in runs),
-                    "curve": curve_of(points, gts, ests, job.sequence_lengths_m, job.scored_only),
-                    "error": f"pruned at {_where(job, runs, points[stop.index])}: running RTE "
-                             f"{stop.value:.4g} % above {stop.threshold:.4g} %"}
+                    "curve": _curve(job, points, gts, ests, failed, False, posted),
+                    "error": failed.text(why)}
         ests = [r.estimate() for r in runs]
         odometry_s = sum(r.seconds for r in runs)
-    return {"status": "ok", "objective": float(np.mean(list(rte.values()))), "rte_pct": rte,
-            "odometry_s": odometry_s, "error": "",
-            "curve": curve_of(points, gts, ests, job.sequence_lengths_m, job.scored_only)}
+    return {"status": "ok", "objective": failed.objective(rte), "rte_pct": rte,
+            "odometry_s": odometry_s, "error": failed.text(),
+            "curve": _curve(job, points, gts, ests, failed, True, posted)}
 
 
 def _threshold(job: TrialJob, index: int, posted: list[float],
@@ -339,12 +454,13 @@ def _metadata(job: TrialJob, name: str, out: Path) -> dict[str, str]:
             "trial": str(job.trial), "params_json": json.dumps(job.params, sort_keys=True)}
 
 
-def _where(job: TrialJob, runs: list[SequenceRun], point: Any) -> str:
+def _where(job: TrialJob, runs: list[SequenceRun], point: Any,
+           failed: Collection[int] = ()) -> str:
     """Where a trial stopped: the sequences it was running ("seq_a frame 12, seq_b frame 9"),
-    or the last one it finished."""
-    running = [f"{name} frame {frame}" for (name, _), run, frame
-               in zip(job.sequences, runs, point.frames, strict=True)
-               if frame >= 0 and not run.finished]
+    ``failed`` ones (by index) left out, or the last one it finished."""
+    running = [f"{name} frame {frame}" for s, ((name, _), run, frame)
+               in enumerate(zip(job.sequences, runs, point.frames, strict=True))
+               if frame >= 0 and not run.finished and s not in failed]
     if running:
         return ", ".join(running)
     last = max(s for s, frame in enumerate(point.frames) if frame >= 0)

@@ -36,12 +36,19 @@ A trial whose value is above the threshold at a checkpoint stops there: it is *p
 objective (what the trials table holds) is its value at that checkpoint; the trajectories it
 ran so far are written, so the per-frame rows it earned stay. A NaN value (no segment has
 ended yet) never stops a trial.
+
+Under ``failures: sequence`` (``pipeline.tuning.job``) a sequence of a joint trial that fails
+runs no further and counts at the penalty in the trial's values from the next checkpoint on
+(``value_at``'s ``failed``). It writes no trajectory, so the curve a trial records is the one
+its stored trajectories give back on a resume (``StudyPruner.restore``): an ok trial's counts a
+failed sequence at the penalty at every checkpoint where it had started; a pruned trial's ends
+before the first such checkpoint; successive halving keeps the values posted at the rungs.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -282,16 +289,22 @@ def per_sequence(length_m: Lengths, count: int) -> list[float]:
 
 def value_at(point: Checkpoint, gts: Sequence[F64], ests: Sequence[F64 | None],
              length_m: Lengths, known: dict[int, float] | None = None,
-             scored_only: bool = False) -> float:
+             scored_only: bool = False, failed: Collection[int] = (),
+             penalty_pct: float = math.nan) -> float:
     """A trial's value at ``point``: the mean of the running RTE of every started sequence
     (``ests[s]`` has run at least to ``point.frames[s]``) at its L (``length_m``: one for all,
     or one a sequence); NaN when one is NaN, or with ``scored_only`` (the rungs) the mean of
     those on which a segment has ended (NaN when none has). ``known``: values of finished
-    sequences already computed, by sequence, filled in."""
+    sequences already computed, by sequence, filled in. ``failed``: sequences (indices) that
+    count at ``penalty_pct`` [%] wherever started, their ``ests`` unread (a joint trial under
+    ``failures: sequence``, ``pipeline.tuning.job``)."""
     lengths = per_sequence(length_m, len(point.frames))
     values = []
     for s, frame in enumerate(point.frames):
         if frame < 0:
+            continue
+        if s in failed:
+            values.append(penalty_pct)
             continue
         finished = frame == len(gts[s]) - 1
         if known is not None and finished and s in known:
@@ -308,23 +321,27 @@ def value_at(point: Checkpoint, gts: Sequence[F64], ests: Sequence[F64 | None],
     return float(np.mean(values)) if all(map(math.isfinite, values)) else math.nan
 
 
-def reached(point: Checkpoint, ests: Sequence[F64 | None]) -> bool:
-    """True when the trajectories ``ests`` (partial or None) run as far as ``point``."""
-    return all(frame < 0 or (est is not None and len(est) > frame)
-               for frame, est in zip(point.frames, ests, strict=True))
+def reached(point: Checkpoint, ests: Sequence[F64 | None], failed: Collection[int] = ()
+            ) -> bool:
+    """True when the trajectories ``ests`` (partial or None) run as far as ``point`` (a
+    ``failed`` sequence, by index, reaches every point)."""
+    return all(frame < 0 or s in failed or (est is not None and len(est) > frame)
+               for s, (frame, est) in enumerate(zip(point.frames, ests, strict=True)))
 
 
 def curve_of(points: Sequence[Checkpoint], gts: Sequence[F64], ests: Sequence[F64 | None],
-             length_m: Lengths, scored_only: bool = False) -> tuple[float, ...]:
+             length_m: Lengths, scored_only: bool = False, failed: Collection[int] = (),
+             penalty_pct: float = math.nan) -> tuple[float, ...]:
     """Values at ``points`` of a trial whose trajectory of sequence s is ``ests[s]`` (possibly
     partial: frames 0..len-1; None when not run); stops at the first point not reached.
-    ``scored_only``: as ``value_at``."""
+    ``scored_only``, ``failed``, ``penalty_pct``: as ``value_at``."""
     known: dict[int, float] = {}
     out = []
     for point in points:
-        if not reached(point, ests):
+        if not reached(point, ests, failed):
             break
-        out.append(value_at(point, gts, ests, length_m, known, scored_only))
+        out.append(value_at(point, gts, ests, length_m, known, scored_only, failed,
+                            penalty_pct))
     return tuple(out)
 
 
@@ -342,11 +359,16 @@ class StudyPruner:
     """The stopping rule of one study: its checkpoints over the study's sequences (ground
     truths ``gts``), the curves of trials an earlier run finished, and each new trial's
     thresholds. It reads and writes nothing: the study hands it the ground truths, their L
-    (``length_m``: one for all, or one a sequence) and the stored trajectories."""
+    (``length_m``: one for all, or one a sequence) and the stored trajectories.
+    ``failed_at_pct``: the penalty [%] of a study under ``failures: sequence``, whose ok trials
+    count a sequence with no stored trajectory (it failed) at it; None under ``failures:
+    trial``."""
 
-    def __init__(self, gts: Sequence[F64], rule: StoppingRule, length_m: Lengths) -> None:
+    def __init__(self, gts: Sequence[F64], rule: StoppingRule, length_m: Lengths,
+                 failed_at_pct: float | None = None) -> None:
         self.rule = rule
         self.length_m = length_m
+        self.failed_at_pct = failed_at_pct
         self.gts = list(gts) if rule.kind != "whole" else []
         self.points = rule.checkpoints([len(g) for g in self.gts])
 
@@ -359,7 +381,7 @@ class StudyPruner:
                 trajectories: Callable[[int], list[F64 | None]]) -> dict[int, Any]:
         """``results`` (TrialResult read from the table) with the curves of their stored
         trajectories (``trajectories(trial)``: per sequence T_world_lidar, partial for a pruned
-        trial, None where not run)."""
+        trial, None where not run; with ``failed_at_pct``, None in an ok trial: it failed)."""
         from dataclasses import replace
 
         if not self.points:
@@ -367,8 +389,16 @@ class StudyPruner:
         out = {}
         for tid, r in results.items():
             if r.status in ("ok", "pruned"):
-                r = replace(r, curve=curve_of(self.points, self.gts, trajectories(tid),
-                                              self.length_m, self.rule.scored_only))
+                ests = trajectories(tid)
+                if self.failed_at_pct is None or r.status != "ok":
+                    curve = curve_of(self.points, self.gts, ests, self.length_m,
+                                     self.rule.scored_only)
+                else:
+                    curve = curve_of(self.points, self.gts, ests, self.length_m,
+                                     self.rule.scored_only,
+                                     [s for s, est in enumerate(ests) if est is None],
+                                     self.failed_at_pct)
+                r = replace(r, curve=curve)
             out[tid] = r
         return out
 

@@ -5,13 +5,18 @@ this module, not the SMBO engine (``pipeline.tuning.smbo``)."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
 from pipeline.config import IterationCount, Section, validate_section
 from pipeline.errors import ConfigError
 from pipeline.tuning.pruning import Fidelity, HalvingSection, PruningSection, StoppingRule
+
+FailureRule = Literal["trial", "sequence"]
+"""How a trial over several sequences (the joint study's) counts one whose odometry fails:
+``trial`` (the whole trial fails, at the penalty) or ``sequence`` (that sequence alone counts
+at the penalty in the mean over the sequences; ``pipeline.tuning.job``)."""
 
 
 class SpaceRange(Section):
@@ -44,6 +49,9 @@ class TrialsSection(Section):
     study used is stored with its trials table, where the later stages read it.
     dask: null = process pool; "local" = a Dask LocalCluster of ``workers`` processes;
     "tcp://host:port" = an existing Dask scheduler.
+    failures: how a trial over several sequences counts one whose odometry fails
+    (``FailureRule``); the joint study's is ``fixed.failures`` (``joint_settings``). A study of
+    one sequence fails the trial under either rule.
     """
 
     algorithm: str = "ndt"
@@ -62,6 +70,7 @@ class TrialsSection(Section):
     fidelity: Fidelity = "whole"
     halving: HalvingSection = Field(default_factory=lambda: HalvingSection.model_validate({}))
     pruning: PruningSection = Field(default_factory=lambda: PruningSection.model_validate({}))
+    failures: FailureRule = "trial"
 
     @property
     def stopping(self) -> StoppingRule:
@@ -116,6 +125,10 @@ class FixedSection(Section):
     pruning: the joint study's own pruner settings (null = ``trials.pruning``): its trials run
     every training sequence, and its rows do not train the surrogate.
     fidelity, halving: the joint study's own (null = ``trials.fidelity`` / ``trials.halving``).
+    failures: what a sequence whose odometry fails does to a joint trial (``FailureRule``):
+    ``trial`` (the default: the trial fails, at the penalty) or ``sequence`` (the trial is ok
+    when any sequence finished, its objective the mean over all of them with each failed one
+    at the penalty; docs/design.md, "Stages").
     """
 
     iterations: IterationCount | None = 64
@@ -125,6 +138,7 @@ class FixedSection(Section):
         default_factory=lambda: PruningSection.model_validate({"percentile": 50.0}))
     fidelity: Fidelity | None = None
     halving: HalvingSection | None = None
+    failures: FailureRule = "trial"
 
 
 def joint_settings(trials: TrialsSection, fixed: FixedSection) -> TrialsSection:

@@ -393,14 +393,16 @@ def make_studies(sequence_paths: Sequence[str | Path], joint: bool) -> list[Stud
 
 
 def study_pruner(study: Study, settings: TrialsSection) -> StudyPruner:
-    """The study's stopping rule, with its sequences' ground truths when it stops trials."""
+    """The study's stopping rule, with its sequences' ground truths when it stops trials (and
+    the penalty a failed sequence counts at, under ``failures: sequence``)."""
     from pipeline.sequence import read_ground_truth
     from pipeline.tuning.job import TRIALS_PURPOSE
 
     rule = settings.stopping
     on = rule.kind != "whole"
     gts = [read_ground_truth(path, TRIALS_PURPOSE) for _, path in study.sequences] if on else []
-    return StudyPruner(gts, rule, study.lengths_m(settings.length_m))
+    failed_at = settings.penalty_pct if settings.failures == "sequence" else None
+    return StudyPruner(gts, rule, study.lengths_m(settings.length_m), failed_at)
 
 
 def check_scorable(path: str | Path, length_m: float) -> None:
@@ -437,7 +439,7 @@ def study_of(study: Study, adapter: Adapter, settings: TrialsSection, seed: int,
                   if settings.fidelity == "halving" else None),
         warm_start=[dict(p) for p in warm_start], sequences=list(study.sequences),
         own_lengths_m=list(study.own_lengths_m),
-        own_jump_limits_m=list(study.own_jump_limits_m))
+        own_jump_limits_m=list(study.own_jump_limits_m), failures=settings.failures)
 
 
 def told_lag(workers: int) -> int:
@@ -475,7 +477,8 @@ def make_job(study: Study, adapter: Adapter, tid: int, seed: int, params: Params
                     adapter_options=dict(settings.adapter_options),
                     space=adapter.space.to_json() if settings.space else None,
                     lengths_m=study.lengths_m(settings.length_m),
-                    jump_limits_m=study.jump_limits_m(settings.jump_limit_m), **pruning)
+                    jump_limits_m=study.jump_limits_m(settings.jump_limit_m),
+                    failures=settings.failures, **pruning)
 
 
 def summarize(algorithm: str, sequence: str, done: dict[int, TrialResult], ran: int,

@@ -11,6 +11,9 @@ process ends at once), oom (the process is SIGKILLed, as by the OOM killer), han
 signal, then sleeps: only a kill ends it), nan, lose (drops the last frame), jump (a 1 km step),
 oom_once (SIGKILLed the first time it sees a parameter set, as by a passing memory shortage:
 ``marker_dir`` remembers; then it runs as ``drift``).
+``fenced``: the same as ``drift``, but it raises at the first scan whose ground truth lies more
+than ``fence_m`` from the origin, whole or streamed, whatever the parameters: a sequence that
+goes that far fails part-way through every trial, a shorter one never.
 """
 
 from __future__ import annotations
@@ -139,6 +142,46 @@ class FailingAdapter(DriftAdapter):
         return traj
 
 
+class FencedDriftAdapter(DriftAdapter):
+    """DriftAdapter that raises at the first scan farther than ``fence_m`` [m] from the origin
+    (by its ground truth), whole or streamed."""
+
+    name = "fenced"
+
+    def __init__(self, fence_m: float) -> None:
+        super().__init__()
+        self.fence_m = fence_m
+
+    def check(self, T_world_lidar: np.ndarray, frame: int) -> None:
+        """RuntimeError when the pose ``T_world_lidar`` lies beyond the fence."""
+        if np.linalg.norm(T_world_lidar[:3, 3]) > self.fence_m:
+            raise RuntimeError(f"left the {self.fence_m:g} m fence at frame {frame}")
+
+    def start(self, params: dict[str, float]) -> DriftOdometry:
+        return FencedOdometry(self, self.space.validate(params))
+
+    def run(self, scans: Iterable[Scan], schedule: Schedule) -> Trajectory:
+        scans = list(scans)
+        for scan in scans:
+            if scan.T_world_lidar is not None:
+                self.check(scan.T_world_lidar, scan.frame)
+        return super().run(scans, schedule)
+
+
+class FencedOdometry(DriftOdometry):
+    """The streaming form of FencedDriftAdapter."""
+
+    def __init__(self, adapter: FencedDriftAdapter, params: dict[str, float]) -> None:
+        super().__init__(adapter, params)
+        self.fence = adapter
+        self.frame = 0
+
+    def step(self, points_lidar: np.ndarray, stamp_ns: int) -> np.ndarray:
+        self.fence.check(self.adapter.truth[int(stamp_ns)], self.frame)
+        self.frame += 1
+        return super().step(points_lidar, stamp_ns)
+
+
 class SleepyDriftAdapter(DriftAdapter):
     """DriftAdapter that first sleeps 0-0.3 s, a different time for every parameter set, so
     that parallel trials finish out of order."""
@@ -182,19 +225,27 @@ def drift() -> DriftAdapter:
     return DriftAdapter()
 
 
+def fenced(fence_m: float) -> FencedDriftAdapter:
+    return FencedDriftAdapter(fence_m)
+
+
 def failing(mode: str, threshold: float = 0.0, marker_dir: str = "") -> FailingAdapter:
     return FailingAdapter(mode, threshold, marker_dir)
 
 
 def write_sequence(
-    path: Path, n_frames: int = 30, step_m: float = 1.0, yaw_rate: float = 0.02, seed: int = 0
+    path: Path, n_frames: int = 30, step_m: float = 1.0, yaw_rate: float = 0.02, seed: int = 0,
+    first_stamp_ns: int = 0,
 ) -> Path:
-    """A small sequence MCAP: 64 random points a scan, ground truth along a gentle curve."""
+    """A small sequence MCAP: 64 random points a scan, ground truth along a gentle curve, a
+    scan every 0.1 s from ``first_stamp_ns`` (the streamed drift adapter finds a scan's ground
+    truth by its stamp: the sequences of a joint study it streams need stamps of their own)."""
     rng = np.random.default_rng(seed)
     with SequenceWriter(path, SequenceInfo(name=path.stem, sensor="test", source="tests")) as w:
         T = np.eye(4)
         for k in range(n_frames):
-            w.add(k * 100_000_000, rng.uniform(-10, 10, (64, 4)).astype(np.float32), T.copy())
+            w.add(first_stamp_ns + k * 100_000_000,
+                  rng.uniform(-10, 10, (64, 4)).astype(np.float32), T.copy())
             dT = np.eye(4)
             dT[:3, :3] = rot_z(yaw_rate)
             dT[0, 3] = step_m
