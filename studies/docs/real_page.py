@@ -68,9 +68,14 @@ def _reading(m: Mapping[str, Any]) -> list[str]:
         "figure) and over *all*, a failed run's at the penalty "
         f"({_f(m['penalty_pct'], 0)} %). A sub-trajectory fails above {failures}. Over runs: "
         "geometric means, with scipy's BCa interval where a family has at least five runs. "
+        "A fold's fixed set is the best trial of a joint study over its training units, a "
+        "unit the trial failed on counted at the penalty (`fixed.failures: sequence`). "
         "The in-sample best (a joint study on the test run itself) is a bound, never a "
         "choice. Settings, spaces and budgets were frozen before any test fold ran "
-        "(real/params.yaml; the params at the end)."]
+        "(real/params.yaml; the params at the end); the one change since is that rule, made "
+        "after NDT's first folds (where the old one, `trial`, left the joint studies of two "
+        "folds with no finished trial) and before any other algorithm's (docs/design.md, "
+        "\"The real-data study\")."]
 
 
 def _targets(m: Mapping[str, Any]) -> list[str]:

@@ -2,8 +2,9 @@
 contents.
 
 1. The fixed set: a joint study over the fold's training units (``fixed``: 64 trials,
-   warm-started from the units' own studies, pruned), from the training units' studies only;
-   the defaults where none of its trials finished on every training unit.
+   warm-started from the units' own studies, pruned), from the training units' studies only:
+   its best ok trial, where a unit the trial failed on counts at the penalty (real/params.yaml's
+   ``fixed.failures: sequence``); the defaults where no trial is ok.
 2. The environment: the PCA of the descriptors fitted on the training units' frames only.
 3. The model: the results database of the training units' studies and the joint study, the
    surrogate fitted on it with the k its cross-validation over the training units chooses
