@@ -249,8 +249,8 @@ class SequenceFailures:
             return before
         text = (f"{len(self.why)} of {len(self.job.sequences)} sequences failed, each at the "
                 f"penalty {self.job.penalty_pct:g} % ({self._names()}): {self._details()}")
-        return " ".join(f"{before}; {text}".split() if before else text.split())[
-            :MAX_ERROR_CHARS]
+        line = f"{before}; {text}" if before else text
+        return " ".join(line.split())[:MAX_ERROR_CHARS]
 
     def _names(self) -> str:
         return ", ".join(self.job.sequences[s][0] for s in sorted(self.why))
